@@ -1,0 +1,32 @@
+# Two commands: `make run` and `make test`. Both create .venv from this project's own files first.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed-stamp
+SCENARIO ?= scenarios/five_ships.yaml
+
+.PHONY: setup run test lint bench clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+run: $(STAMP)
+	$(VENV)/bin/trafficsim run $(SCENARIO) --out out/$(basename $(notdir $(SCENARIO)))
+
+test: $(STAMP)
+	$(PY) -m ruff check trafficsim tests
+	$(PY) -m pytest
+
+lint: $(STAMP)
+	$(PY) -m ruff check trafficsim tests
+
+bench: $(STAMP)
+	$(PY) -m pytest tests/benchmarks --benchmark-only --benchmark-json=out/benchmark.json
+
+clean:
+	rm -rf $(VENV) out build *.egg-info

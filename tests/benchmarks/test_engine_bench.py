@@ -1,0 +1,38 @@
+"""Engine throughput (dynamics + guidance + autopilot + metrics) in ship-steps per second.
+
+Run with ``make bench``; the figure printed in ``extra_info`` goes in the README.
+"""
+
+import numpy as np
+import pytest
+
+from trafficsim.batch import EncounterEnv, ShipSetup, build_batch
+from trafficsim.engine import Simulation
+from trafficsim.ships.library import load_ship
+from trafficsim.units import from_kn
+
+STEPS = 20
+
+
+def _batch(type_: str, n_encounters: int, ships_per_encounter: int = 2):
+    spec = load_ship(type_)
+    rng = np.random.default_rng(0)
+    ships = []
+    for e in range(n_encounters):
+        for s in range(ships_per_encounter):
+            ships.append(ShipSetup(f"e{e}s{s}", spec, e, 3000.0 * s, 1000.0 * s,
+                                   rng.uniform(0, 2 * np.pi), from_kn(spec["service_speed_kn"]),
+                                   np.array([[8000.0, 4000.0 * s]])))
+    envs = [EncounterEnv(0.3, 1.0, 8.0, 2.0)] * n_encounters
+    return build_batch(ships, envs)
+
+
+@pytest.mark.parametrize("type_", ["kvlcc2", "container"])
+def test_engine_10000_ships(benchmark, type_):
+    sim = Simulation.start(_batch(type_, 5000), 1.0)
+    benchmark.pedantic(sim.run, args=(STEPS,), rounds=3, warmup_rounds=1)
+    assert np.isfinite(sim.batch.x).all()
+    if benchmark.stats is not None:  # None under --benchmark-disable
+        rate = sim.batch.n_ships * STEPS / benchmark.stats.stats.mean
+        benchmark.extra_info["ship_steps_per_s"] = rate
+        print(f"\n{type_}: {rate:,.0f} ship-steps/s")

@@ -1,0 +1,493 @@
+"""Tests of the safe YAML loader and the pydantic error mapping (trafficsim.io.yamlio)."""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from typing import Literal
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from pydantic import Field, field_validator
+
+from trafficsim.errors import InputError, ScenarioError
+from trafficsim.io import yamlio
+from trafficsim.io.yamlio import (
+    Document,
+    FieldError,
+    Integer,
+    Number,
+    Strict,
+    Text,
+    format_loc,
+    load_yaml,
+    parse_yaml,
+    validate,
+    validate_document,
+)
+
+
+def _error(source: str | bytes, **kwargs: object) -> ScenarioError:
+    with pytest.raises(ScenarioError) as info:
+        parse_yaml(source, "f.yaml", **kwargs)  # type: ignore[arg-type]
+    return info.value
+
+
+# ------------------------------------------------------------------------------------------
+# Loading: data and lines
+# ------------------------------------------------------------------------------------------
+
+DOC = """\
+# comment
+name: demo
+ships:
+  - name: a
+    speed: 12
+  - {name: b, speed: 3.5}
+env:
+  wind:
+    speed: 4
+empty:
+"""
+
+
+def test_plain_data() -> None:
+    doc = parse_yaml(DOC, "d.yaml")
+    assert isinstance(doc, Document)
+    assert doc.path == "d.yaml"
+    assert doc.data == {"name": "demo",
+                        "ships": [{"name": "a", "speed": 12}, {"name": "b", "speed": 3.5}],
+                        "env": {"wind": {"speed": 4}}, "empty": None}
+
+
+@pytest.mark.parametrize(("loc", "line"), [
+    ((), 2),                              # the top-level mapping starts at its first key
+    (("name",), 2),
+    (("ships",), 3),                      # an entry is located at its key
+    (("ships", 0), 4),
+    (("ships", 0, "speed"), 5),
+    (("ships", 1), 6),
+    (("ships", 1, "speed"), 6),
+    (("ships", 1, "missing"), 6),         # missing key -> its parent
+    (("ships", 7, "speed"), 3),           # index out of range -> the list's entry
+    (("env", "wind", "speed"), 9),
+    (("env", "wind", "gust"), 8),
+    (("env", "current", "speed"), 7),
+    (("empty",), 10),
+    (("nope",), 2),
+    (("name", 0), 2),                     # path through a scalar stops at it
+])
+def test_line_of(loc: tuple[str | int, ...], line: int) -> None:
+    assert parse_yaml(DOC).line_of(loc) == line
+
+
+def test_node_at() -> None:
+    doc = parse_yaml(DOC)
+    node = doc.node_at(("ships", 0, "speed"))
+    assert isinstance(node, yaml.ScalarNode) and node.value == "12"
+    assert doc.node_at(("ships", 0, "nope")) is None
+    assert doc.node_at(()) is doc.root
+
+
+def test_error_helper_locates() -> None:
+    err = parse_yaml(DOC, "d.yaml").error("bad speed", ("ships", 1, "speed"))
+    assert isinstance(err, ScenarioError)
+    assert str(err) == "d.yaml:6: ships[1].speed: bad speed"
+
+
+def test_format_loc() -> None:
+    assert format_loc(("ships", 1, "route", 0, 1)) == "ships[1].route[0][1]"
+    assert format_loc(("a", "b")) == "a.b"
+    assert format_loc(()) == ""
+
+
+def test_crlf_and_bom_keep_lines() -> None:
+    doc = parse_yaml(b"\xef\xbb\xbfa: 1\r\nb:\r\n  c: 2\r\n")
+    assert doc.data == {"a": 1, "b": {"c": 2}}
+    assert doc.line_of(("b", "c")) == 3
+
+
+def test_load_yaml_reads_file(tmp_path) -> None:
+    path = tmp_path / "x.yaml"
+    path.write_text("a: 1\n", encoding="utf-8")
+    doc = load_yaml(path)
+    assert doc.data == {"a": 1} and doc.path == str(path)
+
+
+# ------------------------------------------------------------------------------------------
+# Loading: refused input
+# ------------------------------------------------------------------------------------------
+
+def test_error_is_scenario_and_value_error() -> None:
+    err = _error("a: [1, 2\n")
+    assert isinstance(err, InputError) and isinstance(err, ValueError)
+    assert err.path == "f.yaml"
+
+
+def test_duplicate_key_names_both_lines() -> None:
+    err = _error("a: 1\nb:\n  c: 1\n  d: 2\n  c: 3\n")
+    assert err.line == 5
+    assert err.key == "b.c"
+    assert "duplicate key 'c' (first at line 3, again at line 5)" in err.message
+
+
+def test_duplicate_key_in_flow_mapping() -> None:
+    assert _error("a: {x: 1, x: 2}\n").line == 1
+
+
+def test_anchor_refused() -> None:
+    err = _error("a: &x 1\nb: 2\n")
+    assert err.line == 1 and "anchors ('&x') are not allowed" in err.message
+
+
+def test_billion_laughs_refused_fast() -> None:
+    lines = ["a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]"]
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 10)]
+    start = time.perf_counter()
+    err = _error("\n".join(lines) + "\n")
+    assert time.perf_counter() - start < 1.0
+    assert err.line == 1 and "anchors" in err.message
+
+
+def test_alias_refused() -> None:
+    err = _error("a: 1\nb: *x\n")  # an unknown alias is refused before PyYAML complains
+    assert err.line == 2 and "aliases ('*x') are not allowed" in err.message
+
+
+def test_size_cap() -> None:
+    err = _error("a: " + "x" * 100 + "\n", max_bytes=50)
+    assert "larger than the limit of 50 bytes" in err.message
+    assert err.line is None
+    assert str(err) == f"f.yaml: {err.message}"
+
+
+def test_size_cap_default_is_one_megabyte(tmp_path) -> None:
+    assert yamlio.MAX_BYTES == 1_000_000
+    path = tmp_path / "big.yaml"
+    path.write_bytes(b"a: '" + b"x" * 1_000_000 + b"'\n")
+    with pytest.raises(ScenarioError, match="larger than the limit of 1000000 bytes"):
+        load_yaml(path)
+    assert load_yaml(path, max_bytes=2_000_000).data["a"] == "x" * 1_000_000
+
+
+def test_not_utf8_located() -> None:
+    err = _error(b"a: 1\nb: caf\xe9\n")
+    assert err.line == 2 and "not UTF-8" in err.message and "0xE9" in err.message
+
+
+def test_control_character_located() -> None:
+    err = _error("a: 1\nb: x\x00y\n")
+    assert err.line == 2 and "U+0000" in err.message
+
+
+@pytest.mark.parametrize("source", ["", "   \n\n", "# only\n# comments\n", b""])
+def test_empty(source: str | bytes) -> None:
+    err = _error(source)
+    assert err.line == 1 and "file is empty" in err.message
+
+
+@pytest.mark.parametrize(("source", "got"), [
+    ("- a\n- b\n", "a list"), ("just text\n", "'just text'"), ("42\n", "'42'")])
+def test_top_level_must_be_mapping(source: str, got: str) -> None:
+    err = _error(source)
+    assert err.line == 1
+    assert err.message == f"the top level must be a mapping of 'key: value' lines, got {got}"
+
+
+@pytest.mark.parametrize(("source", "line"), [
+    ("a: 1\n2: b\n", 2), ("yes: 1\n", 1), ("~: 1\n", 1), ("a:\n  ? [x, y]\n  : 1\n", 2),
+    ("a: 1\n? {k: v}\n: 2\n", 2)])
+def test_keys_must_be_text(source: str, line: int) -> None:
+    err = _error(source)
+    assert err.line == line and "keys must be text" in err.message
+
+
+def test_merge_key_refused() -> None:
+    err = _error("a:\n  <<: {b: 1}\n")
+    assert err.line == 2 and "merge keys" in err.message
+
+
+@pytest.mark.parametrize(("source", "line", "text"), [
+    ("a: [1, 2\nb: 3\n", 2, "expected ',' or ']'"),
+    ("a: 1\nb:\n\tc: 2\n", 3, "tabs cannot indent YAML, use spaces"),
+    ("a: 1\n  b: 2\n", 2, "mapping values are not allowed here"),
+    ("a: 'open\n", 2, "invalid YAML"),
+    ("a: 1\n---\nb: 2\n", 2, "a second YAML document starts here"),
+    ("a: !!python/object/apply:os.system [ls]\n", 1, "unsupported tag"),
+    ("a: !custom 1\n", 1, "unsupported tag '!custom'"),
+    ("a: !!binary aGVsbG8=\n", 1, "unsupported tag"),
+    ("a: !!set {x: null}\n", 1, "unsupported tag"),
+    ("a: !!int abc\n", 1, "'abc' is not a whole number"),
+    ("a: !!float abc\n", 1, "'abc' is not a number"),
+    ("a: !!bool maybe\n", 1, "'maybe' is not a boolean"),
+    ("a: !!null x\n", 1, "'x' is not a valid null"),
+    ("a: \"\\ud800\"\n", 1, "surrogate"),
+])
+def test_yaml_errors_located(source: str, line: int, text: str) -> None:
+    err = _error(source)
+    assert err.line == line
+    assert text in err.message
+
+
+def test_unclosed_bracket_names_where_it_opened() -> None:
+    err = _error("a: 1\nb: [1,\n   2\nc: 3\n")
+    assert err.line == 4 and "started at line 2" in err.message
+
+
+def test_deep_nesting_refused() -> None:
+    depth = 5000
+    err = _error("a: " + "[" * depth + "]" * depth + "\n")
+    assert err.line == 1 and "nesting is deeper than" in err.message
+
+
+@pytest.mark.parametrize("exc", [
+    ValueError("bad"), AttributeError("x"), RecursionError("deep"), TypeError("t"),
+    yaml.YAMLError("plain yaml error")])
+def test_any_library_exception_becomes_scenario_error(monkeypatch, exc: Exception) -> None:
+    def boom(*args: object, **kwargs: object) -> None:
+        raise exc
+
+    monkeypatch.setattr(yamlio.yaml, "compose", boom)
+    err = _error("a: 1\n")
+    assert err.path == "f.yaml"
+
+
+def test_missing_file_and_directory(tmp_path) -> None:
+    with pytest.raises(ScenarioError, match="file not found"):
+        load_yaml(tmp_path / "nope.yaml")
+    with pytest.raises(ScenarioError, match="directory"):
+        load_yaml(tmp_path)
+
+
+# ------------------------------------------------------------------------------------------
+# YAML 1.1 surprises
+# ------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("text", "value"), [
+    ("yes", True), ("No", False), ("on", True), ("OFF", False), ("true", True),
+    ("~", None), ("", None), ("null", None),
+    ("12", 12), ("-0x1f", -31), ("0b101", 5), ("1_000", 1000), ("0", 0), ("-3", -3),
+    ("1.5", 1.5), ("1.0e+3", 1000.0), ("-.inf", -math.inf),
+    ("1:30", "1:30"), ("1:30.5", "1:30.5"), ("010", "010"), ("-007", "-007"),
+    ("1e5", "1e5"), ("2024-01-01", "2024-01-01"), ("=", "="),
+    ("'no'", "no"), ('"1:30"', "1:30"), ("!!str 5", "5"), ("!!int '7'", 7),
+    ("!!float 2", 2.0),
+])
+def test_scalars(text: str, value: object) -> None:
+    assert parse_yaml(f"a: {text}\n").data["a"] == value
+
+
+def test_nan_loads_as_float() -> None:
+    assert math.isnan(parse_yaml("a: .NaN\n").data["a"])
+
+
+# ------------------------------------------------------------------------------------------
+# Validation: the pydantic error mapping
+# ------------------------------------------------------------------------------------------
+
+class Inner(Strict):
+    speed_kn: Number
+    count: Integer = 0
+
+
+class Model(Strict):
+    name: Text
+    kind: Literal["a", "b"] = "a"
+    value: Number = 0.0
+    plain: float = 0.0
+    optional: float | None = None
+    table: dict[str, float] = Field(default_factory=dict)
+    whole: list[int] = Field(default_factory=list)
+    items: tuple[Inner, ...] = ()
+    inner: Inner | None = None
+    tags: list[str] = Field(default_factory=list, min_length=0, max_length=2)
+
+    @field_validator("items")
+    @classmethod
+    def _distinct(cls, items: tuple[Inner, ...]) -> tuple[Inner, ...]:
+        if len(items) > 1 and items[0].speed_kn == items[1].speed_kn:
+            raise FieldError("same speed as items[0]", loc=(1, "speed_kn"))
+        return items
+
+
+def _validation_error(source: str) -> ScenarioError:
+    with pytest.raises(ScenarioError) as info:
+        validate_document(parse_yaml(source, "m.yaml"), Model)
+    return info.value
+
+
+@pytest.mark.parametrize(("source", "line", "key", "message"), [
+    ("value: 1\n", 1, "name", "missing required key 'name'"),
+    ("name: x\nvalu: 1\n", 2, "valu", "unknown key 'valu' (did you mean 'value'?)"),
+    ("name: x\nzzz: 1\n", 2, "zzz", "unknown key 'zzz'; allowed keys: name, kind, value"),
+    ("name: x\ninner: {speed_kn: 1, cnt: 2}\n", 2, "inner.cnt",
+     "unknown key 'cnt' (did you mean 'count'?)"),
+    ("name: x\nitems:\n  - {speed_kn: 1}\n  - {speed_kn: 2, sped_kn: 1}\n", 4,
+     "items[1].sped_kn",
+     "unknown key 'sped_kn' (did you mean 'speed_kn'?)"),
+    ("name: x\nvalue: fast\n", 2, "value", "expected a number, got 'fast'"),
+    ("name: x\nvalue: '12'\n", 2, "value", "expected a number, got '12' (remove the quotes)"),
+    ("name: x\nvalue: yes\n", 2, "value",
+     "expected a number, got 'yes' (YAML reads this word as a boolean)"),
+    ("name: x\nvalue: false\n", 2, "value", "expected a number, got false"),
+    ("name: x\nvalue:\n", 2, "value", "expected a number, got nothing (an empty value)"),
+    ("name: x\nvalue: [1]\n", 2, "value", "expected a number, got a list"),
+    ("name: x\nvalue: 1:30\n", 2, "value", "base-60 number 90"),
+    ("name: x\nvalue: 2:03:04.5\n", 2, "value", "base-60 number 7384.5"),
+    ("name: x\nvalue: 09\n", 2, "value", "write it without the leading zero"),
+    ("name: x\nvalue: 1.5e3\n", 2, "value", "write 1.5e+3"),
+    ("name: x\nvalue: .nan\n", 2, "value", "expected a finite number, got .nan"),
+    ("name: x\nvalue: -.inf\n", 2, "value", "expected a finite number, got -.inf"),
+    ("name: x\nplain: true\n", 2, "plain", "expected a number, got true"),
+    ("name: x\nplain: '3'\n", 2, "plain", "expected a number, got '3'"),
+    ("name: x\noptional: on\n", 2, "optional", "expected a number, got 'on'"),
+    ("name: x\ntable: {a: 1, b: yes}\n", 2, "table.b", "expected a number, got 'yes'"),
+    ("name: x\nwhole: [1, true]\n", 2, "whole[1]", "expected a whole number, got true"),
+    ("name: x\nwhole: [1.5]\n", 2, "whole[0]", "expected a whole number, got 1.5"),
+    ("name: x\ninner: {speed_kn: 1, count: 2.5}\n", 2, "inner.count",
+     "expected a whole number, got 2.5"),
+    ("name: x\ninner: {speed_kn: 1, count: true}\n", 2, "inner.count",
+     "expected a whole number, got true"),
+    ("name: no\n", 1, "name",
+     "expected text, got 'no' (YAML reads it as a boolean; put it in quotes if you mean "
+     "text: \"no\")"),
+    ("name: 12\n", 1, "name", "put it in quotes if you mean text: \"12\""),
+    ("name: '  '\n", 1, "name", "must not be empty"),
+    ("name: x\nkind: c\n", 2, "kind", "expected 'a' or 'b', got 'c'"),
+    ("name: x\nwhole: 5\n", 2, "whole", "expected a list, got 5"),
+    ("name: x\ninner: 5\n", 2, "inner", "expected a mapping of 'key: value' lines, got 5"),
+    ("name: x\ninner: [1]\n", 2, "inner", "expected a mapping of 'key: value' lines, got a list"),
+    ("name: x\ntags: [a, b, c]\n", 2, "tags", "expected at most 2 items, got 3"),
+    ("name: x\nitems:\n  - {speed_kn: 1}\n  - {speed_kn: 1}\n", 4, "items[1].speed_kn",
+     "same speed as items[0]"),
+])
+def test_error_messages(source: str, line: int, key: str, message: str) -> None:
+    err = _validation_error(source)
+    assert err.line == line
+    assert err.key == key
+    assert message in err.message
+    assert str(err).startswith(f"m.yaml:{line}: {key}: ")
+
+
+def test_all_errors_kept_sorted_by_line() -> None:
+    err = _validation_error("value: x\nplain: y\nzzz: 1\n")  # name missing: located at line 1
+    assert [e.line for e in err.errors] == [1, 1, 2, 3]
+    assert all(isinstance(e, ScenarioError) for e in err.errors)
+    assert err.message.endswith("(and 3 more errors)")
+    assert str(err.errors[0]).startswith("m.yaml:1: ")
+
+
+def test_typo_is_not_also_reported_missing() -> None:
+    err = _validation_error("name: x\ninner: {sped_kn: 1}\n")
+    assert len(err.errors) == 1
+    assert err.message == "unknown key 'sped_kn' (did you mean 'speed_kn'?)"
+    err = _validation_error("name: x\ninner: {zzz: 1}\n")   # not close: both reported
+    assert [e.message.split(" (")[0] for e in err.errors] == [
+        "missing required key 'speed_kn'", "unknown key 'zzz'; allowed keys: speed_kn, count"]
+
+
+def test_one_error_has_no_suffix() -> None:
+    err = _validation_error("value: 1\n")
+    assert err.message == "missing required key 'name'" and len(err.errors) == 1
+
+
+def test_validate_reads_file_and_passes_context(tmp_path) -> None:
+    class WithContext(Strict):
+        name: Text
+
+        @field_validator("name")
+        @classmethod
+        def _known(cls, name: str, info) -> str:
+            if name not in info.context["known"]:
+                raise ValueError(f"unknown name '{name}'")
+            return name
+
+    path = tmp_path / "c.yaml"
+    path.write_text("name: a\n", encoding="utf-8")
+    assert validate(path, WithContext, context={"known": {"a"}}).name == "a"
+    with pytest.raises(ScenarioError, match=r"c.yaml:1: name: unknown name 'a'"):
+        validate(path, WithContext, context={"known": set()})
+
+
+def test_strict_model_accepts_numbers_and_is_frozen() -> None:
+    model = validate_document(parse_yaml(
+        "name: x\nvalue: 3\nplain: 2\noptional: 1.5\ntable: {a: 1}\nwhole: [1, 2]\n"), Model)
+    assert model.value == 3.0 and isinstance(model.value, float)
+    assert model.plain == 2.0 and model.optional == 1.5
+    assert model.table == {"a": 1.0} and model.whole == [1, 2]
+    with pytest.raises(Exception, match="frozen"):
+        model.value = 4.0  # type: ignore[misc]
+
+
+def test_strict_model_from_python_rejects_bool() -> None:
+    with pytest.raises(Exception, match="valid number"):
+        Inner.model_validate({"speed_kn": True})
+    with pytest.raises(Exception, match="valid number"):
+        Model.model_validate({"name": "x", "plain": True})
+    assert Model.model_validate({"name": "x", "plain": 1}).plain == 1.0
+
+
+# ------------------------------------------------------------------------------------------
+# Properties
+# ------------------------------------------------------------------------------------------
+
+YAML_ALPHABET = st.sampled_from([*"abc019 :-,[]{}#&*!|>'\"%@`?\n\t.~_+<=\\",
+                                 "yes", "no", "1:30", ".nan", "!!", "---", "\n  ", "\n- "])
+
+
+def _only_scenario_errors(source: str | bytes) -> None:
+    try:
+        doc = parse_yaml(source, "p.yaml")
+    except ScenarioError as err:
+        assert err.path == "p.yaml"
+        return
+    assert isinstance(doc.data, dict)
+    with contextlib.suppress(ScenarioError):
+        validate_document(doc, Model)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.binary(max_size=300))
+def test_random_bytes_raise_only_scenario_errors(data: bytes) -> None:
+    _only_scenario_errors(data)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(max_size=200))
+def test_random_text_raises_only_scenario_errors(text: str) -> None:
+    _only_scenario_errors(text)
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.lists(YAML_ALPHABET, max_size=60).map("".join))
+def test_yaml_like_text_raises_only_scenario_errors(text: str) -> None:
+    _only_scenario_errors(text)
+    _only_scenario_errors("name: x\nitems:\n  - " + text)
+
+
+# PyYAML's emitter mangles the YAML 1.1 line breaks NEL, LS and PS (not a loader matter).
+TEXT = st.text(st.characters(exclude_categories=("Cs",),
+                             exclude_characters="\x85\u2028\u2029"), max_size=12)
+JSON_SCALARS = (st.none() | st.booleans() | st.integers() | TEXT | st.floats(allow_nan=False))
+JSON_DATA = st.recursive(
+    JSON_SCALARS,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(TEXT, inner, max_size=4),
+    max_leaves=20)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.dictionaries(TEXT, JSON_DATA, min_size=1, max_size=5))
+def test_safe_dump_round_trips(data: dict) -> None:
+    text = yaml.safe_dump(data, allow_unicode=True)
+    try:
+        doc = parse_yaml(text)
+    except ScenarioError as err:
+        # Only characters YAML cannot carry (e.g. lone surrogates) may be refused.
+        assert "surrogate" in err.message or "invalid character" in err.message
+        return
+    assert doc.data == data
+    for key in data:
+        assert 1 <= doc.line_of((key,)) <= text.count("\n") + 1

@@ -1,0 +1,336 @@
+"""The ``mmg`` family with the KVLCC2 ship files against Yasukawa & Yoshimura (2015) [YY15].
+
+[YY15] Yasukawa H., Yoshimura Y. (2015) Introduction of MMG standard method for ship maneuvering
+predictions, J Mar Sci Technol 20:37-52.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping
+from functools import cache
+from typing import Any
+
+import numpy as np
+import pytest
+
+from trafficsim.errors import ShipLibraryError
+from trafficsim.ships import base, manoeuvres
+from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Actuators, Env, R, U, V
+from trafficsim.ships.library import load_ship
+from trafficsim.ships.mmg import FAMILY
+
+L7_SPEED = 1.179  # m/s, Fn 0.142: the L7 model test speed [YY15] (= 15.5 kn full scale)
+SCALE = 320.0 / 7.0  # full scale / L7
+
+# 35 deg turning indices of KVLCC2, advance / Lpp and tactical diameter / Lpp. Values as quoted
+# in the task brief for [YY15] (simulation vs free-running model tests: advance ~3.1 L,
+# tactical diameter ~3.3 L); they could NOT be re-checked against the paper's text in this work
+# (the paper shows them as trajectory plots), hence the ~10 % tolerance.
+REF_ADVANCE_L = 3.1
+REF_TACTICAL_L = 3.3
+REF_TOL = 0.10
+
+
+def _spec(name: str, **coefficients: float) -> dict[str, Any]:
+    spec = copy.deepcopy(load_ship(name))
+    spec["coefficients"].update(coefficients)
+    return spec
+
+
+def _substeps(spec: Mapping[str, Any], dt: float) -> int:
+    return max(1, int(np.ceil(dt / spec["integration"]["max_dt_s"] - 1e-9)))
+
+
+def _run(spec: Mapping[str, Any], seconds: float, dt: float, rudder_rad: float, rps: float,
+         speed: float, env: Env | None = None) -> np.ndarray:
+    """State history ``(steps + 1, N_STATE)`` of one ship with constant commands."""
+    params, act = FAMILY.build([spec]), Actuators.from_specs([spec])
+    x = np.zeros((base.N_STATE, 1))
+    x[U], x[RPS] = speed, rps
+    rows = [x[:, 0].copy()]
+    sub = _substeps(spec, dt)
+    for _ in range(round(seconds / dt)):
+        x = base.step(FAMILY, params, act, x, np.array([rudder_rad]), np.array([rps]),
+                      env or Env(), dt, sub)
+        rows.append(x[:, 0].copy())
+    return np.array(rows)
+
+
+def _service_rps(spec: Mapping[str, Any], speed: float) -> float:
+    params, act = FAMILY.build([spec]), Actuators.from_specs([spec])
+    return float(base.steady_rps_for_speed(FAMILY, params, act, np.array([speed]))[0])
+
+
+@cache
+def _turn(name: str, rudder_deg: float) -> dict[str, float]:
+    _, indices = manoeuvres.turning_circle(load_ship(name), rudder_deg=rudder_deg)
+    return indices
+
+
+# --- an independent scalar transcription of [YY15] for one ship, to check the vectorised code ---
+
+def _paper_accelerations(spec: Mapping[str, Any], u: float, v: float, r: float, delta: float,
+                         n: float) -> tuple[float, float, float]:
+    """[YY15] eqs 4, 7-18, 23-26 written out literally (n > 0, u > 0), in SI units."""
+    c, p = spec["coefficients"], spec["particulars"]
+    rho = base.RHO_WATER
+    L, d, D = p["length_m"], p["draught_m"], p["propeller_diameter_m"]
+    m = rho * p["displacement_m3"]
+    xg = p["lcg_m"]
+    U_ = np.hypot(u, v)
+    vp, rp = v / U_, r * L / U_
+    beta = np.arctan(-v / u)
+    k = 0.5 * rho * L * d * U_**2
+    X_H = k * (-c["R0"] + c["X_vv"] * vp**2 + c["X_vr"] * vp * rp + c["X_rr"] * rp**2
+               + c["X_vvvv"] * vp**4)
+    Y_H = k * (c["Y_v"] * vp + c["Y_r"] * rp + c["Y_vvv"] * vp**3 + c["Y_vvr"] * vp**2 * rp
+               + c["Y_vrr"] * vp * rp**2 + c["Y_rrr"] * rp**3)
+    N_H = k * L * (c["N_v"] * vp + c["N_r"] * rp + c["N_vvv"] * vp**3 + c["N_vvr"] * vp**2 * rp
+                   + c["N_vrr"] * vp * rp**2 + c["N_rrr"] * rp**3)
+    beta_p = beta - c["x_P"] * rp
+    c2 = c["C_2_plus"] if beta_p > 0 else c["C_2_minus"]
+    w_p = 1 - (1 - c["w_P0"]) * (1 + (1 - np.exp(-c["C_1"] * abs(beta_p))) * (c2 - 1))
+    J = u * (1 - w_p) / (n * D)
+    K_T = c["k_0"] + c["k_1"] * J + c["k_2"] * J**2
+    X_P = (1 - c["t_P"]) * rho * n**2 * D**4 * K_T
+    eta = D / p["rudder_height_m"]
+    u_R = c["epsilon"] * u * (1 - w_p) * np.sqrt(
+        eta * (1 + c["kappa"] * (np.sqrt(1 + 8 * K_T / (np.pi * J**2)) - 1)) ** 2 + (1 - eta))
+    beta_r = beta - c["l_R"] * rp
+    gamma = c["gamma_R_plus"] if beta_r > 0 else c["gamma_R_minus"]
+    v_R = U_ * gamma * beta_r
+    alpha = delta - np.arctan(v_R / u_R)
+    F_N = 0.5 * rho * p["rudder_area_m2"] * (u_R**2 + v_R**2) * c["f_alpha"] * np.sin(alpha)
+    X_R = -(1 - c["t_R"]) * F_N * np.sin(delta)
+    Y_R = -(1 + c["a_H"]) * F_N * np.cos(delta)
+    N_R = -(c["x_R"] * L + c["a_H"] * c["x_H"] * L) * F_N * np.cos(delta)
+    s = 0.5 * rho * L**2 * d
+    m_x, m_y, J_z = c["m_x"] * s, c["m_y"] * s, c["J_z"] * s * L**2
+    I_zG = m * (c["k_zz"] * L) ** 2
+    X, Y, N = X_H + X_P + X_R, Y_H + Y_R, N_H + N_R
+    du = (X + (m + m_y) * v * r + xg * m * r**2) / (m + m_x)
+    M = np.array([[m + m_y, xg * m], [xg * m, I_zG + xg**2 * m + J_z]])
+    dv, dr = np.linalg.solve(M, [Y - (m + m_x) * u * r, N - xg * m * u * r])
+    return du, dv, dr
+
+
+@pytest.mark.parametrize("state", [
+    (1.15, 0.0, 0.0, 0.0),
+    (1.10, -0.06, 0.02, np.radians(35.0)),
+    (0.80, 0.09, -0.05, np.radians(-20.0)),
+    (0.50, -0.12, 0.06, np.radians(10.0)),
+])
+def test_accelerations_match_a_literal_transcription_of_the_paper(state: tuple) -> None:
+    """At speed the vectorised code is [YY15]; the low-speed regularisation is invisible."""
+    spec = load_ship("kvlcc2_l7")
+    u, v, r, delta = state
+    n = 11.85
+    x = np.zeros((base.N_STATE, 1))
+    x[U], x[V], x[R], x[RUDDER], x[RPS] = u, v, r, delta, n
+    got = np.array(base.accelerations(FAMILY, FAMILY.build([spec]), x, Env()))[:, 0]
+    want = np.array(_paper_accelerations(spec, u, v, r, delta, n))
+    scale = np.array([1e-3, 1e-3, 1e-3 / 7.0]) + np.abs(want)
+    assert np.all(np.abs(got - want) <= 2e-3 * scale), (got, want)
+
+
+def test_self_propulsion_rps_matches_the_surge_balance_by_hand() -> None:
+    """(1 - t_P) rho n^2 D^4 K_T(J) = 1/2 rho L d U^2 R0' solved as a quadratic in nD."""
+    spec = load_ship("kvlcc2_l7")
+    c, p = spec["coefficients"], spec["particulars"]
+    D, up = p["propeller_diameter_m"], L7_SPEED * (1 - c["w_P0"])
+    resist = 0.5 * p["length_m"] * p["draught_m"] * L7_SPEED**2 * c["R0"] / (1 - c["t_P"])
+    # rho D^2 (k0 a^2 + k1 a up + k2 up^2) = rho resist, a = n D
+    a = np.roots([c["k_0"], c["k_1"] * up, c["k_2"] * up**2 - resist / D**2]).max()
+    assert _service_rps(spec, L7_SPEED) == pytest.approx(a / D, rel=1e-4)
+    assert a / D == pytest.approx(11.85, abs=0.01)  # not the 17.95 rps quoted for the L7 test
+
+
+@pytest.mark.parametrize("name, speed", [("kvlcc2_l7", L7_SPEED), ("kvlcc2", 15.5 * 1852 / 3600)])
+def test_straight_run_from_rest_settles_at_service_speed(name: str, speed: float) -> None:
+    spec = load_ship(name)
+    assert spec["service_speed_kn"] * 1852 / 3600 == pytest.approx(speed, rel=1e-3)
+    rps = _service_rps(spec, speed)
+    settle = 400.0 * np.sqrt(spec["particulars"]["length_m"] / 7.0)  # Froude-scaled time
+    hist = _run(spec, settle, 1.0, 0.0, rps, speed=0.0)
+    assert hist[-1, U] == pytest.approx(speed, rel=0.02)
+    assert np.all(hist[:, V] == 0.0) and np.all(hist[:, R] == 0.0)
+    assert spec["actuators"]["rps_min"] < 0.0 < rps < spec["actuators"]["rps_max"] < 1.15 * rps
+
+
+def test_positive_rudder_turns_to_starboard() -> None:
+    spec = load_ship("kvlcc2_l7")
+    hist = _run(spec, 20.0, 0.1, np.radians(20.0), 11.85, L7_SPEED)
+    assert hist[-1, R] > 0.0  # yaw rate to starboard
+    assert 0.0 < hist[-1, PSI] < np.pi  # heading increased (from north towards east)
+    assert hist[-1, EAST] > 0.0  # track bends to starboard
+    assert hist[-1, V] < 0.0  # midship drifts outwards (to port) in a starboard turn
+
+
+def test_mirror_symmetry_is_exact_once_the_asymmetric_coefficients_are_equalised() -> None:
+    """Only gamma_R+/- and C_2+/- break port/starboard symmetry in [YY15]; equalise them."""
+    spec = _spec("kvlcc2_l7", gamma_R_minus=0.640, C_2_minus=1.6)
+    stbd = _run(spec, 60.0, 0.1, np.radians(25.0), 11.85, L7_SPEED)
+    port = _run(spec, 60.0, 0.1, np.radians(-25.0), 11.85, L7_SPEED)
+    np.testing.assert_allclose(port[:, R], -stbd[:, R], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(port[:, V], -stbd[:, V], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(port[:, EAST], -stbd[:, EAST], rtol=1e-9, atol=1e-11)
+    np.testing.assert_allclose(port[:, NORTH], stbd[:, NORTH], rtol=1e-9, atol=1e-11)
+    np.testing.assert_allclose(port[:, U], stbd[:, U], rtol=1e-12)
+
+
+def test_paper_coefficients_make_a_small_signed_port_starboard_difference() -> None:
+    """gamma_R+ (0.640) > gamma_R- (0.395) straightens the rudder inflow more in a starboard turn,
+    so the starboard tactical diameter is the larger; the difference stays within 2 %."""
+    stbd, port = _turn("kvlcc2_l7", 35.0), _turn("kvlcc2_l7", -35.0)
+    assert stbd["tactical_diameter_m"] > port["tactical_diameter_m"]
+    for key in ("advance_m", "transfer_m", "tactical_diameter_m"):
+        assert stbd[key] == pytest.approx(port[key], rel=0.02), key
+
+
+@pytest.mark.parametrize("rudder_deg", [35.0, -35.0])
+def test_l7_turning_circle_against_yasukawa_yoshimura(rudder_deg: float) -> None:
+    ind = _turn("kvlcc2_l7", rudder_deg)
+    L = ind["length_m"]
+    assert ind["advance_m"] / L == pytest.approx(REF_ADVANCE_L, rel=REF_TOL)
+    assert ind["tactical_diameter_m"] / L == pytest.approx(REF_TACTICAL_L, rel=REF_TOL)
+    # transfer about 40 % of the tactical diameter, as for any well-behaved turn
+    assert 0.35 < ind["transfer_m"] / ind["tactical_diameter_m"] < 0.5
+    assert 0.3 < ind["speed_loss_ratio"] < 0.5  # full-form ships lose over half their speed
+
+
+@pytest.mark.parametrize("rudder_deg", [35.0, -35.0])
+def test_full_scale_turns_like_the_model_froude_similarity(rudder_deg: float) -> None:
+    """Same non-dimensional coefficients, Froude-scaled speed, rudder rate and lags: the indices
+    in ship lengths and the times in sqrt(L/g) agree to the few-percent geometric differences
+    of the two particulars tables (m' 0.2935 vs 0.2902, A_R/(L d) 0.0169 vs 0.0167)."""
+    full, model = _turn("kvlcc2", rudder_deg), _turn("kvlcc2_l7", rudder_deg)
+    for key in ("advance_m", "transfer_m", "tactical_diameter_m", "steady_diameter_m"):
+        assert full[key] / full["length_m"] == pytest.approx(model[key] / model["length_m"],
+                                                             rel=0.02), key
+    for key in ("time_to_90_s", "time_to_180_s"):
+        assert full[key] / np.sqrt(SCALE) == pytest.approx(model[key], rel=0.02), key
+    assert full["speed_loss_ratio"] == pytest.approx(model["speed_loss_ratio"], rel=0.02)
+
+
+@pytest.mark.parametrize("name", ["kvlcc2", "kvlcc2_l7"])
+def test_zigzag_overshoots_are_sane_and_meet_imo(name: str) -> None:
+    """No published KVLCC2 overshoot values could be checked in this work; the model gives
+    10/10: 5.1 / 14.3 deg, 20/20: 10.9 / 15.9 deg (first / second). Check ordering and IMO."""
+    spec = load_ship(name)
+    _, z10 = manoeuvres.zigzag(spec, 10.0)
+    _, z20 = manoeuvres.zigzag(spec, 20.0)
+    assert 3.0 < z10["first_overshoot_deg"] < 9.0
+    assert z10["first_overshoot_deg"] < z10["second_overshoot_deg"]
+    assert z10["first_overshoot_deg"] < z20["first_overshoot_deg"] < 20.0
+    for kind, ind in (("zigzag", z10), ("zigzag", z20)):
+        assert all(c["pass"] for c in manoeuvres.imo_criteria(kind, ind).values())
+
+
+def test_low_speed_and_pure_rotation_give_finite_damping() -> None:
+    """U -> 0 with yaw or sway left over (end of a crash stop): finite, opposing forces."""
+    spec = load_ship("kvlcc2")
+    params = FAMILY.build([spec] * 5)
+    x = np.zeros((base.N_STATE, 5))
+    x[R] = [0.01, -0.01, 0.0, 0.0, 0.0]
+    x[V] = [0.0, 0.0, 0.3, -0.3, 0.0]
+    x[U] = [0.0, 0.0, 0.0, 0.0, 1e-12]
+    with np.errstate(all="raise"):
+        du, dv, dr = base.accelerations(FAMILY, params, x, Env())
+    assert np.all(np.isfinite(du)) and np.all(np.isfinite(dv)) and np.all(np.isfinite(dr))
+    assert dr[0] < 0.0 < dr[1]  # yaw damping at rest
+    assert dv[2] < 0.0 < dv[3]  # sway damping at rest
+    assert du[4] == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("name", ["kvlcc2", "kvlcc2_l7"])
+def test_dt_one_second_is_stable_for_two_hours_of_random_orders(name: str) -> None:
+    """dt = 1 s (with the ship file's sub-steps) for 2 h full-scale time (the L7 model for the
+    Froude-equivalent 2 h / sqrt(45.7)): random rudder and engine orders (ahead and astern) and
+    wind keep every state finite and bounded; ship 0, at rest with the propeller stopped and no
+    wind, stays exactly at rest with its rudder swinging."""
+    spec = load_ship(name)
+    rng = np.random.default_rng(7)
+    n = 6
+    params, act = FAMILY.build([spec] * n), Actuators.from_specs([spec] * n)
+    speed = spec["service_speed_kn"] * 1852 / 3600
+    rps0 = _service_rps(spec, speed)
+    x = np.zeros((base.N_STATE, n))
+    x[U, 1:], x[RPS, 1:] = speed, rps0
+    sub = _substeps(spec, 1.0)
+    froude = np.sqrt(spec["particulars"]["length_m"] / 320.0)
+    wind = rng.uniform(0, 20, n) * froude
+    wind[0] = 0.0
+    env = Env(wind_speed_mps=wind, wind_from_rad=rng.uniform(0, 2 * np.pi, n))
+    for k in range(int(7200 * froude)):
+        if k % 120 == 0:
+            rudder = np.radians(rng.uniform(-35, 35, n))
+        if k % 600 == 0:
+            rps = rps0 * rng.uniform(-0.8, 1.1, n)
+            rps[0] = 0.0
+        x = base.step(FAMILY, params, act, x, rudder, rps, env, 1.0, sub)
+        assert np.all(np.isfinite(x)), k
+        assert np.all(np.abs(x[U]) < 1.3 * speed) and np.all(np.abs(x[V]) < 0.3 * speed)
+    assert np.all(np.delete(x[:, 0], RUDDER) == 0.0)
+    assert x[RUDDER, 0] != 0.0
+
+
+def test_dt_one_second_matches_a_fine_step() -> None:
+    spec = load_ship("kvlcc2")
+    coarse = _run(spec, 600.0, 1.0, np.radians(35.0), 1.75, 7.97)
+    fine = _run(spec, 600.0, 0.25, np.radians(35.0), 1.75, 7.97)[::4]
+    np.testing.assert_allclose(coarse[:, [NORTH, EAST]], fine[:, [NORTH, EAST]], atol=0.05)
+    np.testing.assert_allclose(coarse[:, R], fine[:, R], atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["kvlcc2", "kvlcc2_l7"])
+def test_crash_stop_stops_the_ship_within_imo_track_reach(name: str) -> None:
+    """Astern is a documented fallback (bollard K_T x astern_thrust_ratio); the crash stop must
+    work and stay inside the IMO 15 L track reach."""
+    _, ind = manoeuvres.crash_stop(load_ship(name))
+    track_l = ind["track_reach_m"] / ind["length_m"]
+    assert 5.0 < track_l < 15.0
+    assert ind["lateral_deviation_m"] < 0.1 * ind["length_m"]
+
+
+def test_astern_thrust_is_continuous_through_zero_rps_and_reversed() -> None:
+    spec = load_ship("kvlcc2")
+    params = FAMILY.build([spec] * 4)
+    x = np.zeros((base.N_STATE, 4))
+    x[U] = 5.0
+    x[RPS] = [1e-9, -1e-9, -1.3, 1.3]
+    du, _, _ = base.accelerations(FAMILY, params, x, Env())
+    assert du[0] == pytest.approx(du[1], rel=1e-6)  # no jump at n = 0
+    assert du[2] < du[1] < du[3]  # astern brakes harder than a stopped propeller
+    # going astern: the rudder still steers (flow from behind, reversed), no NaN
+    x = np.zeros((base.N_STATE, 2))
+    x[U], x[RPS], x[RUDDER] = -1.0, -1.3, [0.3, -0.3]
+    du, dv, dr = base.accelerations(FAMILY, FAMILY.build([spec] * 2), x, Env())
+    assert np.all(np.isfinite([du, dv, dr]))
+    assert dr[0] == pytest.approx(-dr[1]) and dr[0] != 0.0
+
+
+def test_batch_of_ships_equals_ships_one_by_one() -> None:
+    specs = [load_ship("kvlcc2"), load_ship("kvlcc2_l7"), load_ship("kvlcc2")]
+    rng = np.random.default_rng(3)
+    x = np.zeros((base.N_STATE, 3))
+    x[U] = [7.0, 1.0, -1.0]
+    x[V], x[R] = rng.normal(0, 0.2, 3), rng.normal(0, 0.005, 3)
+    x[RUDDER], x[RPS] = [0.3, -0.5, 0.1], [1.7, 12.0, -1.0]
+    env = Env(wind_speed_mps=np.array([10.0, 2.0, 0.0]), wind_from_rad=np.array([1.0, 4.0, 0.0]))
+    batch = np.array(base.accelerations(FAMILY, FAMILY.build(specs), x, env))
+    for i, spec in enumerate(specs):
+        env_i = Env(wind_speed_mps=env.wind_speed_mps[i], wind_from_rad=env.wind_from_rad[i])
+        one = np.array(base.accelerations(FAMILY, FAMILY.build([spec]), x[:, i:i + 1], env_i))
+        np.testing.assert_allclose(batch[:, i], one[:, 0], rtol=1e-13, atol=1e-18)
+
+
+def test_missing_required_particular_or_coefficient_is_reported() -> None:
+    spec = _spec("kvlcc2")
+    del spec["particulars"]["rudder_area_m2"]
+    with pytest.raises(ShipLibraryError, match="rudder_area_m2"):
+        FAMILY.build([spec])
+    spec = _spec("kvlcc2")
+    del spec["coefficients"]["N_rrr"]
+    with pytest.raises(ShipLibraryError, match="N_rrr"):
+        FAMILY.build([spec])

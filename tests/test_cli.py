@@ -1,0 +1,106 @@
+"""The command line as a user meets it: exit codes, one-line errors, files on disk."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from tests.conftest import SCENARIOS
+
+
+def cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "trafficsim", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, timeout=600)
+
+
+def one_line_error(res):
+    assert res.returncode == 2, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert "Traceback" not in res.stderr
+    return lines[0]
+
+
+def test_run_writes_trajectories_and_summary(tmp_path):
+    res = cli("run", SCENARIOS / "head_on.yaml", "--out", tmp_path)
+    assert res.returncode == 0, res.stderr
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["n_ships"] == 2 and summary["seed"] == 1
+    assert summary["ship_steps_per_s"] > 0 and "numpy" in summary["versions"]
+    pair = summary["pairs"][0]
+    for key in ("min_range_m", "t_min_range_s", "dcpa_m", "tcpa_s", "collision"):
+        assert key in pair
+    assert pair["dcpa_m"] < 1.0  # the ships start on reciprocal courses on the same line
+    assert not pair["collision"] and pair["min_range_m"] > 500.0  # the routes keep them apart
+    table = pq.read_table(tmp_path / "trajectories.parquet")
+    assert table.num_rows == 2 * (2400 // 5 + 1)
+    assert {"t_s", "ship", "north_m", "east_m", "heading_deg", "sog_kn"} <= set(table.column_names)
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["run"], "required"),
+    (["run", "x.yaml"], "--out"),
+    (["frobnicate"], "invalid choice"),
+    (["trial", "kvlcc2", "--manoeuvre", "spin", "--out", "o"], "invalid choice"),
+    (["trial", "kvlcc2", "--manoeuvre", "turning", "--rudder-deg", "-5", "--out", "o"],
+     "positive"),
+    (["trial", "kvlcc2", "--manoeuvre", "turning", "--speed-kn", "fast", "--out", "o"],
+     "expected a float"),
+])
+def test_bad_flags_give_one_line_and_exit_2(args, expect):
+    assert expect in one_line_error(cli(*args))
+
+
+def test_missing_scenario_file_is_named(tmp_path):
+    line = one_line_error(cli("run", tmp_path / "nope.yaml", "--out", tmp_path / "o"))
+    assert "nope.yaml" in line and "not found" in line
+
+
+def test_bad_scenario_names_file_line_and_key(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    text = (SCENARIOS / "head_on.yaml").read_text().replace("speed_kn: 12\n", "speed_kn: fast\n", 1)
+    bad.write_text(text)
+    line = one_line_error(cli("run", bad, "--out", tmp_path / "o"))
+    expected_line = text.splitlines().index("    speed_kn: fast") + 1
+    assert f"bad.yaml:{expected_line}:" in line and "speed_kn" in line
+
+
+def test_unknown_ship_type_suggests_the_right_one():
+    line = one_line_error(cli("trial", "kvlc2", "--manoeuvre", "turning", "--out", "o"))
+    assert "did you mean 'kvlcc2'" in line
+
+
+def test_validate_accepts_bundled_files_and_rejects_bad_ones(tmp_path):
+    files = sorted(SCENARIOS.glob("*.yaml"))
+    res = cli("validate", *files)
+    assert res.returncode == 0, res.stderr
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("schema_version: 1\nname: x\nduration_s: -5\nships: []\n")
+    res = cli("validate", bad)
+    assert res.returncode == 2 and "bad.yaml:3:" in res.stderr
+
+
+def test_trial_turning_writes_trial_csv_and_indices(tmp_path):
+    res = cli("trial", "kvlcc2", "--manoeuvre", "turning", "--out", tmp_path)
+    assert res.returncode == 0, res.stderr
+    header = (tmp_path / "trial.csv").read_text().splitlines()[0].split(",")
+    assert header[:6] == ["t_s", "north_m", "east_m", "heading_deg", "rudder_deg", "rpm"]
+    data = json.loads((tmp_path / "indices.json").read_text())
+    assert data["indices"]["tactical_diameter_m"] > 0
+    assert data["imo_msc137"]["advance_L"]["pass"]
+
+
+def test_help_is_fast_and_lists_the_commands():
+    res = cli("--help")
+    assert res.returncode == 0
+    for command in ("run", "trial", "validate"):
+        assert command in res.stdout
+
+
+def test_make_run_scenario_exists():
+    makefile = (Path(__file__).resolve().parents[1] / "Makefile").read_text()
+    scenario = makefile.split("SCENARIO ?= ")[1].split()[0]
+    assert (Path(__file__).resolve().parents[1] / scenario).is_file()

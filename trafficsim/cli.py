@@ -1,0 +1,131 @@
+"""Command line: ``trafficsim run | trial | validate``.
+
+Every user error ends as one line on stderr (``trafficsim: error: file:line: key: message``) and
+exit code 2, never a traceback. Heavy imports happen inside the commands so ``--help`` is fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import NoReturn
+
+from trafficsim import __version__
+from trafficsim.errors import InputError, TrafficsimError
+
+EXIT_USER_ERROR = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a bad flag in one line and exits 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+def _positive(kind: type) -> object:
+    def parse(text: str) -> float | int:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a {kind.__name__}, got '{text}'") from None
+        if value <= 0:
+            raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="trafficsim", description="Fast-time multi-ship traffic and "
+                "collision-avoidance simulator.")
+    p.add_argument("--version", action="version", version=f"trafficsim {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    run = sub.add_parser("run", help="simulate a scenario file")
+    run.add_argument("scenario", type=Path, help="scenario YAML file")
+    run.add_argument("--out", type=Path, required=True, help="output folder")
+    run.set_defaults(func=_cmd_run)
+
+    trial = sub.add_parser("trial", help="standard manoeuvre of one ship with IMO indices")
+    trial.add_argument("ship", help="ship type from the library (e.g. kvlcc2) or ship-file path")
+    trial.add_argument("--manoeuvre", required=True, choices=["turning", "zigzag", "crash-stop"])
+    trial.add_argument("--rudder-deg", type=_positive(float), default=None,
+                       help="rudder angle (turning: 35, zigzag: 10 by default)")
+    trial.add_argument("--heading-deg", type=_positive(float), default=None,
+                       help="zig-zag heading change (default: equal to the rudder angle)")
+    trial.add_argument("--port", action="store_true", help="turn to port (turning circle)")
+    trial.add_argument("--speed-kn", type=_positive(float), default=None,
+                       help="approach speed (default: the ship's service speed)")
+    trial.add_argument("--dt-s", type=_positive(float), default=None,
+                       help="time step (default: 1 s, shorter for small ships)")
+    trial.add_argument("--out", type=Path, required=True, help="output folder")
+    trial.set_defaults(func=_cmd_trial)
+
+    val = sub.add_parser("validate", help="check scenario or ship files without running them")
+    val.add_argument("files", type=Path, nargs="+")
+    val.set_defaults(func=_cmd_validate)
+    return p
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from trafficsim.run import run_scenario
+
+    summary = run_scenario(args.scenario, args.out)
+    print(f"{summary['scenario']}: {summary['n_ships']} ships, {summary['duration_s']:g} s "
+          f"simulated in {summary['wall_time_s']:.2f} s "
+          f"({summary['ship_steps_per_s']:,.0f} ship-steps/s)")
+    for pair in summary["pairs"]:
+        flag = "  COLLISION" if pair["collision"] else ""
+        print(f"  {pair['ship_a']} - {pair['ship_b']}: min range {pair['min_range_m']:.0f} m "
+              f"at t = {pair['t_min_range_s']:.0f} s{flag}")
+    print(f"results: {args.out / 'trajectories.parquet'}, {args.out / 'summary.json'}")
+    return 0
+
+
+def _cmd_trial(args: argparse.Namespace) -> int:
+    from trafficsim.trial import run_trial
+
+    indices, criteria = run_trial(args.ship, args.manoeuvre, args.rudder_deg, args.heading_deg,
+                                  args.port, args.speed_kn, args.dt_s, args.out)
+    for key, value in indices.items():
+        print(f"  {key}: {value:.4g}")
+    for key, c in criteria.items():
+        verdict = "pass" if c["pass"] else "FAIL"
+        print(f"  IMO {key}: {c['value']:.3g} (limit {c['limit']:.3g}) {verdict}")
+    print(f"results: {args.out / 'trial.csv'}, {args.out / 'indices.json'}")
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from trafficsim.validate import validate_file
+
+    bad = 0
+    for path in args.files:
+        errors = validate_file(path)
+        for err in errors:
+            print(f"trafficsim: error: {err}", file=sys.stderr)
+        if errors:
+            bad += 1
+        else:
+            print(f"{path}: ok")
+    return EXIT_USER_ERROR if bad else 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except TrafficsimError as err:
+        print(f"trafficsim: error: {err}", file=sys.stderr)
+        return EXIT_USER_ERROR if isinstance(err, InputError) else 1
+    except KeyboardInterrupt:
+        print("trafficsim: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Ship control: heading autopilot, speed by engine order, route guidance."""

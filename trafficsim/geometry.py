@@ -1,0 +1,41 @@
+"""Encounter geometry shared by metrics and (later) the decision network; vectorised over pairs."""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+
+
+def cpa(rel_north_m: np.ndarray, rel_east_m: np.ndarray, rel_vn_mps: np.ndarray,
+        rel_ve_mps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance and time to the closest point of approach for straight-line motion.
+
+    Args: relative position and velocity of the other ship, ``(P,)`` each (metres, m/s).
+    Returns: ``dcpa_m`` (>= 0) and ``tcpa_s`` (negative when the closest point is past).
+    """
+    v2 = rel_vn_mps**2 + rel_ve_mps**2
+    safe = np.where(v2 > 1e-12, v2, 1.0)
+    tcpa = np.where(v2 > 1e-12, -(rel_north_m * rel_vn_mps + rel_east_m * rel_ve_mps) / safe, 0.0)
+    dn = rel_north_m + rel_vn_mps * tcpa
+    de = rel_east_m + rel_ve_mps * tcpa
+    return np.hypot(dn, de), tcpa
+
+
+#: hull outline in units of (length, beam): stern corners, shoulders, bow point
+_HULL = np.array([[-0.5, -0.5], [0.3, -0.5], [0.5, 0.0], [0.3, 0.5], [-0.5, 0.5], [-0.5, -0.5]])
+
+
+def hull_outlines(north_m: np.ndarray, east_m: np.ndarray, heading_rad: np.ndarray,
+                  length_m: np.ndarray, beam_m: np.ndarray) -> np.ndarray:
+    """Hull outlines (pointed-bow pentagons) in north/east metres, shape ``(k, 6, 2)`` (closed)."""
+    bx = _HULL[None, :, 0] * length_m[:, None]  # body x forward
+    by = _HULL[None, :, 1] * beam_m[:, None]  # body y starboard
+    c, s = np.cos(heading_rad)[:, None], np.sin(heading_rad)[:, None]
+    return np.stack([north_m[:, None] + bx * c - by * s, east_m[:, None] + bx * s + by * c], axis=2)
+
+
+def hulls_overlap(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Whether hull outlines ``a[k]`` and ``b[k]`` (each ``(k, 6, 2)``) intersect, ``(k,)`` bool."""
+    if a.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    return shapely.intersects(shapely.polygons(a), shapely.polygons(b))

@@ -1,0 +1,1 @@
+"""File input and output: YAML loading with located errors, scenario and spec schemas."""

@@ -1,0 +1,80 @@
+"""Result files written atomically: temp file in the same folder, flush, fsync, rename.
+
+A crash never leaves a half-written result behind: a reader sees the old file or the new one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+
+def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
+    """Write ``path`` via ``write(fileobj)`` on a temp file, then rename over ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def write_json(path: Path, data: Mapping[str, Any]) -> None:
+    """Atomically write ``data`` as indented JSON (NaN/inf become null)."""
+    text = json.dumps(_clean(data), indent=2, default=_jsonable, allow_nan=False) + "\n"
+    atomic_write(path, lambda fh: fh.write(text.encode()))
+
+
+def _clean(value: Any) -> Any:
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    if isinstance(value, np.floating) and not np.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def write_parquet(path: Path, columns: Mapping[str, Any]) -> None:
+    """Atomically write a table of equal-length columns as Parquet."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    table = pa.table({k: np.asarray(v) if not isinstance(v, list) else v
+                      for k, v in columns.items()})
+    atomic_write(path, lambda fh: pq.write_table(table, fh))
+
+
+def write_csv(path: Path, columns: Mapping[str, np.ndarray], fmt: str = "%.6g") -> None:
+    """Atomically write equal-length numeric columns as CSV with a header row."""
+    names = list(columns)
+    data = np.column_stack([np.asarray(columns[k], dtype=float) for k in names])
+
+    def write(fh: IO[bytes]) -> None:
+        fh.write((",".join(names) + "\n").encode())
+        np.savetxt(fh, data, delimiter=",", fmt=fmt)
+
+    atomic_write(path, write)

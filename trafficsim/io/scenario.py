@@ -1,0 +1,277 @@
+"""Scenario files: the schema and :func:`load_scenario`.
+
+A scenario places one or more ships in an environment for a fixed duration::
+
+    schema_version: 1              # required, must be 1
+    name: head_on                  # required, non-empty
+    description: "..."             # optional
+    duration_s: 1800               # > 0, <= 30 days
+    dt_s: 1.0                      # optional, default 1.0; 0 < dt <= 60; dt <= duration
+    seed: 1                        # optional int >= 0, default 0
+    record_every_s: 5.0            # optional positive multiple of dt_s (default: 1 s, rounded
+                                   #   up to a whole number of steps)
+    environment:                   # optional
+      current: {speed_kn: 0.5, towards_deg: 90}   # 0 <= speed <= 10 kn, direction [0, 360)
+      wind: {speed_mps: 10, from_deg: 45}          # 0 <= speed <= 60 m/s, direction [0, 360)
+    ships:                         # required, at least one
+      - name: own                  # required, unique within the scenario
+        type: kvlcc2               # library name or path to a ship file (relative to this file)
+        north_m: 0                 # required
+        east_m: 0                  # required
+        heading_deg: 0             # required, [0, 360)
+        speed_kn: 12               # optional (default: the ship's service speed), [0, 60]
+        route: [[5000, 0], [9000, 3000]]   # optional [north_m, east_m] waypoints
+
+Values keep the file's units (knots, degrees); conversion to SI happens when the batch is built.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import BeforeValidator, Field, PrivateAttr, ValidationInfo, field_validator
+from pydantic_core import PydanticCustomError
+
+from trafficsim.errors import ScenarioError, ShipLibraryError
+from trafficsim.io.yamlio import (
+    Document,
+    FieldError,
+    Integer,
+    Number,
+    Strict,
+    Text,
+    collect_errors,
+    load_yaml,
+    raise_errors,
+)
+
+__all__ = [
+    "MAX_DURATION_S",
+    "SCHEMA_VERSION",
+    "Current",
+    "Environment",
+    "Scenario",
+    "ShipEntry",
+    "Wind",
+    "load_scenario",
+]
+
+SCHEMA_VERSION = 1
+"""The scenario schema version this code reads."""
+
+MAX_DURATION_S = 30 * 86400.0
+"""Longest scenario accepted: 30 days, in seconds."""
+
+MAX_DT_S = 60.0
+"""Longest time step accepted, in seconds."""
+
+_MULTIPLE_TOL = 1e-9
+
+Direction = Annotated[Number, Field(ge=0.0, lt=360.0)]
+"""A compass direction in degrees, clockwise from north, in [0, 360)."""
+
+
+def _route_point(value: Any) -> Any:
+    # A wrong count gets its own message: pydantic would say "Tuple should have at most 2 items".
+    if isinstance(value, list | tuple) and len(value) != 2:
+        raise PydanticCustomError(
+            "route_point",
+            "a route point is [north_m, east_m]: expected exactly 2 numbers, got {count}",
+            {"count": len(value)})
+    return value
+
+
+RoutePoint = Annotated[tuple[Number, Number], BeforeValidator(_route_point)]
+"""A waypoint ``(north_m, east_m)`` in metres."""
+
+
+def _at_least_one_ship(value: Any) -> Any:
+    # Checked before the items: pydantic's min_length counts only the items that validated.
+    if isinstance(value, list | tuple) and not value:
+        raise ValueError("expected at least one ship, got an empty list")
+    return value
+
+
+class Current(Strict):
+    """Uniform surface current: ``speed_kn`` knots flowing towards ``towards_deg``."""
+
+    speed_kn: Annotated[Number, Field(ge=0.0, le=10.0)]
+    towards_deg: Direction
+
+
+class Wind(Strict):
+    """Uniform true wind: ``speed_mps`` m/s blowing from ``from_deg``."""
+
+    speed_mps: Annotated[Number, Field(ge=0.0, le=60.0)]
+    from_deg: Direction
+
+
+class Environment(Strict):
+    """Current and wind; either may be omitted (None = none)."""
+
+    current: Current | None = None
+    wind: Wind | None = None
+
+
+class ShipEntry(Strict):
+    """One ship of a scenario, in the file's units.
+
+    ``speed_kn`` None means the ship's service speed. ``ship_file`` (the resolved ship file)
+    is set by :func:`load_scenario`.
+    """
+
+    name: Text
+    type: Text
+    north_m: Number
+    east_m: Number
+    heading_deg: Direction
+    speed_kn: Annotated[Number, Field(ge=0.0, le=60.0)] | None = None
+    route: tuple[RoutePoint, ...] = ()
+
+    _ship_file: Path | None = PrivateAttr(default=None)
+
+    @property
+    def ship_file(self) -> Path | None:
+        """Absolute path of the ship file that ``type`` names (None if not resolved)."""
+        return self._ship_file
+
+
+class Scenario(Strict):
+    """A validated scenario file. See the module docstring for the format.
+
+    After :func:`load_scenario`, ``path`` is the absolute path of the file and every
+    ``ships[i].ship_file`` the resolved ship file.
+    """
+
+    schema_version: Integer
+    name: Text
+    description: str = ""
+    duration_s: Annotated[Number, Field(gt=0.0, le=MAX_DURATION_S)]
+    dt_s: Annotated[Number, Field(gt=0.0, le=MAX_DT_S, validate_default=True)] = 1.0
+    # None (absent or empty) becomes the default in _default_recording, so it is always a float.
+    record_every_s: Annotated[Number, Field(gt=0.0)] = Field(default=None, validate_default=True)
+    seed: Annotated[Integer, Field(ge=0)] = 0
+    environment: Environment = Field(default_factory=Environment)
+    ships: Annotated[tuple[ShipEntry, ...], BeforeValidator(_at_least_one_ship)]
+
+    _path: Path | None = PrivateAttr(default=None)
+
+    @property
+    def path(self) -> Path | None:
+        """Absolute path of the scenario file (None if not loaded from a file)."""
+        return self._path
+
+    @property
+    def ship_files(self) -> tuple[Path | None, ...]:
+        """Resolved ship file of every ship, in order."""
+        return tuple(ship.ship_file for ship in self.ships)
+
+    @field_validator("schema_version")
+    @classmethod
+    def _known_version(cls, version: int) -> int:
+        if version != SCHEMA_VERSION:
+            raise ValueError(f"unsupported schema_version {version}; this version of trafficsim "
+                             f"reads schema_version {SCHEMA_VERSION}")
+        return version
+
+    @field_validator("dt_s")
+    @classmethod
+    def _dt_within_duration(cls, dt: float, info: ValidationInfo) -> float:
+        duration = info.data.get("duration_s")
+        if duration is not None and dt > duration:
+            raise ValueError(f"must not exceed duration_s ({duration:g} s), got {dt:g}")
+        return dt
+
+    @field_validator("record_every_s", mode="before")
+    @classmethod
+    def _default_recording(cls, every: Any, info: ValidationInfo) -> Any:
+        # Default: 1 s rounded up to a whole number of steps (a 2 s step records every 2 s).
+        if every is not None:
+            return every
+        dt = info.data.get("dt_s")
+        return 1.0 if dt is None else max(1, math.ceil(1.0 / dt - _MULTIPLE_TOL)) * dt
+
+    @field_validator("record_every_s")
+    @classmethod
+    def _whole_steps(cls, every: float, info: ValidationInfo) -> float:
+        dt = info.data.get("dt_s")
+        if dt is None:  # dt_s itself is invalid and already reported
+            return every
+        ratio = every / dt
+        steps = round(ratio)
+        if steps < 1 or abs(ratio - steps) > _MULTIPLE_TOL:
+            nearest = max(1, steps) * dt
+            raise ValueError(f"must be a whole multiple of dt_s ({dt:g} s), got {every:g}; "
+                             f"e.g. {nearest:g}")
+        return every
+
+    @field_validator("environment", mode="before")
+    @classmethod
+    def _empty_environment(cls, value: Any) -> Any:
+        # "environment:" with everything below commented out means no environment.
+        return {} if value is None else value
+
+    @field_validator("ships")
+    @classmethod
+    def _unique_names(cls, ships: tuple[ShipEntry, ...]) -> tuple[ShipEntry, ...]:
+        first: dict[str, int] = {}
+        for index, ship in enumerate(ships):
+            if ship.name in first:
+                raise FieldError(f"duplicate ship name '{ship.name}' (already used by "
+                                 f"ships[{first[ship.name]}]); names must be unique",
+                                 loc=(index, "name"))
+            first[ship.name] = index
+        return ships
+
+
+def _find_ship_files(doc: Document, base_dir: Path
+                     ) -> tuple[dict[int, Path], list[ScenarioError]]:
+    """Resolve every ship's ``type`` in the raw data, so lookups are reported with the
+    schema errors; ships whose ``type`` is not text are left to the schema."""
+    from trafficsim.ships import library  # the library imports ship families: load lazily
+
+    found: dict[int, Path] = {}
+    errors: list[ScenarioError] = []
+    ships = doc.data.get("ships")
+    if not isinstance(ships, list):
+        return found, errors
+    for index, ship in enumerate(ships):
+        kind = ship.get("type") if isinstance(ship, dict) else None
+        if not isinstance(kind, str) or not kind.strip():
+            continue
+        try:
+            found[index] = Path(library.find_ship(kind, base_dir))
+        except ShipLibraryError as exc:
+            message = exc.message if exc.path is None else str(exc)
+            errors.append(doc.error(message, ("ships", index, "type")))
+    return found, errors
+
+
+def load_scenario(path: str | os.PathLike[str]) -> Scenario:
+    """Load and validate a scenario file, resolving every ship's ``type`` to a ship file.
+
+    Args:
+        path: the scenario YAML file.
+
+    Returns:
+        The :class:`Scenario`, with ``path`` and ``ships[i].ship_file`` set (absolute).
+
+    Raises:
+        ScenarioError: located at the offending line; ``errors`` holds every problem found
+            (schema errors and unknown ship types together).
+    """
+    doc = load_yaml(path)
+    absolute = Path(os.path.abspath(path))
+    scenario, errors = collect_errors(doc, Scenario)
+    ship_files, lookup_errors = _find_ship_files(doc, absolute.parent)
+    errors += lookup_errors
+    if errors:
+        raise_errors(errors)
+    assert scenario is not None
+    for index, ship in enumerate(scenario.ships):
+        ship._ship_file = ship_files[index]
+    scenario._path = absolute
+    return scenario

@@ -1,0 +1,139 @@
+"""The ship library: ship files by type name (``trafficsim/ships/library/<type>.yaml``) or by path.
+
+A ship file holds particulars, actuator limits and the coefficients of one model family; its format
+is documented in the README ("Ship files"). Loading validates the file and checks ``coefficients``
+against the family's declared coefficient names, so a typo is reported with its line.
+"""
+
+from __future__ import annotations
+
+import difflib
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import Field, model_validator
+
+from trafficsim.errors import ShipLibraryError
+from trafficsim.io.yamlio import Strict, load_yaml, validate
+
+LIBRARY_DIR = Path(__file__).parent / "library"
+
+
+class Particulars(Strict):
+    length_m: float = Field(gt=0, le=600)
+    beam_m: float = Field(gt=0, le=100)
+    draught_m: float = Field(gt=0, le=40)
+    model_config = Strict.model_config | {"extra": "allow"}
+
+    @model_validator(mode="before")
+    @classmethod
+    def _numbers(cls, data: Any) -> Any:
+        if isinstance(data, dict):
+            for key, value in data.items():
+                if isinstance(value, bool) or not isinstance(value, (int, float)):
+                    raise ValueError(f"particular '{key}': expected a number, got {value!r}")
+        return data
+
+
+class ActuatorSpec(Strict):
+    rudder_max_deg: float = Field(gt=0, le=90)
+    rudder_rate_degps: float = Field(gt=0, le=90)
+    rudder_tau_s: float = Field(gt=0, le=60)
+    rps_max: float = Field(gt=0, le=100)
+    rps_min: float = Field(ge=-100, le=0)
+    engine_tau_s: float = Field(gt=0, le=600)
+
+
+class AutopilotSpec(Strict):
+    kp: float = Field(default=1.0, gt=0, le=20)
+    kd_s: float = Field(default=0.0, ge=0, le=1000)
+    ki_per_s: float = Field(default=0.0, ge=0, le=1)
+
+
+class IntegrationSpec(Strict):
+    max_dt_s: float = Field(default=1.0, gt=0, le=60)
+
+
+class ShipFile(Strict):
+    schema_version: Literal[1]
+    name: str = Field(min_length=1)
+    description: str = ""
+    source: str = ""
+    model: str
+    particulars: Particulars
+    service_speed_kn: float = Field(gt=0, le=60)
+    actuators: ActuatorSpec
+    coefficients: dict[str, float]
+    autopilot: AutopilotSpec = AutopilotSpec()
+    integration: IntegrationSpec = IntegrationSpec()
+
+
+def known_ships() -> list[str]:
+    """Type names of the bundled ships."""
+    return sorted(p.stem for p in LIBRARY_DIR.glob("*.yaml"))
+
+
+def find_ship(type_or_path: str, base_dir: Path | None = None) -> Path:
+    """Resolve a ship type name or a ship-file path to an absolute file path.
+
+    A value with a path separator or a ``.yaml``/``.yml`` suffix is a path (relative to
+    ``base_dir``, default the working directory); anything else is a library type name.
+    """
+    looks_like_path = "/" in type_or_path or type_or_path.endswith((".yaml", ".yml"))
+    if looks_like_path:
+        p = Path(type_or_path)
+        if not p.is_absolute() and base_dir is not None:
+            p = base_dir / p
+        if not p.is_file():
+            raise ShipLibraryError(f"ship file '{type_or_path}' not found (looked at {p})")
+        return p.resolve()
+    p = LIBRARY_DIR / f"{type_or_path}.yaml"
+    if p.is_file():
+        return p
+    names = known_ships()
+    close = difflib.get_close_matches(type_or_path, names, n=1)
+    hint = f" (did you mean '{close[0]}'?)" if close else ""
+    raise ShipLibraryError(
+        f"unknown ship '{type_or_path}'{hint}; known ships: {', '.join(names)}; "
+        "or give a path to a ship file")
+
+
+def load_ship(type_or_path: str, base_dir: Path | None = None) -> dict[str, Any]:
+    """Load and validate a ship file; returns it as a plain dict (plus ``path``)."""
+    return dict(_load_cached(str(find_ship(type_or_path, base_dir))))
+
+
+@lru_cache(maxsize=256)
+def _load_cached(path: str) -> dict[str, Any]:
+    from trafficsim.ships.base import families
+
+    ship = validate(Path(path), ShipFile)
+    fams = families()
+    doc = load_yaml(Path(path))
+    if ship.model not in fams:
+        close = difflib.get_close_matches(ship.model, list(fams), n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ShipLibraryError(
+            f"unknown model family '{ship.model}'{hint}; expected one of {', '.join(sorted(fams))}",
+            path=path, line=doc.line_of(("model",)), key="model")
+    declared = fams[ship.model].coefficients
+    coeffs = dict(ship.coefficients)
+    for name in coeffs:
+        if name not in declared:
+            close = difflib.get_close_matches(name, list(declared), n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else ""
+            raise ShipLibraryError(
+                f"unknown coefficient '{name}' for model '{ship.model}'{hint}",
+                path=path, line=doc.line_of(("coefficients", name)), key=f"coefficients.{name}")
+    for name, default in declared.items():
+        if name not in coeffs:
+            if default is None:
+                raise ShipLibraryError(
+                    f"missing required coefficient '{name}' for model '{ship.model}'",
+                    path=path, line=doc.line_of(("coefficients",)), key="coefficients")
+            coeffs[name] = default
+    out = ship.model_dump()
+    out["coefficients"] = coeffs
+    out["path"] = path
+    return out
