@@ -104,3 +104,22 @@ def test_make_run_scenario_exists():
     makefile = (Path(__file__).resolve().parents[1] / "Makefile").read_text()
     scenario = makefile.split("SCENARIO ?= ")[1].split()[0]
     assert (Path(__file__).resolve().parents[1] / scenario).is_file()
+
+
+def test_validate_checks_the_ship_files_a_scenario_uses(tmp_path):
+    ship = tmp_path / "boat.yaml"
+    text = (Path(__file__).resolve().parents[1] / "trafficsim/ships/library/catfish.yaml"
+            ).read_text().replace("  beam_m:", "  beam_m: wide\n  beam_typo:", 1)
+    ship.write_text(text)
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("schema_version: 1\nname: s\nduration_s: 10\nships:\n  - name: a\n"
+                        "    type: boat.yaml\n    north_m: 0\n    east_m: 0\n    heading_deg: 0\n")
+    res = cli("validate", scenario)
+    assert res.returncode == 2 and "boat.yaml:" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_unwritable_output_folder_is_one_line(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    line = one_line_error(cli("run", SCENARIOS / "head_on.yaml", "--out", blocker / "out"))
+    assert str(blocker) in line

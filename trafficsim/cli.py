@@ -122,6 +122,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except TrafficsimError as err:
         print(f"trafficsim: error: {err}", file=sys.stderr)
         return EXIT_USER_ERROR if isinstance(err, InputError) else 1
+    except OSError as err:  # e.g. an --out folder that cannot be written
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"trafficsim: error: {where}{err.strerror or err}", file=sys.stderr)
+        return EXIT_USER_ERROR
     except KeyboardInterrupt:
         print("trafficsim: interrupted", file=sys.stderr)
         return 130

@@ -27,6 +27,8 @@ class InputError(TrafficsimError, ValueError):
         self.path = path
         self.line = line
         self.key = key
+        #: every error found in the file (``trafficsim validate`` prints them all)
+        self.errors: list[InputError] = [self]
         super().__init__(self.render())
 
     def render(self) -> str:

@@ -19,8 +19,10 @@ def validate_file(path: Path) -> list[InputError]:
             load_ship(str(path.resolve()))
         else:
             from trafficsim.io.scenario import load_scenario
+            from trafficsim.ships.library import load_ship
 
-            load_scenario(path)
+            for ship_file in load_scenario(path).ship_files:
+                load_ship(str(ship_file))
     except InputError as err:
         return list(getattr(err, "errors", None) or [err])
     return []

@@ -36,3 +36,15 @@ def test_engine_10000_ships(benchmark, type_):
         rate = sim.batch.n_ships * STEPS / benchmark.stats.stats.mean
         benchmark.extra_info["ship_steps_per_s"] = rate
         print(f"\n{type_}: {rate:,.0f} ship-steps/s")
+
+
+@pytest.mark.parametrize("n_encounters", [1, 50, 500])
+def test_engine_scaling_with_batch_size(benchmark, n_encounters):
+    """Nomoto traffic: cost per ship-step as the batch grows (per-step overhead amortised)."""
+    sim = Simulation.start(_batch("container", n_encounters), 1.0)
+    steps = max(STEPS, 20000 // (2 * n_encounters))
+    benchmark.pedantic(sim.run, args=(steps,), rounds=3, warmup_rounds=1)
+    if benchmark.stats is not None:
+        rate = sim.batch.n_ships * steps / benchmark.stats.stats.mean
+        benchmark.extra_info["ship_steps_per_s"] = rate
+        print(f"\n{2 * n_encounters} ships: {rate:,.0f} ship-steps/s")

@@ -741,7 +741,7 @@ def raise_errors(errors: Sequence[ScenarioError]) -> NoReturn:
     more = len(ordered) - 1
     suffix = f" (and {more} more error{'s' if more > 1 else ''})" if more else ""
     exc = ScenarioError(first.message + suffix, path=first.path, line=first.line, key=first.key)
-    exc.errors = list(ordered)  # type: ignore[attr-defined]
+    exc.errors = list(ordered)
     raise exc
 
 

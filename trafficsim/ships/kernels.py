@@ -17,8 +17,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
+from trafficsim.jit import kernel
 from trafficsim.ships import mmg, modular, nomoto, response
 
 #: integer codes of the model families in the compiled dispatch
@@ -28,7 +28,7 @@ RUDDER_MAX, RUDDER_RATE, RUDDER_TAU, RPS_MAX, RPS_MIN, ENGINE_TAU = range(6)
 TWO_PI = 2.0 * math.pi
 
 
-@njit(cache=True)
+@kernel
 def accel(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, float]:
     """Body-frame accelerations of one ship of family ``code``."""
     if code == 0:
@@ -40,7 +40,7 @@ def accel(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[flo
     return modular.accel(p, x, env)
 
 
-@njit(cache=True)
+@kernel
 def _derivative(code: int, p: np.ndarray, a: np.ndarray, x: np.ndarray, rudder_cmd: float,
                 rps_cmd: float, env: np.ndarray, out: np.ndarray) -> None:
     du, dv, dr = accel(code, p, x, env)
@@ -57,7 +57,7 @@ def _derivative(code: int, p: np.ndarray, a: np.ndarray, x: np.ndarray, rudder_c
     out[7] = (min(max(rps_cmd, a[RPS_MIN]), a[RPS_MAX]) - x[7]) / a[ENGINE_TAU]
 
 
-@njit(cache=True)
+@kernel
 def step_ships(codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
                rudder_cmd: np.ndarray, rps_cmd: np.ndarray, E: np.ndarray, dt: float,
                substeps: np.ndarray) -> None:
@@ -102,7 +102,7 @@ def step_ships(codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
             X[j, i] = x[j]
 
 
-@njit(cache=True)
+@kernel
 def accelerations(codes: np.ndarray, P: np.ndarray, X: np.ndarray, E: np.ndarray) -> np.ndarray:
     """Body-frame accelerations ``(3, n)`` (du, dv, dr) of every ship at state ``X`` ``(8, n)``."""
     n = X.shape[1]

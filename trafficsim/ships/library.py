@@ -14,8 +14,8 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from trafficsim.errors import ShipLibraryError
-from trafficsim.io.yamlio import Strict, load_yaml, validate
+from trafficsim.errors import ScenarioError, ShipLibraryError
+from trafficsim.io.yamlio import FieldError, Strict, load_yaml, validate
 
 LIBRARY_DIR = Path(__file__).parent / "library"
 
@@ -32,7 +32,7 @@ class Particulars(Strict):
         if isinstance(data, dict):
             for key, value in data.items():
                 if isinstance(value, bool) or not isinstance(value, (int, float)):
-                    raise ValueError(f"particular '{key}': expected a number, got {value!r}")
+                    raise FieldError(f"expected a number, got {value!r}", loc=(key,))
         return data
 
 
@@ -108,7 +108,10 @@ def load_ship(type_or_path: str, base_dir: Path | None = None) -> dict[str, Any]
 def _load_cached(path: str) -> dict[str, Any]:
     from trafficsim.ships.base import families
 
-    ship = validate(Path(path), ShipFile)
+    try:
+        ship = validate(Path(path), ShipFile)
+    except ScenarioError as err:  # same located message, as the ship-file error it is
+        raise _as_ship_error(err) from None
     fams = families()
     doc = load_yaml(Path(path))
     if ship.model not in fams:
@@ -136,4 +139,11 @@ def _load_cached(path: str) -> dict[str, Any]:
     out = ship.model_dump()
     out["coefficients"] = coeffs
     out["path"] = path
+    return out
+
+
+def _as_ship_error(err: ScenarioError) -> ShipLibraryError:
+    out = ShipLibraryError(err.message, path=err.path, line=err.line, key=err.key)
+    out.errors = [ShipLibraryError(e.message, path=e.path, line=e.line, key=e.key)
+                  for e in getattr(err, "errors", [err])]
     return out

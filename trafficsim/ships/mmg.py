@@ -75,9 +75,9 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from trafficsim.errors import ShipLibraryError
+from trafficsim.jit import kernel
 from trafficsim.ships import wind
 from trafficsim.ships.base import RHO_WATER, RPS, RUDDER, U, V, register
 from trafficsim.ships.base import R as YAW_RATE
@@ -291,7 +291,7 @@ class MMGFamily:
         )
 
 
-@njit(cache=True)
+@kernel
 def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, float]:
     """Body-frame accelerations of ONE ship ([YY15] motion equations at midship).
 

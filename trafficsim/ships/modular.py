@@ -138,9 +138,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from trafficsim.errors import ShipLibraryError
+from trafficsim.jit import kernel
 from trafficsim.ships.base import (
     EAST,
     N_STATE,
@@ -281,7 +281,7 @@ class ModularFamily:
  _GEAR_RATIO, _TAU_RUDDER_S, _TAU_ENGINE_S) = range(30)
 
 
-@njit(cache=True)
+@kernel
 def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, float]:
     """Body-frame accelerations of ONE ship [seed 002, eqs 4.1-4.6, 4.9].
 
@@ -314,7 +314,7 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     return fx / p[_M11], dv, dr
 
 
-@njit(cache=True)
+@kernel
 def _thesis_controls(rudder: float, rps: float) -> tuple[float, float]:
     """Thesis rudder angle d (rad, + = port, so ``d = -RUDDER``) and shaft speed n (rad/s).
 
@@ -324,7 +324,7 @@ def _thesis_controls(rudder: float, rps: float) -> tuple[float, float]:
     return -rudder, _TWO_PI * rps
 
 
-@njit(cache=True)
+@kernel
 def _solve_sway_yaw(m22: float, m33: float, y_rdot: float, n_vdot: float, fy: float, fn: float
                     ) -> tuple[float, float]:
     """Solve [[m22, -Y_rdot], [-N_vdot, m33]] (dv, dr) = (fy, fn).
@@ -336,7 +336,7 @@ def _solve_sway_yaw(m22: float, m33: float, y_rdot: float, n_vdot: float, fy: fl
     return (m33 * fy + y_rdot * fn) / det, (n_vdot * fy + m22 * fn) / det
 
 
-@njit(cache=True)
+@kernel
 def _hull_forces(p: np.ndarray, u: float, v: float, r: float, speed: float
                  ) -> tuple[float, float, float]:
     """Hull module X_H, Y_H (N) and N_H (N m) [seed 002, eqs 4.4-4.6, 4.9]; ``speed`` = U, m/s."""
@@ -348,7 +348,7 @@ def _hull_forces(p: np.ndarray, u: float, v: float, r: float, speed: float
     return xh, yh, nh
 
 
-@njit(cache=True)
+@kernel
 def _propeller_forces(p: np.ndarray, n: float) -> tuple[float, float, float]:
     """Propeller module X_P, Y_P (N), N_P (N m) at shaft speed ``n`` (rad/s): thrust X_nn n|n|
     and the side force and moment of the same-handed screws Y_n n, N_n n [seed 002, eqs 4.4-4.6,
@@ -356,7 +356,7 @@ def _propeller_forces(p: np.ndarray, n: float) -> tuple[float, float, float]:
     return p[_X_NN] * n * abs(n), p[_Y_N] * n, p[_N_N] * n
 
 
-@njit(cache=True)
+@kernel
 def _rudder_forces(p: np.ndarray, speed: float, d: float, n: float) -> tuple[float, float, float]:
     """Rudder module X_R, Y_R (N), N_R (N m) [seed 002, eqs 4.4-4.6, ch 4.6].
 

@@ -51,9 +51,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from trafficsim.errors import ShipLibraryError
+from trafficsim.jit import kernel
 from trafficsim.ships.base import RPS, RUDDER, U, V, register, stack
 from trafficsim.ships.base import R as YAW_RATE
 
@@ -129,7 +129,7 @@ class NomotoFamily:
 _K_PRIME, _T_PRIME, _LENGTH_M, _U_SERVICE, _RPS_SERVICE, _SURGE_TAU_S, _N3_PRIME = range(7)
 
 
-@njit(cache=True)
+@kernel
 def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, float]:
     """Body-frame accelerations of ONE ship of the K-T / surge-lag model (module docstring).
 

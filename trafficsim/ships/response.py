@@ -64,8 +64,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numba import njit
 
+from trafficsim.jit import kernel
 from trafficsim.ships.base import RPS, RUDDER, U, V, register, stack
 from trafficsim.ships.base import R as YAW_RATE
 
@@ -139,7 +139,7 @@ class ResponseFamily:
  _U_FADE) = range(17)
 
 
-@njit(cache=True)
+@kernel
 def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, float]:
     """Body-frame accelerations of ONE ship [seed 001, eq 2] in SI, with the two guards of the
     module docstring (``a1 u|u|`` resistance, rudder terms faded below ``u_fade``).

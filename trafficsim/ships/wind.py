@@ -60,8 +60,8 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
-from numba import njit
 
+from trafficsim.jit import kernel
 from trafficsim.ships.base import PSI, RHO_AIR, Env, U, V, env_table
 
 #: Table angles, degrees (Isherwood 1972, Table; 10 deg steps from head to stern wind).
@@ -202,7 +202,7 @@ def rows(params: WindParams) -> np.ndarray:
                                          axis=1))
 
 
-@njit(cache=True)
+@kernel
 def _at(i: int, w: np.ndarray) -> tuple[float, float, float]:
     """Isherwood C_X, C_Y, C_N (wind from port) of the ship ``w`` at table row ``i``."""
     a, b, c = _A[i], _B[i], _C[i]
@@ -214,7 +214,7 @@ def _at(i: int, w: np.ndarray) -> tuple[float, float, float]:
     return cx, cy, cn
 
 
-@njit(cache=True)
+@kernel
 def coefficients1(w: np.ndarray, angle: float) -> tuple[float, float, float]:
     """Wind coefficients of ONE ship in this package's body axes.
 
@@ -236,7 +236,7 @@ def coefficients1(w: np.ndarray, angle: float) -> tuple[float, float, float]:
     return x0 + f * (x1 - x0), side * (y0 + f * (y1 - y0)), side * (n0 + f * (n1 - n0))
 
 
-@njit(cache=True)
+@kernel
 def loads1(w: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, float]:
     """Wind force and moment on ONE ship over its still-air load, body frame.
 
@@ -268,7 +268,7 @@ def loads1(w: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float,
             w[_QN] * (n1 * q1 - n0 * q0))
 
 
-@njit(cache=True)
+@kernel
 def _coefficients_all(W: np.ndarray, angles: np.ndarray) -> np.ndarray:
     out = np.empty((3, angles.shape[0]))
     for i in range(angles.shape[0]):
@@ -276,7 +276,7 @@ def _coefficients_all(W: np.ndarray, angles: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@kernel
 def _loads_all(W: np.ndarray, X: np.ndarray, E: np.ndarray) -> np.ndarray:
     n = X.shape[1]
     out = np.empty((3, n))
