@@ -54,6 +54,9 @@ def test_crash_stop_needs_astern_power():
     _, ind = manoeuvres.crash_stop(load_ship("kvlcc2"))
     assert 0 < ind["head_reach_m"] <= ind["track_reach_m"]
     assert ind["time_to_stop_s"] > 60
+    # Nomoto traffic: quadratic surge gives stopping distances of real merchant ships (5-15 L)
+    _, ind = manoeuvres.crash_stop(load_ship("cargo"))
+    assert 5.0 < ind["track_reach_m"] / ind["length_m"] < 15.0
 
 
 @pytest.mark.parametrize("l_over_v, first, second", [

@@ -145,7 +145,8 @@ def test_steady_speed(specs: dict, name: str) -> None:
     x0 = np.zeros((base.N_STATE, 3))
     orders = np.array([c["rps_service"], act["rps_max"], act["rps_min"]])
     tau = c["surge_tau_s"]
-    hist = _run([spec] * 3, x0, lambda t: (np.zeros(3), orders), 2.0, 20.0 * tau)
+    # from rest the quadratic surge approaches u_ss as tanh(t |u_ss| / (2 U T_u))
+    hist = _run([spec] * 3, x0, lambda t: (np.zeros(3), orders), 2.0, 100.0 * tau)
     np.testing.assert_allclose(hist[-1, U], us * orders / c["rps_service"], rtol=1e-6)
     assert hist[-1, U, 2] < 0.0
     params, a = FAMILY.build([spec]), Actuators.from_specs([spec])
@@ -204,9 +205,13 @@ def test_stable_at_dt_one_second(specs: dict) -> None:
     assert np.abs(hist[:, YAW]).max() < np.radians(10.0)
     # sway decays: the model keeps v = 0
     assert np.abs(hist[-1, V]).max() < 0.01
+    # engine stopped, helm hard over: coasting slows as 1/t (quadratic resistance) and the
+    # turn dies away with the speed
     stopped = _run([specs["tanker"]], _service_state([specs["tanker"]]),
-                   lambda t: (np.array([0.6]), np.array([0.0])), 1.0, 4000.0)
-    assert abs(stopped[-1, YAW, 0]) < 1e-4
+                   lambda t: (np.array([0.6]), np.array([0.0])), 1.0, 20000.0)
+    r = np.abs(stopped[:, YAW, 0])
+    assert r[-1] < 0.1 * r.max()
+    assert np.all(np.diff(stopped[2000:, U, 0]) <= 0.0)
 
 
 def test_vectorised_mix_equals_single_runs(specs: dict) -> None:

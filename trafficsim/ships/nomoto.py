@@ -18,13 +18,18 @@ saturates. The Mariner's steady ``r L / U`` at 35 deg rudder is 0.28 where the l
 ``K' delta`` is 2.36, which would turn it on a circle of 0.85 L instead of 7 L. Ship files fit
 ``n3'`` to the steady turns (the "spiral curve") of their source model.
 
-Surge is a first-order lag towards a steady speed proportional to the propeller speed::
+Surge balances a thrust and a resistance that are both quadratic, towards a steady speed
+proportional to the propeller speed::
 
-    du/dt = (u_ss(n) - u) / T_u,      u_ss(n) = U_service * n / n_service
+    du/dt = (u_ss |u_ss| - u |u|) / (2 U_service T_u),      u_ss(n) = U_service * n / n_service
 
 (``n`` in rev/s, ``U_service`` the ship file's ``service_speed_kn``, ``n_service`` the
-propeller speed giving it, ``T_u`` the surge time constant). ``u_ss`` is negative for
-``n < 0``: the family supports astern running (``supports_astern = True``).
+propeller speed giving it, ``T_u`` the surge time constant). Linearised about the service speed
+this is the first-order lag ``du/dt = (u_ss - u) / T_u``; away from it the quadratic form keeps
+what a linear lag loses: resistance fades as the ship slows, so a crash stop takes realistic
+distances (Mariner: about 7 L with half-power astern) instead of stopping exponentially fast.
+``u_ss`` is negative for ``n < 0``: the family supports astern running
+(``supports_astern = True``).
 
 Sway: the model has no sway dynamics; ``v`` is kept at zero (an initial ``v`` decays with the
 yaw time constant, ``dv/dt = -v / T``). Wind is not modelled; current enters the kinematics
@@ -154,7 +159,7 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     cubic = p[_N3_PRIME] * (l_over_u * l_over_u) * r * r * r  # n3 r^3, n3 = n3' (L/U)^2
     dr = (K * x[RUDDER] - r - cubic) * inv_T
     u_ss = u_service * x[RPS] / p[_RPS_SERVICE]
-    du = (u_ss - u) / p[_SURGE_TAU_S]
+    du = (u_ss * abs(u_ss) - u * abs(u)) / (2.0 * u_service * p[_SURGE_TAU_S])
     dv = -x[V] * inv_T
     return du, dv, dr
 
