@@ -98,12 +98,12 @@ class Recorder:
 
 def package_versions() -> dict[str, str]:
     """Versions of the interpreter and the libraries that shape the results."""
+    import numba
     import pyarrow
-    import scipy
     import shapely
 
     return {"trafficsim": __version__, "python": platform.python_version(),
-            "numpy": np.__version__, "scipy": scipy.__version__,
+            "numpy": np.__version__, "numba": numba.__version__,
             "shapely": shapely.__version__, "pyarrow": pyarrow.__version__}
 
 
