@@ -1,0 +1,1 @@
+"""State estimation: Kalman filters that turn noisy sensor readings into estimates."""
