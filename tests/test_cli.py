@@ -123,3 +123,17 @@ def test_unwritable_output_folder_is_one_line(tmp_path):
     blocker.write_text("")
     line = one_line_error(cli("run", SCENARIOS / "head_on.yaml", "--out", blocker / "out"))
     assert str(blocker) in line
+
+
+def test_trajectories_keep_truth_measurements_and_estimates_side_by_side(tmp_path):
+    res = cli("run", SCENARIOS / "crossing_sensors.yaml", "--out", tmp_path)
+    assert res.returncode == 0, res.stderr
+    table = pq.read_table(tmp_path / "trajectories.parquet").to_pydict()
+    for key in ("gnss_north_m", "gnss_east_m", "gnss_valid", "compass_heading_deg",
+                "est_north_m", "est_east_m", "est_heading_deg", "est_sog_kn", "est_cog_deg"):
+        assert key in table
+    import numpy as np
+
+    err = np.hypot(np.array(table["est_north_m"]) - np.array(table["north_m"]),
+                   np.array(table["est_east_m"]) - np.array(table["east_m"]))
+    assert 0.0 < np.sqrt(np.mean(err**2)) < 8.0

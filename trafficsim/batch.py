@@ -28,6 +28,9 @@ class ShipSetup:
 
     Attributes:
         route_m: ``(k, 2)`` waypoints north/east in metres (may be empty: hold course).
+        ship_in_encounter: index within the encounter (keys the ship's random streams).
+        sensors: instrument configs (ship-file defaults merged with scenario overrides).
+        filter: own-ship filter, ``none`` (perfect knowledge) or ``pv``.
     """
 
     name: str
@@ -38,6 +41,9 @@ class ShipSetup:
     heading_rad: float
     speed_mps: float
     route_m: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    ship_in_encounter: int = 0
+    sensors: Mapping[str, Any] = field(default_factory=dict)
+    filter: str = "none"
 
 
 @dataclass(frozen=True)
@@ -80,6 +86,9 @@ class Batch:
     pair_i: np.ndarray  # (P,) int, first ship of each pair
     pair_j: np.ndarray  # (P,) int, second ship (pair_i < pair_j, same encounter)
     n_encounters: int
+    ship_in_encounter: np.ndarray  # (n,) int, keys the random streams
+    sensors: list[Mapping[str, Any]]  # per-ship instrument configs
+    filters: list[str]  # per-ship own-ship filter
     t_s: float = 0.0
 
     @property
@@ -166,6 +175,9 @@ def build_batch(ships: Sequence[ShipSetup], envs: Sequence[EncounterEnv]) -> Bat
         pair_i=pi,
         pair_j=pj,
         n_encounters=len(envs),
+        ship_in_encounter=np.array([s.ship_in_encounter for s in ships], dtype=np.int64),
+        sensors=[s.sensors for s in ships],
+        filters=[s.filter for s in ships],
     )
     batch.x[RPS] = batch.rps_for_speed(batch.x[U])
     return batch

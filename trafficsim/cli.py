@@ -122,6 +122,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except TrafficsimError as err:
         print(f"trafficsim: error: {err}", file=sys.stderr)
         return EXIT_USER_ERROR if isinstance(err, InputError) else 1
+    except BrokenPipeError:  # output piped into a command that stopped reading
+        sys.stderr.close()
+        return 0
     except OSError as err:  # e.g. an --out folder that cannot be written
         where = f"{err.filename}: " if err.filename else ""
         print(f"trafficsim: error: {where}{err.strerror or err}", file=sys.stderr)

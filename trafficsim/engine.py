@@ -16,6 +16,7 @@ from trafficsim.batch import Batch
 from trafficsim.control import autopilot, guidance
 from trafficsim.errors import SimulationError
 from trafficsim.metrics import PairMetrics
+from trafficsim.navigation import Navigation
 from trafficsim.ships import base, kernels
 from trafficsim.ships.base import EAST, NORTH, PSI, Env, R
 
@@ -41,10 +42,12 @@ class Simulation:
     rudder_cmd_rad: np.ndarray
     rps_cmd: np.ndarray
     substeps: np.ndarray  # (n,) RK4 sub-steps per time step
+    nav: Navigation | None = None  # instruments and filters; None = perfect knowledge
     step_index: int = 0
 
     @classmethod
-    def start(cls, batch: Batch, dt: float) -> Simulation:
+    def start(cls, batch: Batch, dt: float, seed: int = 0) -> Simulation:
+        """Start at t = 0; ``seed`` keys every random stream (instruments)."""
         x = batch.x
         n = batch.n_ships
         speed = x[base.U].copy()
@@ -61,21 +64,33 @@ class Simulation:
             rps_cmd=batch.rps_for_speed(speed),
             substeps=np.maximum(1, np.ceil(dt * batch.substeps_per_s - 1e-9)).astype(np.int64),
         )
+        if any(f != "none" for f in batch.filters) or any(batch.sensors):
+            sim.nav = Navigation.build(batch.sensors, batch.filters, x, seed, batch.encounter,
+                                       batch.ship_in_encounter, dt)
+        sim._navigate_and_control()
         return sim
 
     @property
     def t_s(self) -> float:
         return self.step_index * self.dt
 
-    def step(self) -> None:
-        """Advance all ships by one time step."""
-        b, x, dt = self.batch, self.batch.x, self.dt
-        est = x  # perfect knowledge: decisions are taken on this estimate
+    def _navigate_and_control(self) -> None:
+        """Measure and estimate at the current time, then set the orders for the next step.
+
+        Decisions are taken on the estimate (perfect knowledge without instruments), so truth,
+        measurements, estimate and orders of one time all refer to that time.
+        """
+        b, x = self.batch, self.batch.x
+        est = x if self.nav is None else self.nav.update(x, b.env)
         self.course_order_rad = guidance.desired_course(
             self.route, b.waypoints, b.n_waypoints, est[NORTH], est[EAST], b.length_m)
         self.rudder_cmd_rad = autopilot.rudder_command(
             self.course_order_rad, est[PSI], est[R], self.integral, b.kp, b.kd_s, b.ki_per_s,
-            b.rudder_max_rad, dt)
+            b.rudder_max_rad, self.dt)
+
+    def step(self) -> None:
+        """Advance all ships by one time step with the current orders, then navigate."""
+        b, x, dt = self.batch, self.batch.x, self.dt
         kernels.step_ships(b.family_code, b.params, b.actuators, x, self.rudder_cmd_rad,
                            self.rps_cmd, b.env_rows, dt, self.substeps)
         self.step_index += 1
@@ -85,6 +100,7 @@ class Simulation:
             raise SimulationError(f"state became non-finite at t = {self.t_s:g} s for ships "
                                   f"{names}; reduce dt_s or check the ship files")
         self.metrics.accumulate(x, b.length_m, b.beam_m, b.pair_i, b.pair_j, self.t_s)
+        self._navigate_and_control()
 
     def run(self, n_steps: int, every: int = 0,
             callback: Callable[[Simulation], None] | None = None) -> None:

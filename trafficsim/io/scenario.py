@@ -30,12 +30,12 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import BeforeValidator, Field, PrivateAttr, ValidationInfo, field_validator
 from pydantic_core import PydanticCustomError
 
-from trafficsim.errors import ScenarioError, ShipLibraryError
+from trafficsim.errors import InputError, ScenarioError, ShipLibraryError
 from trafficsim.io.yamlio import (
     Document,
     FieldError,
@@ -130,6 +130,16 @@ class ShipEntry(Strict):
     heading_deg: Direction
     speed_kn: Annotated[Number, Field(ge=0.0, le=60.0)] | None = None
     route: tuple[RoutePoint, ...] = ()
+    sensors: dict[str, dict[str, Any]] | None = None
+    filter: Literal["none", "pv"] = "none"
+
+    @field_validator("sensors")
+    @classmethod
+    def _valid_sensors(cls, sensors: dict[str, dict[str, Any]] | None
+                       ) -> dict[str, dict[str, Any]] | None:
+        if sensors is not None:
+            validate_sensors(sensors)
+        return sensors
 
     _ship_file: Path | None = PrivateAttr(default=None)
 
@@ -225,6 +235,20 @@ class Scenario(Strict):
                                  loc=(index, "name"))
             first[ship.name] = index
         return ships
+
+
+def validate_sensors(sensors: dict[str, dict[str, Any]]) -> None:
+    """Check a ``sensors:`` mapping by building its instruments; errors point at the key."""
+    from trafficsim.navigation import check_sensor_config
+
+    try:
+        check_sensor_config(sensors)
+    except InputError as err:
+        key = err.key or ""
+        # sensors' own messages name "<sensor>[0]" for the ship; point at the sensor instead
+        head = key.split("[", 1)[0]
+        loc = (head,) if head in sensors else ()
+        raise FieldError(err.message, loc=loc) from None
 
 
 def _find_ship_files(doc: Document, base_dir: Path

@@ -12,7 +12,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from trafficsim.errors import ScenarioError, ShipLibraryError
 from trafficsim.io.yamlio import FieldError, Strict, load_yaml, validate
@@ -67,6 +67,16 @@ class ShipFile(Strict):
     coefficients: dict[str, float]
     autopilot: AutopilotSpec = AutopilotSpec()
     integration: IntegrationSpec = IntegrationSpec()
+    #: default instruments of this ship type (see trafficsim.navigation); scenarios override
+    sensors: dict[str, dict[str, Any]] = Field(default_factory=dict)
+
+    @field_validator("sensors")
+    @classmethod
+    def _valid_sensors(cls, sensors: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        from trafficsim.io.scenario import validate_sensors
+
+        validate_sensors(sensors)
+        return sensors
 
 
 def known_ships() -> list[str]:

@@ -1,0 +1,157 @@
+"""Fixed-interval RTS smoother [seed 001, eq 8] and body velocities from a track [eq 9]."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trafficsim.estimation import ca, smoother
+from trafficsim.ships import manoeuvres
+from trafficsim.ships.base import Env
+from trafficsim.ships.library import load_ship
+
+from .test_ca import T, consistent_truth
+
+
+def test_rts_equals_batch_least_squares() -> None:
+    """The smoother's X(k|N) and P(k|N) equal the mean and covariance of the whole-record
+    Gaussian posterior, solved as one linear least-squares problem (information form)."""
+    rng = np.random.default_rng(3)
+    m, n = 2, 7
+    p = ca.CAParams.of(m, [2.0, 1.0], [3.0, 0.5], [0.05, 0.2], [1 / 30, 0.1])
+    m0 = np.array([[0.0, 5.0, 0.0], [10.0, -1.0, 0.1]])
+    p0 = np.array([np.diag([25.0, 4.0, 0.01]), np.diag([1.0, 1.0, 0.1])])
+    z = m0[:, None, 0] + rng.normal(0.0, 5.0, (m, n))
+    phi, q = ca.transition(p.dt_s), ca.process_noise(p)
+
+    x = np.zeros((m, n, 3))
+    cov = np.zeros((m, n, 3, 3))
+    xp = np.full((m, n, 3), np.nan)
+    pp = np.full((m, n, 3, 3), np.nan)
+    x[:, 0], cov[:, 0] = ca.update(p, m0, p0, z[:, 0])[:2]
+    for k in range(1, n):
+        xp[:, k], pp[:, k] = ca.predict(p, x[:, k - 1], cov[:, k - 1])
+        x[:, k], cov[:, k] = ca.update(p, xp[:, k], pp[:, k], z[:, k])[:2]
+    sm = smoother.rts(x, cov, xp, pp, phi, first=0)
+
+    h = np.array([1.0, 0.0, 0.0])
+    for i in range(m):
+        info = np.zeros((3 * n, 3 * n))
+        rhs = np.zeros(3 * n)
+        p0i = np.linalg.inv(p0[i])
+        qi = np.linalg.inv(q[i])
+        info[:3, :3] += p0i
+        rhs[:3] += p0i @ m0[i]
+        for k in range(n):
+            b = slice(3 * k, 3 * k + 3)
+            info[b, b] += np.outer(h, h) / p.sigma_meas[i] ** 2
+            rhs[b] += h * z[i, k] / p.sigma_meas[i] ** 2
+            if k + 1 < n:
+                c = slice(3 * k + 3, 3 * k + 6)
+                info[b, b] += phi[i].T @ qi @ phi[i]
+                info[c, c] += qi
+                info[b, c] -= phi[i].T @ qi
+                info[c, b] -= qi @ phi[i]
+        post_cov = np.linalg.inv(info)
+        post_mean = post_cov @ rhs
+        np.testing.assert_allclose(sm.x[i].ravel(), post_mean, rtol=1e-7, atol=1e-8)
+        for k in range(n):
+            b = slice(3 * k, 3 * k + 3)
+            np.testing.assert_allclose(sm.p[i, k], post_cov[b, b], rtol=1e-6, atol=1e-12)
+
+
+def test_smoother_beats_filter_and_its_covariance_is_honest() -> None:
+    """Monte Carlo over 4000 runs of a truth drawn from the model (consistent start): the
+    smoothed error variance is below the filtered one (mid-record position by about 4x), the
+    smoother's P(k|N) matches the empirical error variance within 10 % (sampling error 2.2 %)
+    and the position-velocity correlation within 0.05; at the end both coincide."""
+    m, n = 4000, 60
+    rng = np.random.default_rng(21)
+    p = ca.CAParams.of(m, T, 3.0, 0.05, 1 / 30)
+    truth = consistent_truth(p, n, rng)
+    z = truth[:, :, 0] + 3.0 * rng.standard_normal((m, n))
+    f = ca.run(p, z)
+    s = smoother.smooth_ca(p, z)
+    ef, es = f.x - truth, s.x - truth
+    mid = n // 2
+    assert np.all(es[:, mid].var(axis=0) < 0.7 * ef[:, mid].var(axis=0))
+    assert es[:, mid, 0].var() < 0.3 * ef[:, mid, 0].var()
+    for k in (1, 2, 10, mid, n - 2, n - 1):
+        var = np.diagonal(s.p[0, k])
+        np.testing.assert_allclose(es[:, k].var(axis=0), var, rtol=0.10, err_msg=f"k={k}")
+        corr_emp = np.corrcoef(es[:, k, 0], es[:, k, 1])[0, 1]
+        corr_model = s.p[0, k, 0, 1] / np.sqrt(var[0] * var[1])
+        assert corr_emp == pytest.approx(corr_model, abs=0.05)
+    np.testing.assert_allclose(s.x[:, -1], f.x[:, -1])
+    np.testing.assert_allclose(s.p[:, -1], f.p[:, -1])
+
+
+def test_first_sample_is_the_backward_prediction() -> None:
+    rng = np.random.default_rng(4)
+    p = ca.CAParams.of(3, T, 3.0, 0.05, 1 / 30)
+    z = np.arange(20)[None, :] * 10.0 + rng.normal(0.0, 3.0, (3, 20))
+    s = smoother.smooth_ca(p, z)
+    back = np.einsum("mij,mj->mi", np.linalg.inv(ca.transition(p.dt_s)), s.x[:, 1])
+    np.testing.assert_allclose(s.x[:, 0], back)
+    assert np.all(np.isfinite(s.p[:, 0])) and np.all(s.p[:, 0, 0, 0] > s.p[:, 1, 0, 0])
+
+
+def test_drift_sign_convention() -> None:
+    """Heading north, moving 10 deg to starboard of it: beta = +10 deg and v > 0 (starboard)."""
+    t = np.arange(60) * T
+    course = np.radians(10.0)
+    out = smoother.body_velocities(5.0 * t * np.cos(course), 5.0 * t * np.sin(course),
+                                   np.zeros_like(t), T)
+    np.testing.assert_allclose(out["drift_rad"], course, atol=1e-9)
+    np.testing.assert_allclose(out["u_mps"], 5.0 * np.cos(course), atol=1e-9)
+    np.testing.assert_allclose(out["v_mps"], 5.0 * np.sin(course), atol=1e-9)
+    np.testing.assert_allclose(out["speed_mps"], 5.0, atol=1e-9)
+    np.testing.assert_allclose(out["r_radps"], 0.0, atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def kvlcc2_turn() -> dict[str, np.ndarray]:
+    """KVLCC2 35 deg starboard turning circle (360 deg), truth at 1 s, resampled at T = 2 s."""
+    track, _ = manoeuvres.turning_circle(load_ship("kvlcc2"), 35.0, dt=1.0, turns_deg=360.0)
+    return {k: v[::2] for k, v in track.items()}
+
+
+def test_body_velocities_recover_turning_circle(kvlcc2_turn: dict[str, np.ndarray]) -> None:
+    """From position fixes (sigma 1 m per axis) and compass (sigma 0.2 deg) every 2 s, 50 noise
+    realisations at once: over the turn (first and last 10 s left out) the RMS errors are below
+    0.06 m/s in u and v (truth spans 8 -> 3 m/s and 0 -> 1.6 m/s), 5e-4 rad/s (0.03 deg/s) in r
+    (truth up to 0.011 rad/s), and the mean over realisations (bias, the smoother's lag on the
+    rudder step) below 0.03 m/s and 2.5e-4 rad/s."""
+    tr = kvlcc2_turn
+    rng = np.random.default_rng(8)
+    k, n = 50, tr["t_s"].size
+    north = tr["north_m"] + rng.normal(0.0, 1.0, (k, n))
+    east = tr["east_m"] + rng.normal(0.0, 1.0, (k, n))
+    psi = np.radians(tr["heading_deg"]) + rng.normal(0.0, np.radians(0.2), (k, n))
+    out = smoother.body_velocities(north, east, psi, T)
+    inner = slice(5, -5)
+    truth = {"u_mps": tr["u_mps"], "v_mps": tr["v_mps"], "r_radps": np.radians(tr["r_degps"])}
+    rms_tol = {"u_mps": 0.06, "v_mps": 0.06, "r_radps": 5e-4}
+    bias_tol = {"u_mps": 0.03, "v_mps": 0.03, "r_radps": 2.5e-4}
+    for key, true in truth.items():
+        err = (out[key] - true)[:, inner]
+        assert np.sqrt(np.mean(err**2)) < rms_tol[key], key
+        assert np.abs(err.mean(axis=0)).max() < bias_tol[key], key
+    assert out["u_mps"].shape == (k, n)
+
+
+def test_body_velocities_subtract_current() -> None:
+    """With a 0.5 m/s current towards east the track drifts; given the current, u and v come
+    out relative to the water as in the simulator's state; ignoring it errs by about 0.5 m/s."""
+    env = Env(current_east_mps=0.5)
+    tr, _ = manoeuvres.turning_circle(load_ship("kvlcc2"), 35.0, dt=2.0, env=env,
+                                      turns_deg=180.0)
+    out = smoother.body_velocities(tr["north_m"], tr["east_m"], np.radians(tr["heading_deg"]),
+                                   2.0, current_east_mps=0.5)
+    inner = slice(5, -5)
+    assert np.abs(out["u_mps"] - tr["u_mps"])[inner].max() < 0.03
+    assert np.abs(out["v_mps"] - tr["v_mps"])[inner].max() < 0.03
+    naive = smoother.body_velocities(tr["north_m"], tr["east_m"], np.radians(tr["heading_deg"]),
+                                     2.0)
+    err = np.hypot(naive["u_mps"] - tr["u_mps"], naive["v_mps"] - tr["v_mps"])[inner]
+    assert np.allclose(err, 0.5, atol=0.03)
