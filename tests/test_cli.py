@@ -137,3 +137,25 @@ def test_trajectories_keep_truth_measurements_and_estimates_side_by_side(tmp_pat
     err = np.hypot(np.array(table["est_north_m"]) - np.array(table["north_m"]),
                    np.array(table["est_east_m"]) - np.array(table["east_m"]))
     assert 0.0 < np.sqrt(np.mean(err**2)) < 8.0
+
+
+def test_trial_with_sensors_records_the_receiver_lag_of_seed_000(tmp_path):
+    """Turning at 35 deg: the receiver's filtered speed over ground lags the truth in the turn
+    (seed 000: a bias of order 0.5 m/s at S_p = 0.01), larger at a lower S_p."""
+    import numpy as np
+
+    def speed_bias(sp):
+        out = tmp_path / f"sp{sp}"
+        res = cli("trial", "kvlcc2", "--manoeuvre", "turning", "--sensors", "--sp", sp,
+                  "--out", out)
+        assert res.returncode == 0, res.stderr
+        data = np.genfromtxt(out / "trial.csv", delimiter=",", names=True)
+        for key in ("gnss_north_m", "gnss_sog_kn", "est_north_m", "est_heading_deg"):
+            assert np.isfinite(data[key]).all()
+        # while the ship slows in the turn the lagging filter overstates the speed
+        lag = (data["gnss_sog_kn"] - data["sog_kn"]) * 1852 / 3600
+        slowing = data["t_s"] < data["t_s"][np.argmax(data["heading_deg"] > 90.0)]
+        return float(np.max(np.convolve(lag[slowing], np.ones(15) / 15, mode="valid")))
+
+    low, mid = speed_bias(0.001), speed_bias(0.01)
+    assert 0.1 < mid < 1.0 and low > mid

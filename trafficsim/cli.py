@@ -62,6 +62,12 @@ def build_parser() -> argparse.ArgumentParser:
                        help="approach speed (default: the ship's service speed)")
     trial.add_argument("--dt-s", type=_positive(float), default=None,
                        help="time step (default: 1 s, shorter for small ships)")
+    trial.add_argument("--sensors", action="store_true",
+                       help="also record GNSS receiver output (gnss_*) and the navigation "
+                            "estimate (est_*) beside the truth")
+    trial.add_argument("--sp", type=_positive(float), default=0.01,
+                       help="receiver filter spectral amplitude S_p, m^2/s^3 (default 0.01)")
+    trial.add_argument("--seed", type=int, default=0, help="seed of the instrument noise")
     trial.add_argument("--out", type=Path, required=True, help="output folder")
     trial.set_defaults(func=_cmd_trial)
 
@@ -90,7 +96,8 @@ def _cmd_trial(args: argparse.Namespace) -> int:
     from trafficsim.trial import run_trial
 
     indices, criteria = run_trial(args.ship, args.manoeuvre, args.rudder_deg, args.heading_deg,
-                                  args.port, args.speed_kn, args.dt_s, args.out)
+                                  args.port, args.speed_kn, args.dt_s, args.out, args.sensors,
+                                  args.sp, args.seed)
     for key, value in indices.items():
         print(f"  {key}: {value:.4g}")
     for key, c in criteria.items():

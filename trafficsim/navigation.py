@@ -140,8 +140,11 @@ class Navigation:
         a, b = gnss.GNSS_NORMAL_DIMS, gnss.GNSS_NORMAL_DIMS + compass.COMPASS_NORMAL_DIMS
         pv_p = pv.build([{"sigma_m": s, "sp_m2ps3": c.get("pv_sp_m2ps3", DEFAULT_PV_SP),
                           "dt_s": dt} for s, c in zip(gnss_p.sigma_m, nav_cfg, strict=True)])
+        # filters start converged one step before the first fix, so the first update
+        # predicts to the time of the first fix
         vel = _earth_velocity(x)
-        pv_s = pv.init(pv_p, x[NORTH], x[EAST], vel[0], vel[1], converged=True)
+        pv_s = pv.init(pv_p, x[NORTH] - vel[0] * dt, x[EAST] - vel[1] * dt, vel[0], vel[1],
+                       converged=True)
         heading_sp = np.array([c.get("heading_sp_rad2ps3", DEFAULT_HEADING_SP) for c in nav_cfg])
         heading_gain = pv.steady_state_gain(np.maximum(compass_p.sigma_rad, 1e-6), heading_sp, dt)
         heading_gain = np.asarray(heading_gain).reshape(n, 2)
@@ -156,7 +159,8 @@ class Navigation:
             gate_p=gating.build([c or {"gate_sigma": DEFAULT_GATE_SIGMA}
                                  for c in section("gate")]),
             gate_rejections=gating.init_state(n),
-            heading_est=np.stack([x[PSI].copy(), x[R].copy()]), banks=banks, dt=dt, est=est)
+            heading_est=np.stack([x[PSI] - x[R] * dt, x[R].copy()]), banks=banks, dt=dt,
+            est=est)
 
     def update(self, x: np.ndarray, env: Env) -> np.ndarray:
         """Measure the true state ``x`` ``(8, n)``, update the filters; returns ``est`` (6, n)."""

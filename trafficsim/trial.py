@@ -1,17 +1,32 @@
-"""``trafficsim trial``: one standard manoeuvre of one ship, written as trial data and indices."""
+"""``trafficsim trial``: one standard manoeuvre of one ship, written as trial data and indices.
+
+With ``--sensors`` the trial also records what the instruments report and what the filters make
+of it, beside the truth: the GNSS receiver's output (``gnss_*``: a DGPS receiver, sigma 2 m, with
+its internal position-velocity Kalman filter at S_p = 0.01 m^2/s^3 [seed 000]) and the ship's own
+navigation estimate (``est_*``, :mod:`trafficsim.navigation`), so the receiver-filter experiment
+of [seed 000] is one command.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from trafficsim.estimation import pv
 from trafficsim.io.results import write_csv, write_json
+from trafficsim.navigation import Navigation, merge_sensors
 from trafficsim.ships import manoeuvres
+from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Env, R, U, V
 from trafficsim.ships.library import load_ship
+from trafficsim.units import compass_deg, to_kn
 
 
 def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: float | None,
-              port: bool, speed_kn: float | None, dt_s: float | None, out_dir: Path
+              port: bool, speed_kn: float | None, dt_s: float | None, out_dir: Path,
+              sensors: bool = False, sp_m2ps3: float = 0.01, seed: int = 0
               ) -> tuple[dict[str, float], dict[str, dict[str, Any]]]:
     """Run the manoeuvre; write ``trial.csv`` (trial-data format) and ``indices.json``."""
     spec = load_ship(ship)
@@ -25,7 +40,62 @@ def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: 
     else:
         track, indices = manoeuvres.crash_stop(spec, speed_kn, dt_s)
     criteria = manoeuvres.imo_criteria(manoeuvre, indices)
+    if sensors:
+        track = {**track, **sensor_columns(track, spec, sp_m2ps3, seed)}
     write_csv(out_dir / "trial.csv", track)
     write_json(out_dir / "indices.json", {"ship": spec["name"], "manoeuvre": manoeuvre,
                                           "indices": indices, "imo_msc137": criteria})
     return indices, criteria
+
+
+def sensor_columns(track: Mapping[str, np.ndarray], spec: Mapping[str, Any],
+                   sp_m2ps3: float = 0.01, seed: int = 0) -> dict[str, np.ndarray]:
+    """Receiver output and navigation estimate along a recorded true track (trial-data columns).
+
+    The instruments are the ship file's ``sensors`` (default: DGPS 2 m, gyro compass), the
+    receiver filter runs at ``sp_m2ps3`` on the raw fixes, as inside a receiver.
+    """
+    t = np.asarray(track["t_s"])
+    dt = float(t[1] - t[0]) if t.size > 1 else 1.0
+    x = np.zeros((8, t.size))
+    x[NORTH], x[EAST] = track["north_m"], track["east_m"]
+    x[PSI] = np.radians(track["heading_deg"])
+    x[U], x[V], x[R] = track["u_mps"], track["v_mps"], np.radians(track["r_degps"])
+    x[RUDDER], x[RPS] = np.radians(track["rudder_deg"]), np.asarray(track["rpm"]) / 60.0
+    config = merge_sensors(spec.get("sensors"), {"navigation": {"pv_sp_m2ps3": sp_m2ps3}})
+    config.setdefault("gnss", {}).setdefault("sigma_m", 2.0)
+    nav = Navigation.build([config], ["pv"], x[:, :1], seed, [0], [0], dt)
+    receiver_p = pv.build([{"sigma_m": float(nav.gnss_p.sigma_m[0]), "sp_m2ps3": sp_m2ps3,
+                            "dt_s": dt}])
+    vn0, ve0 = _earth_velocity(x[:, 0])
+    receiver = pv.init(receiver_p, x[NORTH, :1] - vn0 * dt, x[EAST, :1] - ve0 * dt,
+                       np.array([vn0]), np.array([ve0]), converged=True)
+    cols = {k: np.full(t.size, np.nan) for k in (
+        "gnss_fix_north_m", "gnss_fix_east_m", "gnss_north_m", "gnss_east_m", "gnss_sog_kn",
+        "gnss_cog_deg", "compass_heading_deg", "est_north_m", "est_east_m", "est_heading_deg",
+        "est_sog_kn", "est_cog_deg", "est_r_degps")}
+    for k in range(t.size):  # a recorded track is replayed in time order, one ship
+        est = nav.update(x[:, k:k + 1], Env())
+        fix = nav.fix
+        receiver = pv.step(receiver_p, receiver, np.nan_to_num(fix.north_m),
+                           np.nan_to_num(fix.east_m), fix.valid)
+        sog, cog = pv.velocity_over_ground(receiver)
+        vn = est[U] * np.cos(est[PSI]) - est[V] * np.sin(est[PSI])
+        ve = est[U] * np.sin(est[PSI]) + est[V] * np.cos(est[PSI])
+        row = {
+            "gnss_fix_north_m": fix.north_m, "gnss_fix_east_m": fix.east_m,
+            "gnss_north_m": receiver.x[:, 0], "gnss_east_m": receiver.x[:, 1],
+            "gnss_sog_kn": to_kn(sog), "gnss_cog_deg": compass_deg(cog),
+            "compass_heading_deg": compass_deg(nav.heading_meas),
+            "est_north_m": est[NORTH], "est_east_m": est[EAST],
+            "est_heading_deg": compass_deg(est[PSI]), "est_sog_kn": to_kn(np.hypot(vn, ve)),
+            "est_cog_deg": compass_deg(np.arctan2(ve, vn)), "est_r_degps": np.degrees(est[R]),
+        }
+        for key, value in row.items():
+            cols[key][k] = np.asarray(value).reshape(-1)[0]
+    return cols
+
+
+def _earth_velocity(x: np.ndarray) -> tuple[float, float]:
+    c, s = np.cos(x[PSI]), np.sin(x[PSI])
+    return float(x[U] * c - x[V] * s), float(x[U] * s + x[V] * c)
