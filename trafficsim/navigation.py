@@ -88,6 +88,9 @@ class Navigation:
     banks: dict[str, NoiseBank]
     dt: float
     est: np.ndarray
+    has_waves: bool = False
+    has_log: bool = False
+    has_actuator_sensors: bool = False
     fix: gnss.GnssFix | None = None
     heading_meas: np.ndarray | None = None
     log_meas: speed_log.LogReading | None = None
@@ -160,19 +163,25 @@ class Navigation:
                                  for c in section("gate")]),
             gate_rejections=gating.init_state(n),
             heading_est=np.stack([x[PSI] - x[R] * dt, x[R].copy()]), banks=banks, dt=dt,
-            est=est)
+            est=est, has_waves=any(c.get("waves") for c in configs),
+            has_log=any(c.get("log") is not None for c in configs),
+            has_actuator_sensors=any(c.get("actuators") is not None for c in configs))
 
     def update(self, x: np.ndarray, env: Env) -> np.ndarray:
         """Measure the true state ``x`` ``(8, n)``, update the filters; returns ``est`` (6, n)."""
-        self.waves_s = waves.step(self.waves_p, self.waves_s, self.banks["waves"].next())
-        wave_psi = waves.heading_offset(self.waves_p, self.waves_s)
-        wave_ne = waves.position_offset(self.waves_p, self.waves_s, x[PSI])
+        wave_psi = wave_ne = None
+        if self.has_waves:
+            self.waves_s = waves.step(self.waves_p, self.waves_s, self.banks["waves"].next())
+            wave_psi = waves.heading_offset(self.waves_p, self.waves_s)
+            wave_ne = waves.position_offset(self.waves_p, self.waves_s, x[PSI])
         self.gnss_s, self.fix = gnss.step(self.gnss_p, self.gnss_s, x, self.banks["gnss"].next(),
                                           self.banks["gnss_gross"].next(), wave_ne, wave_psi)
         self.compass_s, self.heading_meas = compass.step(
             self.compass_p, self.compass_s, x[PSI], self.banks["compass"].next(), wave_psi)
-        self.log_meas = speed_log.measure(self.log_p, x, env, self.banks["log"].next())
-        self.act_meas = actuators.measure(self.act_p, x, self.banks["actuators"].next())
+        if self.has_log:  # recorded only: the filters here do not use the log or rudder/rpm
+            self.log_meas = speed_log.measure(self.log_p, x, env, self.banks["log"].next())
+        if self.has_actuator_sensors:
+            self.act_meas = actuators.measure(self.act_p, x, self.banks["actuators"].next())
 
         # heading: steady-state alpha-beta on the compass
         psi, r = self.heading_est

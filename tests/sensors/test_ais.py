@@ -1,0 +1,210 @@
+"""AIS class A reports: ITU-R M.1371-5 reporting intervals, exact quantisation of the message
+fields, latency of reception, reception range and probability, noise statistics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trafficsim.errors import InputError
+from trafficsim.sensors import ais
+from trafficsim.sensors.radar import directed_pairs
+from trafficsim.ships.base import EAST, N_STATE, NORTH, PSI, R
+
+KN = 1852.0 / 3600.0
+TURN = math.radians(1.0)  # 1 deg/s, well above 5 deg in 30 s
+
+
+@pytest.mark.parametrize(("sog_kn", "turning", "anchored", "expected_s"), [
+    (0.0, False, True, 180.0),      # at anchor, not faster than 3 kn: 3 min
+    (3.0, False, True, 180.0),
+    (4.0, False, True, 10.0),       # at anchor but moving faster than 3 kn
+    (0.0, False, False, 10.0),      # 0-14 kn: 10 s
+    (14.0, False, False, 10.0),
+    (10.0, True, False, 10.0 / 3),  # 0-14 kn changing course: 3 1/3 s
+    (14.1, False, False, 6.0),      # 14-23 kn: 6 s
+    (23.0, False, False, 6.0),
+    (18.0, True, False, 2.0),       # 14-23 kn changing course: 2 s
+    (23.1, False, False, 2.0),      # > 23 kn: 2 s
+    (30.0, True, False, 2.0),
+])
+def test_reporting_interval_itu_table(sog_kn: float, turning: bool, anchored: bool,
+                                      expected_s: float) -> None:
+    """ITU-R M.1371-5 annex 1 table 1, class A shipborne mobile equipment."""
+    got = ais.reporting_interval_s(np.array([sog_kn * KN]), np.array([turning]),
+                                   np.array([anchored]))
+    assert got[0] == pytest.approx(expected_s)
+
+
+def _ships(speeds_kn, rates_radps=None, headings=None):
+    n = len(speeds_kn)
+    x = np.zeros((N_STATE, n))
+    x[PSI] = np.zeros(n) if headings is None else headings
+    x[R] = np.zeros(n) if rates_radps is None else rates_radps
+    speed = np.asarray(speeds_kn, dtype=float) * KN
+    vel = np.stack([speed * np.cos(x[PSI]), speed * np.sin(x[PSI])])
+    return x, vel
+
+
+def _sent_times(params, x, vel, dt, duration, anchored=None):
+    n = x.shape[1]
+    state = ais.init(params, 0)
+    times: list[list[float]] = [[] for _ in range(n)]
+    for k in range(round(duration / dt)):
+        t = k * dt
+        state, sent = ais.transmit(params, state, t, x, vel, np.zeros((n, 5)), anchored)
+        for i in np.flatnonzero(sent):  # test bookkeeping only
+            times[i].append(t)
+    return times
+
+
+@pytest.mark.parametrize("dt", [0.1, 1.0])
+def test_schedule_mean_interval_follows_the_table(dt: float) -> None:
+    speeds = [8.0, 8.0, 18.0, 18.0, 30.0, 1.0]
+    rates = [0.0, TURN, 0.0, TURN, 0.0, 0.0]
+    anchored = np.array([False, False, False, False, False, True])
+    params = ais.build([{"sigma_velocity_mps": 0.0}] * 6)
+    x, vel = _ships(speeds, rates)
+    times = _sent_times(params, x, vel, dt, 1800.0, anchored)
+    expected = [10.0, 10.0 / 3, 6.0, 2.0, 2.0, 180.0]
+    for t, iv in zip(times, expected, strict=True):
+        assert t[0] == 0.0
+        mean = (t[-1] - t[0]) / (len(t) - 1)
+        assert mean == pytest.approx(iv, abs=dt / (len(t) - 1) + 1e-9)
+        assert np.diff(t).max() <= iv + dt + 1e-9  # each gap within one step of the interval
+
+
+def test_rate_increases_at_once_when_turning_starts() -> None:
+    params = ais.build([{"sigma_velocity_mps": 0.0}])
+    x, vel = _ships([10.0])
+    state = ais.init(params, 0)
+    sent_at = []
+    for k in range(12):
+        x[R] = TURN if k >= 5 else 0.0
+        state, sent = ais.transmit(params, state, float(k), x, vel, np.zeros((1, 5)))
+        if sent[0]:
+            sent_at.append(k)
+    # 10 s interval from t = 0; the turn from t = 5 pulls the next report to 5 (0 + 3 1/3
+    # is already past), then 6.67 -> 7, 10
+    assert sent_at == [0, 5, 7, 10]
+
+
+def test_disabled_transponder_never_reports() -> None:
+    params = ais.build([{"enabled": False}])
+    x, vel = _ships([12.0])
+    assert _sent_times(params, x, vel, 1.0, 60.0) == [[]]
+
+
+def test_quantisation_steps_exact() -> None:
+    """Position 1/10000 min, SOG 0.1 kn, COG 0.1 deg, heading 1 deg (ITU-R M.1371-5 msg 1)."""
+    rng = np.random.default_rng(11)
+    n = 2000
+    lat = 55.0
+    params = ais.build([{"ref_latitude_deg": lat}] * n)
+    x = np.zeros((N_STATE, n))
+    x[NORTH], x[EAST] = rng.uniform(-2e4, 2e4, (2, n))
+    x[PSI] = rng.uniform(0.0, 2 * math.pi, n)
+    vel = rng.uniform(-12.0, 12.0, (2, n))
+    state = ais.init(params, 0)
+    draws = rng.standard_normal((n, ais.AIS_TX_NORMAL_DIMS))
+    state, sent = ais.transmit(params, state, 0.0, x, vel, draws)
+    assert sent.all()
+    north, east, sog, cog, hdg = (state.buf[:, state.head[0], k] for k in range(5))
+
+    def on_grid(v: np.ndarray, step: float) -> bool:
+        k = v / step
+        return bool(np.all(np.abs(k - np.round(k)) < 1e-6))
+
+    east_step = 1852.0 / 10000.0 * math.cos(math.radians(lat))
+    assert on_grid(north, 1852.0 / 10000.0)
+    assert on_grid(east, east_step)
+    assert on_grid(sog, 0.1 * KN)
+    assert on_grid(np.degrees(cog), 0.1)
+    assert on_grid(np.degrees(hdg), 1.0)
+    assert (np.degrees(cog) < 360.0 - 1e-9).all() and (np.degrees(hdg) <= 359.0 + 1e-9).all()
+    # rounding to the nearest step: the error is at most half a step
+    sp, sv = params.sigma_position_m[0], params.sigma_velocity_mps[0]
+    assert np.abs(north - (x[NORTH] + sp * draws[:, 0])).max() <= 0.0926 + 1e-9
+    assert np.abs(east - (x[EAST] + sp * draws[:, 1])).max() <= east_step / 2 + 1e-9
+    vn, ve = vel[0] + sv * draws[:, 2], vel[1] + sv * draws[:, 3]
+    assert np.abs(sog - np.hypot(vn, ve)).max() <= 0.05 * KN + 1e-9
+
+
+def test_sog_cap_and_cog_wrap() -> None:
+    assert ais.quantise_sog(np.array([200.0]))[0] == pytest.approx(102.2 * KN)
+    assert ais.quantise_angle(np.array([math.radians(359.97)]), ais.COG_STEP_RAD)[0] == 0.0
+    assert ais.quantise_angle(np.array([-math.radians(0.6)]), ais.HEADING_STEP_RAD)[0] == \
+        pytest.approx(math.radians(359.0))
+
+
+@pytest.mark.parametrize(("latency", "dt"), [(3.0, 1.0), (2.5, 1.0), (0.0, 1.0), (4.0, 0.5)])
+def test_latency_report_received_later_with_its_time_stamp(latency: float, dt: float) -> None:
+    """A report stamped t_r arrives on the first step at or after t_r + latency and holds the
+    position of time t_r."""
+    params = ais.build([{"latency_s": latency, "sigma_position_m": 0.0,
+                         "sigma_velocity_mps": 0.0, "sigma_heading_deg": 0.0}] * 2)
+    obs, tgt = directed_pairs(np.array([0]), np.array([1]))
+    x, vel = _ships([0.0, 12.0], headings=np.array([0.0, 0.0]))
+    x[EAST, 1] = 3000.0
+    state = ais.init(params, obs.shape[0])
+    got = []  # (receive time, stamp, north) for pair 0 -> 1
+    for k in range(round(25.0 / dt)):
+        t = k * dt
+        x[NORTH, 1] = vel[0, 1] * t
+        state, rep = ais.step(params, state, t, obs, tgt, x, vel, np.zeros((2, 5)),
+                              np.zeros((2, 1)))
+        if rep.valid[0]:
+            got.append((t, rep.stamp_s[0], rep.north_m[0]))
+    stamps = [g[1] for g in got]
+    assert stamps == [0.0, 10.0, 20.0]
+    for t_rx, stamp, north in got:
+        assert t_rx == pytest.approx(math.ceil((stamp + latency) / dt - 1e-9) * dt)
+        assert north == pytest.approx(vel[0, 1] * stamp, abs=0.0926 + 1e-9)
+
+
+def test_reception_range_and_probability() -> None:
+    n_pairs = 20000
+    n = 2 * n_pairs
+    params = ais.build([{"p_receive": 0.7, "latency_s": 0.0}] * n)
+    x, vel = _ships([10.0] * n)
+    obs = np.arange(n_pairs)
+    tgt = obs + n_pairs
+    x[NORTH, tgt] = np.where(obs % 2 == 0, 19.9, 20.1) * 1852.0
+    state = ais.init(params, n_pairs)
+    rng = np.random.default_rng(5)
+    state, rep = ais.step(params, state, 0.0, obs, tgt, x, vel, np.zeros((n, 5)),
+                          rng.standard_normal((n_pairs, 1)))
+    assert not rep.valid[obs % 2 == 1].any()  # beyond 20 NM
+    frac = rep.valid[obs % 2 == 0].mean()
+    assert frac == pytest.approx(0.7, abs=4 * math.sqrt(0.21 / (n_pairs / 2)))
+    # a report is consumed whether heard or not: nothing more arrives until the next report
+    _, rep = ais.step(params, state, 1.0, obs, tgt, x, vel, np.zeros((n, 5)),
+                      np.full((n_pairs, 1), -9.0))
+    assert not rep.valid.any()
+
+
+def test_position_and_velocity_noise_statistics() -> None:
+    n = 20000
+    params = ais.build([{"sigma_position_m": 8.0, "sigma_velocity_mps": 0.3}] * n)
+    x, vel = _ships([15.0] * n)
+    draws = np.random.default_rng(3).standard_normal((n, ais.AIS_TX_NORMAL_DIMS))
+    state, _ = ais.transmit(params, ais.init(params, 0), 0.0, x, vel, draws)
+    north, east, sog, cog, _ = (state.buf[:, state.head[0], k] for k in range(5))
+    assert np.std(north) == pytest.approx(8.0, rel=0.03)
+    assert np.std(east) == pytest.approx(8.0, rel=0.03)
+    assert np.std(sog) == pytest.approx(0.3, rel=0.05)  # along-track velocity noise
+    cog_err = (cog + math.pi) % (2 * math.pi) - math.pi
+    assert np.std(cog_err) == pytest.approx(0.3 / (15.0 * KN), rel=0.05)
+
+
+def test_bad_config_rejected() -> None:
+    with pytest.raises(InputError):
+        ais.build([{"latency": 2.0}])
+    with pytest.raises(InputError):
+        ais.build([{"latency_s": 60.0}])
+    with pytest.raises(InputError):
+        ais.build([{"p_receive": -0.1}])
+    with pytest.raises(InputError):
+        ais.build([{"enabled": "yes"}])

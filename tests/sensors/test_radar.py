@@ -1,0 +1,200 @@
+"""Radar / ARPA plots: noise statistics, range limits, detection probability, scan schedule,
+propagation of own navigation errors, converted-measurement covariance."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trafficsim.errors import InputError
+from trafficsim.noise import NoiseBank
+from trafficsim.sensors import radar
+from trafficsim.ships.base import EAST, N_STATE, NORTH, PSI
+
+NM = 1852.0
+
+
+def _scene(n_pairs: int, seed: int, r_min: float = 1.0 * NM, r_max: float = 11.0 * NM):
+    """Observers 0..N-1 and their targets N..2N-1 at random range, bearing and headings."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros((N_STATE, 2 * n_pairs))
+    x[NORTH, :n_pairs] = rng.uniform(-5e4, 5e4, n_pairs)
+    x[EAST, :n_pairs] = rng.uniform(-5e4, 5e4, n_pairs)
+    x[PSI] = rng.uniform(0.0, 2 * math.pi, 2 * n_pairs)
+    r = rng.uniform(r_min, r_max, n_pairs)
+    b = rng.uniform(0.0, 2 * math.pi, n_pairs)
+    x[NORTH, n_pairs:] = x[NORTH, :n_pairs] + r * np.cos(b)
+    x[EAST, n_pairs:] = x[EAST, :n_pairs] + r * np.sin(b)
+    obs = np.arange(n_pairs)
+    return x, obs, obs + n_pairs
+
+
+def _measure(params, x, obs, tgt, draws, est=None, **kw):
+    n = x.shape[1]
+    due = np.ones(n, dtype=bool)
+    est_n, est_e, est_psi = (x[NORTH], x[EAST], x[PSI]) if est is None else est
+    return radar.measure(params, due, obs, tgt, x, est_n, est_e, est_psi, draws, 0.0, **kw)
+
+
+def test_directed_pairs_both_directions() -> None:
+    obs, tgt = radar.directed_pairs(np.array([0, 0, 1]), np.array([1, 2, 2]))
+    assert obs.tolist() == [0, 0, 1, 1, 2, 2]
+    assert tgt.tolist() == [1, 2, 2, 0, 0, 1]
+
+
+def test_default_sigmas_are_the_a823_budget() -> None:
+    """A.823(19) annex: 20 m pulse + 0.01 NM rectangular quantisation; 0.05 beam, +-0.05
+    backlash, +-0.1 quantisation, 0.03 encoder (deg)."""
+    p = radar.build([{}])
+    assert p.sigma_range_m[0] == pytest.approx(22.67, abs=0.01)
+    assert math.degrees(p.sigma_bearing_rad[0]) == pytest.approx(0.0870, abs=1e-4)
+    assert p.max_range_m[0] == pytest.approx(12 * NM)
+    assert p.p_detect[0] == 0.8
+
+
+@pytest.mark.parametrize("sigma_b_deg", [radar.DEFAULT_SIGMA_BEARING_DEG, 1.0],
+                         ids=["a823", "1deg"])
+def test_error_statistics_match_configured_sigmas(sigma_b_deg: float) -> None:
+    n_pairs = 20000
+    x, obs, tgt = _scene(n_pairs, seed=1)
+    params = radar.build([{"sigma_range_m": 25.0, "sigma_bearing_deg": sigma_b_deg,
+                           "p_detect": 1.0}] * (2 * n_pairs))
+    draws = np.random.default_rng(2).standard_normal((n_pairs, radar.RADAR_NORMAL_DIMS))
+    plots = _measure(params, x, obs, tgt, draws)
+    assert plots.valid.all()
+    rel_n = x[NORTH, tgt] - x[NORTH, obs]
+    rel_e = x[EAST, tgt] - x[EAST, obs]
+    e_r = plots.range_m - np.hypot(rel_n, rel_e)
+    true_b = np.arctan2(rel_e, rel_n) - x[PSI, obs]
+    e_b = (plots.bearing_rad - true_b + math.pi) % (2 * math.pi) - math.pi
+    # sample sigma of N normals has relative standard error 1/sqrt(2N) = 0.5 %
+    assert np.std(e_r) == pytest.approx(25.0, rel=0.02)
+    assert np.std(e_b) == pytest.approx(math.radians(sigma_b_deg), rel=0.02)
+    assert abs(np.mean(e_r)) < 4 * 25.0 / math.sqrt(n_pairs)
+    assert abs(np.mean(e_b)) < 4 * math.radians(sigma_b_deg) / math.sqrt(n_pairs)
+    # earth-frame errors are consistent with the converted-measurement covariance:
+    # e^T R^-1 e is chi-square(2), mean 2 with standard error 2/sqrt(N) = 0.014
+    e = np.stack([plots.north_m - x[NORTH, tgt], plots.east_m - x[EAST, tgt]], axis=1)
+    nees = np.einsum("ki,kij,kj->k", e, np.linalg.inv(plots.cov), e)
+    assert np.mean(nees) == pytest.approx(2.0, abs=0.06)
+
+
+def test_noise_bank_draws_give_the_same_statistics() -> None:
+    """Draws as the engine makes them: one ``radar`` stream per observer ship."""
+    n_pairs = 5000
+    x, obs, tgt = _scene(n_pairs, seed=3)
+    params = radar.build([{"p_detect": 1.0}] * (2 * n_pairs))
+    bank = NoiseBank(7, np.zeros(n_pairs, int), np.arange(n_pairs), radar.RADAR_PURPOSE,
+                     radar.RADAR_NORMAL_DIMS)
+    plots = _measure(params, x, obs, tgt, bank.next())
+    e_r = plots.range_m - np.hypot(x[NORTH, tgt] - x[NORTH, obs], x[EAST, tgt] - x[EAST, obs])
+    assert np.std(e_r) == pytest.approx(radar.DEFAULT_SIGMA_RANGE_M, rel=0.04)
+
+
+def test_max_and_min_range() -> None:
+    n_pairs = 4
+    x = np.zeros((N_STATE, 2 * n_pairs))
+    x[NORTH, n_pairs:] = [11.99 * NM, 12.01 * NM, 30.0, 50.0]
+    obs, tgt = np.arange(n_pairs), np.arange(n_pairs) + n_pairs
+    params = radar.build([{"p_detect": 1.0, "sigma_range_m": 0.0}] * (2 * n_pairs))
+    plots = _measure(params, x, obs, tgt, np.zeros((n_pairs, 3)))
+    assert plots.valid.tolist() == [True, False, False, True]
+    assert np.isnan(plots.north_m[1]) and np.isnan(plots.cov[2]).all()
+
+
+def test_detection_probability_per_scan() -> None:
+    """MSC.192(79) 5.3.1.1: an indication in 8 of 10 scans, p_detect = 0.8."""
+    n_pairs = 40000
+    x, obs, tgt = _scene(n_pairs, seed=4)
+    params = radar.build([{}] * (2 * n_pairs))
+    draws = np.random.default_rng(5).standard_normal((n_pairs, radar.RADAR_NORMAL_DIMS))
+    frac = _measure(params, x, obs, tgt, draws).valid.mean()
+    assert frac == pytest.approx(0.8, abs=4 * math.sqrt(0.16 / n_pairs))
+
+
+@pytest.mark.parametrize(("period", "dt", "expected"), [(2.5, 1.0, 40), (2.5, 0.1, 40),
+                                                        (3.0, 1.0, 34), (2.5, 5.0, 20)])
+def test_scan_schedule(period: float, dt: float, expected: int) -> None:
+    """Scans at t = 0, T, 2T ... (first step at or after each), one per step at most."""
+    params = radar.build([{"scan_period_s": period}])
+    state = radar.init(params)
+    n_scans = 0
+    for k in range(round(100.0 / dt)):
+        state, due = radar.scan_due(params, state, k * dt)
+        n_scans += int(due[0])
+    assert n_scans == expected
+
+
+def test_no_plot_between_scans_or_when_disabled() -> None:
+    x, obs, tgt = _scene(3, seed=6)
+    params = radar.build([{"p_detect": 1.0}] * 3 + [{"p_detect": 1.0, "enabled": False}] * 3)
+    state = radar.init(params)
+    state, plots = radar.step(params, state, 0.0, obs, tgt, x, x[NORTH], x[EAST], x[PSI],
+                              np.zeros((3, 3)))
+    assert plots.valid.all()
+    state, plots = radar.step(params, state, 1.0, obs, tgt, x, x[NORTH], x[EAST], x[PSI],
+                              np.zeros((3, 3)))
+    assert not plots.valid.any()
+    _, plots = radar.step(params, state, 0.0, tgt, obs, x, x[NORTH], x[EAST], x[PSI],
+                          np.zeros((3, 3)))
+    assert not plots.valid.any()  # the observers 3..5 have their radar off
+
+
+def test_own_navigation_errors_propagate() -> None:
+    """A heading error rotates the plot about own antenna; a position error shifts it."""
+    x = np.zeros((N_STATE, 2))
+    x[NORTH, 1], x[EAST, 1] = 6000.0, 2000.0
+    x[PSI] = [0.3, 1.0]
+    params = radar.build([{"sigma_range_m": 0.0, "sigma_bearing_deg": 0.0, "p_detect": 1.0,
+                           "antenna_x_m": 50.0, "antenna_y_m": 5.0}] * 2)
+    obs, tgt = np.array([0]), np.array([1])
+    exact = _measure(params, x, obs, tgt, np.zeros((1, 3)))
+    assert exact.north_m[0] == pytest.approx(6000.0, abs=1e-6)
+    assert exact.east_m[0] == pytest.approx(2000.0, abs=1e-6)
+
+    dpsi, dn, de = math.radians(1.0), 30.0, -20.0
+    est = (x[NORTH] + dn, x[EAST] + de, x[PSI] + dpsi)
+    plot = _measure(params, x, obs, tgt, np.zeros((1, 3)), est=est)
+    # expected: the antenna estimate plus the true antenna-to-target vector rotated by dpsi
+    c0, s0 = math.cos(0.3), math.sin(0.3)
+    ant_true = np.array([50.0 * c0 - 5.0 * s0, 50.0 * s0 + 5.0 * c0])
+    c1, s1 = math.cos(0.3 + dpsi), math.sin(0.3 + dpsi)
+    ant_est = np.array([dn + 50.0 * c1 - 5.0 * s1, de + 50.0 * s1 + 5.0 * c1])
+    rel = np.array([6000.0, 2000.0]) - ant_true
+    rot = np.array([[math.cos(dpsi), -math.sin(dpsi)], [math.sin(dpsi), math.cos(dpsi)]])
+    expect = ant_est + rot @ rel
+    assert plot.north_m[0] == pytest.approx(expect[0], abs=1e-6)
+    assert plot.east_m[0] == pytest.approx(expect[1], abs=1e-6)
+    # the cross-range error is range * heading error: 6.3 km * 1 deg = 110 m
+    assert np.hypot(plot.north_m[0] - 6000.0 - dn, plot.east_m[0] - 2000.0 - de) == \
+        pytest.approx(np.hypot(*rel) * 2 * math.sin(dpsi / 2), abs=2.0)
+
+
+def test_converted_covariance_includes_own_navigation_uncertainty() -> None:
+    x = np.zeros((N_STATE, 2))
+    x[EAST, 1] = 5000.0  # target due east: range along east, cross-range along north
+    params = radar.build([{"sigma_range_m": 20.0, "sigma_bearing_deg": 0.5, "p_detect": 1.0}] * 2)
+    obs, tgt = np.array([0]), np.array([1])
+    var_psi = math.radians(0.3) ** 2
+    pos_cov = np.array([[[4.0, 1.0], [1.0, 9.0]]] * 2)
+    plot = _measure(params, x, obs, tgt, np.zeros((1, 3)), own_heading_var_rad2=np.full(2, var_psi),
+                    own_pos_cov_m2=pos_cov)
+    cross = 5000.0**2 * (math.radians(0.5) ** 2 + var_psi)
+    assert plot.cov[0, 0, 0] == pytest.approx(cross + 4.0)
+    assert plot.cov[0, 1, 1] == pytest.approx(400.0 + 9.0)
+    assert plot.cov[0, 0, 1] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_bad_config_and_draws_rejected() -> None:
+    with pytest.raises(InputError):
+        radar.build([{"sigma_range": 3.0}])
+    with pytest.raises(InputError):
+        radar.build([{"p_detect": 1.2}])
+    with pytest.raises(InputError):
+        radar.build([{"scan_period_s": 0.0}])
+    params = radar.build([{}] * 2)
+    x = np.zeros((N_STATE, 2))
+    with pytest.raises(ValueError):
+        _measure(params, x, np.array([0]), np.array([1]), np.zeros((1, 2)))

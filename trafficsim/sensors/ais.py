@@ -1,0 +1,357 @@
+"""AIS class A position reports of other ships: schedule, noise, quantisation, latency, reception.
+
+Every ship with a transponder broadcasts position reports (messages 1-3 of ITU-R M.1371-5,
+annex 2) on its own schedule; every other ship of the encounter may receive them. Transmission
+is per ship (one noisy report heard by all receivers alike), reception per directed pair
+(:func:`trafficsim.sensors.radar.directed_pairs`).
+
+Transmission (per ship, :func:`transmit`):
+
+* Reporting interval of class A shipborne mobile equipment, ITU-R M.1371-5 annex 1, table 1
+  (:func:`reporting_interval_s`): at anchor or moored and not faster than 3 kn, 3 min (faster:
+  10 s); 0-14 kn, 10 s (3 1/3 s when changing course); 14-23 kn, 6 s (2 s when changing
+  course); faster than 23 kn, 2 s. Speeds on a bin boundary take the slower rate (14 kn -> 10 s).
+  "Changing course" is a rate of turn above 5 deg in 30 s, the threshold at which a class A
+  station flags a turn in its ROT field without a rate-of-turn indicator (IMO guidelines for the
+  installation of shipborne AIS, SN/Circ.227, ROT sensor input); configurable.
+* The schedule is deterministic state: ``next_tx_s`` per ship. A report goes out on the first
+  step at or after ``next_tx_s``; the next is one interval after the *scheduled* time (so the mean
+  interval is exact whatever the step), and when the required interval shortens (the ship starts
+  to turn or speeds up) the pending report is pulled forward to one new interval after the last
+  one, as the station increases its rate at once.
+* Content: the transmitting ship's GNSS position with white noise ``sigma_position_m`` per axis
+  (the default 5 m per axis is 12 m horizontal at 95 %, a stand-alone GNSS receiver), its SOG
+  and COG from the ground velocity with white noise ``sigma_velocity_mps`` per axis (so COG
+  noise grows as speed falls, as a GNSS receiver's does), its gyro heading with
+  ``sigma_heading_deg``. The engine may instead pass a ship's own navigation output as the
+  "truth" and set the sigmas to 0.
+* Quantisation of the message fields (ITU-R M.1371-5 annex 2, message 1 table): position in
+  1/10000 min (latitude step 1852 m / 10000 = 0.1852 m north; longitude step 0.1852 cos(lat) m
+  east, ``ref_latitude_deg``; the local frame's origin is taken on the grid), SOG in 0.1 kn
+  (capped at 102.2 kn), COG in 0.1 deg, true heading in 1 deg. Values are rounded to the nearest
+  step.
+* Time stamp: the report carries the exact time of the position it holds (the step time of the
+  transmission).
+
+Reception (per directed pair, :func:`receive`): a report stamped ``t_r`` reaches the receivers
+``latency_s`` (of the transmitting ship: GNSS fix age, slot wait and transmission, a deterministic
+delay) later, i.e. on the first step at or after ``t_r + latency_s``; within ``max_range_nm`` of
+the receiver (VHF line of sight) and with probability ``p_receive`` (slot collisions, fading).
+If a long step makes several reports deliverable at once, only the newest is delivered (the
+others are superseded). Each ship keeps its last ``AIS_BUFFER`` reports in flight, so latencies
+up to ``(AIS_BUFFER - 1) * 2 s`` are exact at the highest rate.
+
+Draws: ``AIS_TX_NORMAL_DIMS`` standard normals per *transmitting ship* per step (position north,
+east; velocity north, east; heading) and ``AIS_RX_NORMAL_DIMS`` per directed pair per step (the
+reception event, received when ``z < Phi^-1(p_receive)``), both of the ``ais`` purpose.
+
+Config keys (per ship; defaults in brackets): ``enabled`` [true] (transponder fitted),
+``sigma_position_m`` [5.0], ``sigma_velocity_mps`` [0.1], ``sigma_heading_deg`` [0.5],
+``latency_s`` [2.0], ``first_report_s`` [0.0], ``max_range_nm`` [20.0], ``p_receive`` [1.0],
+``turn_rate_degps`` [5/30], ``ref_latitude_deg`` [0.0].
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from trafficsim.errors import InputError
+from trafficsim.sensors import KNOT_MPS, check_keys, column, wrap_2pi
+from trafficsim.sensors.radar import probit
+from trafficsim.ships.base import EAST, NORTH, PSI, R
+
+#: standard normals per transmitting ship per step: position N, E; velocity N, E; heading
+AIS_TX_NORMAL_DIMS = 5
+#: standard normals per directed pair per step: reception event
+AIS_RX_NORMAL_DIMS = 1
+AIS_PURPOSE = "ais"
+#: reports kept in flight per ship
+AIS_BUFFER = 8
+
+#: message 1-3 field resolutions (ITU-R M.1371-5 annex 2)
+POSITION_STEP_M = 1852.0 / 10000.0  # 1/10000 min of latitude
+SOG_STEP_MPS = 0.1 * KNOT_MPS
+SOG_MAX_MPS = 102.2 * KNOT_MPS
+COG_STEP_RAD = math.radians(0.1)
+HEADING_STEP_RAD = math.radians(1.0)
+
+#: ITU-R M.1371-5 annex 1 table 1, class A reporting intervals, s
+INTERVAL_ANCHORED_S = 180.0
+INTERVAL_SLOW_S = 10.0
+INTERVAL_SLOW_TURNING_S = 10.0 / 3.0
+INTERVAL_MEDIUM_S = 6.0
+INTERVAL_FAST_S = 2.0
+ANCHOR_SPEED_KN, SLOW_KN, MEDIUM_KN = 3.0, 14.0, 23.0
+DEFAULT_TURN_RATE_DEGPS = 5.0 / 30.0
+
+KEYS = ("enabled", "sigma_position_m", "sigma_velocity_mps", "sigma_heading_deg", "latency_s",
+        "first_report_s", "max_range_nm", "p_receive", "turn_rate_degps", "ref_latitude_deg")
+
+
+@dataclass(frozen=True)
+class AisParams:
+    """Per-ship AIS parameters, ``(n,)`` arrays (the ship as transmitter and as receiver).
+
+    Attributes:
+        enabled: bool, transponder fitted and on.
+        sigma_position_m: position noise per axis in the broadcast, m.
+        sigma_velocity_mps: ground-velocity noise per axis behind SOG/COG, m/s.
+        sigma_heading_rad: heading noise, rad.
+        latency_s: delay from a report's time stamp to its reception, s.
+        first_report_s: time of the first report, s.
+        max_range_m: reception range of this ship as receiver, m.
+        p_receive, z_receive: reception probability and ``Phi^-1(p_receive)``.
+        turn_rate_radps: rate of turn above which the ship counts as changing course, rad/s.
+        east_step_m: east quantisation step ``0.1852 cos(ref_latitude)``, m.
+    """
+
+    enabled: np.ndarray
+    sigma_position_m: np.ndarray
+    sigma_velocity_mps: np.ndarray
+    sigma_heading_rad: np.ndarray
+    latency_s: np.ndarray
+    first_report_s: np.ndarray
+    max_range_m: np.ndarray
+    p_receive: np.ndarray
+    z_receive: np.ndarray
+    turn_rate_radps: np.ndarray
+    east_step_m: np.ndarray
+
+
+@dataclass(frozen=True)
+class AisState:
+    """Schedules and reports in flight.
+
+    Attributes:
+        next_tx_s: ``(n,)`` scheduled time of each ship's next report, s.
+        last_tx_s: ``(n,)`` scheduled time of its last report, s (-inf before the first).
+        head: ``(n,)`` int, buffer slot of the newest report.
+        buf_t_s: ``(n, AIS_BUFFER)`` time stamps of the last reports, s (-inf = empty).
+        buf: ``(n, AIS_BUFFER, 5)`` their fields: north_m, east_m, sog_mps, cog_rad, heading_rad.
+        last_rx_s: ``(m,)`` time stamp of the last report consumed per directed pair, s.
+    """
+
+    next_tx_s: np.ndarray
+    last_tx_s: np.ndarray
+    head: np.ndarray
+    buf_t_s: np.ndarray
+    buf: np.ndarray
+    last_rx_s: np.ndarray
+
+
+@dataclass(frozen=True)
+class AisReports:
+    """Reports received this step, per directed pair ``(m,)`` (NaN where ``valid`` is false).
+
+    Attributes:
+        valid: bool, a report from the target was received this step.
+        stamp_s: the report's time stamp (the time its position refers to), s.
+        north_m, east_m: reported (quantised) position, m.
+        sog_mps, cog_rad, heading_rad: reported SOG (m/s), COG and heading (rad, [0, 2 pi)).
+    """
+
+    valid: np.ndarray
+    stamp_s: np.ndarray
+    north_m: np.ndarray
+    east_m: np.ndarray
+    sog_mps: np.ndarray
+    cog_rad: np.ndarray
+    heading_rad: np.ndarray
+
+
+def build(configs: Sequence[Mapping]) -> AisParams:
+    """AIS parameters from per-ship config dicts (keys and defaults: module docstring)."""
+    what = "ais"
+    check_keys(configs, KEYS, what)
+    p_receive = column(configs, "p_receive", 1.0, what, minimum=0.0)
+    if np.any(p_receive > 1.0):
+        raise InputError(f"p_receive must be <= 1, got {p_receive.max()}", key=f"{what}.p_receive")
+    latency = column(configs, "latency_s", 2.0, what, minimum=0.0)
+    max_latency = (AIS_BUFFER - 1) * INTERVAL_FAST_S
+    if np.any(latency > max_latency):
+        raise InputError(f"latency_s must be <= {max_latency:g} s, got {latency.max():g}",
+                         key=f"{what}.latency_s")
+    lat = column(configs, "ref_latitude_deg", 0.0, what, scale=math.pi / 180.0)
+    if np.any(np.abs(lat) >= math.pi / 2):
+        raise InputError("ref_latitude_deg must be inside (-90, 90)",
+                         key=f"{what}.ref_latitude_deg")
+    enabled = []
+    for i, cfg in enumerate(configs):
+        value = cfg.get("enabled", True)
+        if not isinstance(value, bool):
+            raise InputError(f"expected true or false, got {value!r}", key=f"{what}[{i}].enabled")
+        enabled.append(value)
+    return AisParams(
+        enabled=np.array(enabled, dtype=bool),
+        sigma_position_m=column(configs, "sigma_position_m", 5.0, what, minimum=0.0),
+        sigma_velocity_mps=column(configs, "sigma_velocity_mps", 0.1, what, minimum=0.0),
+        sigma_heading_rad=column(configs, "sigma_heading_deg", 0.5, what, scale=math.pi / 180.0,
+                                 minimum=0.0),
+        latency_s=latency,
+        first_report_s=column(configs, "first_report_s", 0.0, what),
+        max_range_m=column(configs, "max_range_nm", 20.0, what, scale=1852.0, minimum=0.0),
+        p_receive=p_receive,
+        z_receive=probit(p_receive),
+        turn_rate_radps=column(configs, "turn_rate_degps", DEFAULT_TURN_RATE_DEGPS, what,
+                               scale=math.pi / 180.0, minimum=0.0),
+        east_step_m=POSITION_STEP_M * np.cos(lat),
+    )
+
+
+def init(params: AisParams, n_pairs: int) -> AisState:
+    """Schedules before the first step (first report at ``first_report_s``), nothing in flight.
+
+    Args:
+        n_pairs: number ``m`` of directed pairs.
+    """
+    n = params.enabled.shape[0]
+    return AisState(
+        next_tx_s=params.first_report_s.astype(float).copy(),
+        last_tx_s=np.full(n, -np.inf),
+        head=np.zeros(n, dtype=np.int64),
+        buf_t_s=np.full((n, AIS_BUFFER), -np.inf),
+        buf=np.full((n, AIS_BUFFER, 5), np.nan),
+        last_rx_s=np.full(int(n_pairs), -np.inf),
+    )
+
+
+def reporting_interval_s(sog_mps: np.ndarray, turning: np.ndarray,
+                         anchored: np.ndarray | bool = False) -> np.ndarray:
+    """Class A reporting interval, s, ITU-R M.1371-5 annex 1 table 1.
+
+    Args:
+        sog_mps: ``(n,)`` speed over ground, m/s.
+        turning: ``(n,)`` bool, changing course.
+        anchored: ``(n,)`` bool (or scalar), at anchor or moored (navigational status).
+    """
+    kn = np.asarray(sog_mps, dtype=float) / KNOT_MPS
+    turning = np.asarray(turning, dtype=bool)
+    slow = np.where(turning, INTERVAL_SLOW_TURNING_S, INTERVAL_SLOW_S)
+    medium = np.where(turning, INTERVAL_FAST_S, INTERVAL_MEDIUM_S)
+    under_way = np.where(kn > MEDIUM_KN, INTERVAL_FAST_S, np.where(kn > SLOW_KN, medium, slow))
+    at_anchor = np.where(kn > ANCHOR_SPEED_KN, INTERVAL_SLOW_S, INTERVAL_ANCHORED_S)
+    return np.where(np.asarray(anchored, dtype=bool), at_anchor, under_way)
+
+
+def quantise_position(north_m: np.ndarray, east_m: np.ndarray,
+                      east_step_m: np.ndarray | float = POSITION_STEP_M
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Position rounded to 1/10000 min of latitude (north) and longitude (east), m."""
+    return (np.round(north_m / POSITION_STEP_M) * POSITION_STEP_M,
+            np.round(east_m / east_step_m) * east_step_m)
+
+
+def quantise_sog(sog_mps: np.ndarray) -> np.ndarray:
+    """SOG rounded to 0.1 kn and capped at 102.2 kn, m/s."""
+    return np.minimum(np.round(sog_mps / SOG_STEP_MPS), 1022.0) * SOG_STEP_MPS
+
+
+def quantise_angle(angle_rad: np.ndarray, step_rad: float) -> np.ndarray:
+    """Angle rounded to ``step_rad`` in [0, 2 pi), rad (COG: 0.1 deg, heading: 1 deg)."""
+    n_steps = round(2.0 * math.pi / step_rad)
+    return np.mod(np.round(wrap_2pi(angle_rad) / step_rad), n_steps) * step_rad
+
+
+def transmit(params: AisParams, state: AisState, t_s: float, x_true: np.ndarray,
+             vel_ne_mps: np.ndarray, draws: np.ndarray,
+             anchored: np.ndarray | None = None) -> tuple[AisState, np.ndarray]:
+    """Ships whose report is due at ``t_s`` broadcast it; schedules advance.
+
+    Args:
+        params: ``(n,)`` AIS parameters.
+        state: schedules and reports in flight.
+        t_s: time of this step, s.
+        x_true: ``(8, n)`` state of the broadcasting ships (position, heading, yaw rate are used;
+            pass the truth, or a ship's own navigation output with zero sigmas).
+        vel_ne_mps: ``(2, n)`` ground velocity north, east (``trafficsim.engine.earth_velocity``).
+        draws: ``(n, AIS_TX_NORMAL_DIMS)`` standard normals.
+        anchored: optional ``(n,)`` bool navigational status "at anchor / moored".
+
+    Returns: the new state and ``sent`` (n,) bool.
+    """
+    n = x_true.shape[1]
+    draws = np.asarray(draws, dtype=float)
+    if draws.shape != (n, AIS_TX_NORMAL_DIMS):
+        raise ValueError(f"draws must have shape ({n}, {AIS_TX_NORMAL_DIMS}), got {draws.shape}")
+    sv = params.sigma_velocity_mps
+    vn = vel_ne_mps[0] + sv * draws[:, 2]
+    ve = vel_ne_mps[1] + sv * draws[:, 3]
+    sog = np.hypot(vn, ve)
+    turning = np.abs(x_true[R]) > params.turn_rate_radps
+    interval = reporting_interval_s(sog, turning, False if anchored is None else anchored)
+
+    # a shorter required interval pulls the pending report forward
+    pending = np.where(np.isfinite(state.last_tx_s),
+                       np.minimum(state.next_tx_s, state.last_tx_s + interval), state.next_tx_s)
+    sent = params.enabled & (t_s >= pending - 1e-9)
+    nxt = pending + interval
+    nxt = np.where(nxt <= t_s + 1e-9, t_s + interval, nxt)
+
+    sp = params.sigma_position_m
+    north, east = quantise_position(x_true[NORTH] + sp * draws[:, 0],
+                                    x_true[EAST] + sp * draws[:, 1], params.east_step_m)
+    fields = np.stack([north, east, quantise_sog(sog),
+                       quantise_angle(np.arctan2(ve, vn), COG_STEP_RAD),
+                       quantise_angle(x_true[PSI] + params.sigma_heading_rad * draws[:, 4],
+                                      HEADING_STEP_RAD)], axis=1)
+
+    head = np.where(sent, (state.head + 1) % AIS_BUFFER, state.head)
+    rows = np.flatnonzero(sent)
+    buf_t, buf = state.buf_t_s.copy(), state.buf.copy()
+    buf_t[rows, head[rows]] = t_s
+    buf[rows, head[rows]] = fields[rows]
+    new = AisState(next_tx_s=np.where(sent, nxt, pending),
+                   last_tx_s=np.where(sent, pending, state.last_tx_s),
+                   head=head, buf_t_s=buf_t, buf=buf, last_rx_s=state.last_rx_s)
+    return new, sent
+
+
+def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
+            x_true: np.ndarray, draws: np.ndarray) -> tuple[AisState, AisReports]:
+    """Reports of each target that reach each observer at ``t_s``.
+
+    Args:
+        obs, tgt: ``(m,)`` int receiving and transmitting ship indices.
+        x_true: ``(8, n)`` true states (for the reception range).
+        draws: ``(m, AIS_RX_NORMAL_DIMS)`` standard normals.
+    """
+    m = obs.shape[0]
+    draws = np.asarray(draws, dtype=float)
+    if draws.shape != (m, AIS_RX_NORMAL_DIMS):
+        raise ValueError(f"draws must have shape ({m}, {AIS_RX_NORMAL_DIMS}), got {draws.shape}")
+    stamps = state.buf_t_s[tgt]  # (m, K)
+    arrived = (stamps > state.last_rx_s[:, None]) & (
+        stamps + params.latency_s[tgt][:, None] <= t_s + 1e-9)
+    masked = np.where(arrived, stamps, -np.inf)
+    slot = np.argmax(masked, axis=1)
+    rows = np.arange(m)
+    newest = masked[rows, slot]
+    has = np.isfinite(newest)
+    rng = np.hypot(x_true[NORTH, tgt] - x_true[NORTH, obs], x_true[EAST, tgt] - x_true[EAST, obs])
+    valid = (has & params.enabled[obs] & (rng <= params.max_range_m[obs])
+             & (draws[:, 0] < params.z_receive[obs]))
+    fields = state.buf[tgt, slot]  # (m, 5)
+    nan = np.where(valid, 1.0, np.nan)
+    reports = AisReports(valid=valid, stamp_s=newest * nan, north_m=fields[:, 0] * nan,
+                         east_m=fields[:, 1] * nan, sog_mps=fields[:, 2] * nan,
+                         cog_rad=fields[:, 3] * nan, heading_rad=fields[:, 4] * nan)
+    last_rx = np.where(has, newest, state.last_rx_s)
+    new = AisState(next_tx_s=state.next_tx_s, last_tx_s=state.last_tx_s, head=state.head,
+                   buf_t_s=state.buf_t_s, buf=state.buf, last_rx_s=last_rx)
+    return new, reports
+
+
+def step(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
+         x_true: np.ndarray, vel_ne_mps: np.ndarray, tx_draws: np.ndarray, rx_draws: np.ndarray,
+         anchored: np.ndarray | None = None) -> tuple[AisState, AisReports]:
+    """One step: broadcast the reports that are due, then deliver those that have arrived.
+
+    Arguments as in :func:`transmit` (``tx_draws``) and :func:`receive` (``rx_draws``). A report
+    with zero latency is received in the step it is sent.
+    """
+    state, _ = transmit(params, state, t_s, x_true, vel_ne_mps, tx_draws, anchored)
+    return receive(params, state, t_s, obs, tgt, x_true, rx_draws)

@@ -1,0 +1,281 @@
+"""Radar / ARPA plots of other ships: range and bearing from own antenna, as earth-frame positions.
+
+Observations are per *directed* pair (observer ``i``, target ``j``) of ships in one encounter:
+:func:`directed_pairs` turns the batch's ``pair_i < pair_j`` into both directions, ``m = 2 P``
+pairs, shape ``(m,)`` for every per-pair array here.
+
+Measurement model of one plot (one antenna revolution, per pair):
+
+* the antenna sits at body ``(antenna_x_m, antenna_y_m)`` from the observer's reference point
+  [seed 003, eq 5]; the radar measures the target's reference point (no glint, no hull extent);
+* range ``r = |p_t - p_a| + sigma_r z_1`` and bearing relative to own heading
+  ``b = atan2(p_t - p_a) - psi + sigma_b z_2`` (Gaussian);
+* the plot is put on the chart with the observer's *own estimated* position and heading,
+  ``p_plot = p_a_est + r (cos(psi_est + b), sin(psi_est + b))``, so own navigation errors
+  (gyro error, GNSS error) propagate into the target plot as they do on a real ARPA;
+* a plot exists on scan steps only (one scan every ``scan_period_s``: 20-30 rpm is 2-3 s),
+  when ``min_range_m <= true range <= max_range_nm`` and with probability ``p_detect`` per scan.
+  MSC.192(79) 5.3.1.1 specifies detection as an indication in at least 8 out of 10 scans at a
+  false-alarm probability of 1e-4 (hence ``p_detect`` = 0.8) and table 2 a clutter-free
+  detection range of 11 NM for SOLAS ships > 5000 GT (X and S band, antenna 15 m); 12 NM is
+  the default maximum. MSC.192(79) 5.4.1 asks for a navigation buoy to be detected from 40 m
+  from the antenna (the default minimum range).
+
+Default noise: the sensor-error budget of IMO resolution A.823(19) (ARPA performance standards,
+annex: the sensor errors on which its tracking-accuracy figures are based). Range: pulse shape,
+normal sigma 20 m, and quantisation, rectangular +-0.01 NM (sigma 18.52/sqrt 3 = 10.7 m):
+``sigma_r = sqrt(20^2 + 10.7^2) = 22.7 m``. Bearing: beam shape sigma 0.05 deg, antenna backlash
+rectangular +-0.05 deg (0.029 deg), quantisation rectangular +-0.1 deg (0.058 deg), synchro
+encoder sigma 0.03 deg: ``sigma_b = 0.087 deg``. The systematic roll-pitch bearing error and the
+gyro and log errors of that budget are not radar noise here: heading errors come from the own
+navigation estimate that the caller passes in. MSC.192(79) 5.25.4.7.1 allows measured target
+range and bearing errors of 50 m (or 1 % of range) and 2 deg (95 %), a looser bound
+(``sigma_range_m`` 25, ``sigma_bearing_deg`` 1 reproduce it).
+
+Converted-measurement covariance (for a Kalman filter in the earth frame): the polar noise
+mapped through the Jacobian of the polar-to-Cartesian conversion at the measured range and
+bearing, ``R = J diag(sigma_r^2, sigma_b^2 + var_psi) J^T + P_own`` with
+``J = [[cos t, -r sin t], [sin t, r cos t]]``, ``t = psi_est + b`` (the linearised "converted
+measurement" of Lerro & Bar-Shalom 1993, IEEE TAES 29(3)); ``var_psi`` (own heading variance) and
+``P_own`` (own position covariance) are optional inputs from the own navigation filter. The
+conversion bias ``r (1 - exp(-sigma_b^2 / 2)) ~ r sigma_b^2 / 2`` is 0.03 m at 12 NM for the
+default ``sigma_b`` and 3.4 m for 1 deg, negligible next to the cross-range sigma ``r sigma_b``
+(33 m and 390 m), so no debiasing is applied.
+
+Draws: ``RADAR_NORMAL_DIMS`` standard normals per pair per step (range, bearing, detection; the
+plot is detected when ``z_3 < Phi^-1(p_detect)``, a uniform event from a normal draw so that one
+stream of the ``radar`` purpose serves all three). The engine maps per-observer streams to pairs.
+
+Config keys (per observer ship; defaults in brackets): ``sigma_range_m`` [22.7],
+``sigma_bearing_deg`` [0.087], ``max_range_nm`` [12.0], ``min_range_m`` [40.0], ``p_detect``
+[0.8], ``scan_period_s`` [2.5], ``scan_phase_s`` [0.0] (time of the first scan), ``antenna_x_m``
+[0.0], ``antenna_y_m`` [0.0], ``enabled`` [true].
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from statistics import NormalDist
+
+import numpy as np
+
+from trafficsim.errors import InputError
+from trafficsim.sensors import check_keys, column, rotate_body_to_earth, wrap_pi
+from trafficsim.ships.base import EAST, NORTH, PSI
+
+#: standard normals per directed pair per step: range noise, bearing noise, detection draw
+RADAR_NORMAL_DIMS = 3
+RADAR_PURPOSE = "radar"
+
+NM = 1852.0
+#: A.823(19) annex sensor errors: pulse shape 20 m, range quantisation +-0.01 NM rectangular
+DEFAULT_SIGMA_RANGE_M = math.hypot(20.0, 0.01 * NM / math.sqrt(3.0))
+#: beam shape 0.05, backlash +-0.05 rect., quantisation +-0.1 rect., encoder 0.03 (deg)
+DEFAULT_SIGMA_BEARING_DEG = math.sqrt(0.05**2 + 0.05**2 / 3.0 + 0.1**2 / 3.0 + 0.03**2)
+KEYS = ("sigma_range_m", "sigma_bearing_deg", "max_range_nm", "min_range_m", "p_detect",
+        "scan_period_s", "scan_phase_s", "antenna_x_m", "antenna_y_m", "enabled")
+
+
+def directed_pairs(pair_i: np.ndarray, pair_j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Observer and target indices ``(m,)`` of both directions of every pair, ``m = 2 P``.
+
+    The first ``P`` entries are ``i -> j`` (observer ``pair_i``), the last ``P`` are ``j -> i``.
+    """
+    pi = np.asarray(pair_i, dtype=np.int64)
+    pj = np.asarray(pair_j, dtype=np.int64)
+    return np.concatenate([pi, pj]), np.concatenate([pj, pi])
+
+
+@dataclass(frozen=True)
+class RadarParams:
+    """Per-observer radar parameters, ``(n,)`` arrays.
+
+    Attributes:
+        sigma_range_m: range noise standard deviation, m.
+        sigma_bearing_rad: bearing noise standard deviation, rad.
+        max_range_m, min_range_m: detection range limits, m.
+        p_detect: detection probability per scan (-).
+        z_detect: ``Phi^-1(p_detect)``, the threshold on the detection draw (-inf when 0).
+        scan_period_s: antenna revolution period, s.
+        scan_phase_s: time of the first scan, s.
+        antenna_x_m, antenna_y_m: antenna position in the body frame, m.
+        enabled: bool, the ship has a radar in use.
+    """
+
+    sigma_range_m: np.ndarray
+    sigma_bearing_rad: np.ndarray
+    max_range_m: np.ndarray
+    min_range_m: np.ndarray
+    p_detect: np.ndarray
+    z_detect: np.ndarray
+    scan_period_s: np.ndarray
+    scan_phase_s: np.ndarray
+    antenna_x_m: np.ndarray
+    antenna_y_m: np.ndarray
+    enabled: np.ndarray
+
+
+@dataclass(frozen=True)
+class RadarState:
+    """Antenna memory: ``next_scan_s`` (n,) time of each observer's next scan, s."""
+
+    next_scan_s: np.ndarray
+
+
+@dataclass(frozen=True)
+class RadarPlots:
+    """One step's plots, per directed pair ``(m,)``.
+
+    Attributes:
+        valid: bool, a plot of the target exists this step.
+        t_s: time of the plot (this step), s.
+        north_m, east_m: plotted target position in the earth frame (own estimate based), m.
+        cov: ``(m, 2, 2)`` converted-measurement covariance of (north, east), m^2.
+        range_m: measured range, m.
+        bearing_rad: measured bearing relative to own heading, rad in [-pi, pi).
+    Entries of invalid pairs are NaN.
+    """
+
+    valid: np.ndarray
+    t_s: float
+    north_m: np.ndarray
+    east_m: np.ndarray
+    cov: np.ndarray
+    range_m: np.ndarray
+    bearing_rad: np.ndarray
+
+
+def probit(p: np.ndarray) -> np.ndarray:
+    """``Phi^-1(p)`` element-wise, with -inf for 0 and +inf for 1 (build time only)."""
+    dist = NormalDist()
+    return np.array([-math.inf if v <= 0.0 else math.inf if v >= 1.0 else dist.inv_cdf(v)
+                     for v in p])
+
+
+def build(configs: Sequence[Mapping]) -> RadarParams:
+    """Radar parameters from per-ship config dicts (keys and defaults: module docstring)."""
+    what = "radar"
+    check_keys(configs, KEYS, what)
+    p_detect = column(configs, "p_detect", 0.8, what, minimum=0.0)
+    if np.any(p_detect > 1.0):
+        raise InputError(f"p_detect must be <= 1, got {p_detect.max()}", key=f"{what}.p_detect")
+    enabled = []
+    for i, cfg in enumerate(configs):
+        value = cfg.get("enabled", True)
+        if not isinstance(value, bool):
+            raise InputError(f"expected true or false, got {value!r}", key=f"{what}[{i}].enabled")
+        enabled.append(value)
+    return RadarParams(
+        sigma_range_m=column(configs, "sigma_range_m", DEFAULT_SIGMA_RANGE_M, what, minimum=0.0),
+        sigma_bearing_rad=column(configs, "sigma_bearing_deg", DEFAULT_SIGMA_BEARING_DEG, what,
+                                 scale=math.pi / 180.0, minimum=0.0),
+        max_range_m=column(configs, "max_range_nm", 12.0, what, scale=NM, minimum=0.0),
+        min_range_m=column(configs, "min_range_m", 40.0, what, minimum=0.0),
+        p_detect=p_detect,
+        z_detect=probit(p_detect),
+        scan_period_s=column(configs, "scan_period_s", 2.5, what, minimum=0.0, strictly=True),
+        scan_phase_s=column(configs, "scan_phase_s", 0.0, what),
+        antenna_x_m=column(configs, "antenna_x_m", 0.0, what),
+        antenna_y_m=column(configs, "antenna_y_m", 0.0, what),
+        enabled=np.array(enabled, dtype=bool),
+    )
+
+
+def init(params: RadarParams) -> RadarState:
+    """Antenna state before the first step: first scan at ``scan_phase_s``."""
+    return RadarState(next_scan_s=params.scan_phase_s.astype(float).copy())
+
+
+def scan_due(params: RadarParams, state: RadarState, t_s: float
+             ) -> tuple[RadarState, np.ndarray]:
+    """Which observers complete a scan at time ``t_s``; advances the scan schedule.
+
+    A scan is due when ``t_s >= next_scan_s`` (to within 1e-9 s); the next scan is then one
+    period after the scheduled one (so the mean interval is the period whatever the step), or
+    one period after ``t_s`` if the schedule fell more than a period behind (steps longer than
+    the scan period give at most one plot per step).
+
+    Returns: the new state and ``due`` (n,) bool.
+    """
+    due = params.enabled & (t_s >= state.next_scan_s - 1e-9)
+    nxt = state.next_scan_s + params.scan_period_s
+    nxt = np.where(nxt <= t_s + 1e-9, t_s + params.scan_period_s, nxt)
+    return RadarState(next_scan_s=np.where(due, nxt, state.next_scan_s)), due
+
+
+def measure(params: RadarParams, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
+            x_true: np.ndarray, est_north_m: np.ndarray, est_east_m: np.ndarray,
+            est_psi_rad: np.ndarray, draws: np.ndarray, t_s: float,
+            own_heading_var_rad2: np.ndarray | None = None,
+            own_pos_cov_m2: np.ndarray | None = None) -> RadarPlots:
+    """Radar plots of every directed pair at time ``t_s``.
+
+    Args:
+        params: observer radar parameters, ``(n,)``.
+        due: ``(n,)`` bool, observers whose scan completes now (:func:`scan_due`).
+        obs, tgt: ``(m,)`` int observer and target ship indices (:func:`directed_pairs`).
+        x_true: ``(8, n)`` true states (:mod:`trafficsim.ships.base` layout).
+        est_north_m, est_east_m, est_psi_rad: ``(n,)`` each observer's own estimated reference
+            point position (m) and heading (rad), used to put the plot on the chart.
+        draws: ``(m, RADAR_NORMAL_DIMS)`` standard normals.
+        t_s: time of this step, s.
+        own_heading_var_rad2: optional ``(n,)`` variance of the own heading estimate, rad^2.
+        own_pos_cov_m2: optional ``(n, 2, 2)`` covariance of the own position estimate, m^2.
+    """
+    draws = np.asarray(draws, dtype=float)
+    if draws.shape != (obs.shape[0], RADAR_NORMAL_DIMS):
+        raise ValueError(f"draws must have shape ({obs.shape[0]}, {RADAR_NORMAL_DIMS}), "
+                         f"got {draws.shape}")
+    ax, ay = params.antenna_x_m[obs], params.antenna_y_m[obs]
+    psi = x_true[PSI, obs]
+    dn_a, de_a = rotate_body_to_earth(psi, ax, ay)
+    rel_n = x_true[NORTH, tgt] - (x_true[NORTH, obs] + dn_a)
+    rel_e = x_true[EAST, tgt] - (x_true[EAST, obs] + de_a)
+    true_range = np.hypot(rel_n, rel_e)
+    true_brg = np.arctan2(rel_e, rel_n) - psi
+
+    rng = true_range + params.sigma_range_m[obs] * draws[:, 0]
+    brg = wrap_pi(true_brg + params.sigma_bearing_rad[obs] * draws[:, 1])
+    valid = (due[obs] & (true_range <= params.max_range_m[obs])
+             & (true_range >= params.min_range_m[obs]) & (draws[:, 2] < params.z_detect[obs])
+             & (rng > 0.0))
+
+    psi_est = est_psi_rad[obs]
+    en_a, ee_a = rotate_body_to_earth(psi_est, ax, ay)
+    theta = psi_est + brg
+    c, s = np.cos(theta), np.sin(theta)
+    north = est_north_m[obs] + en_a + rng * c
+    east = est_east_m[obs] + ee_a + rng * s
+
+    var_r = params.sigma_range_m[obs] ** 2
+    var_b = params.sigma_bearing_rad[obs] ** 2
+    if own_heading_var_rad2 is not None:
+        var_b = var_b + np.asarray(own_heading_var_rad2, dtype=float)[obs]
+    cross = rng * rng * var_b
+    cov = np.empty((obs.shape[0], 2, 2))
+    cov[:, 0, 0] = c * c * var_r + s * s * cross
+    cov[:, 1, 1] = s * s * var_r + c * c * cross
+    cov[:, 0, 1] = cov[:, 1, 0] = c * s * (var_r - cross)
+    if own_pos_cov_m2 is not None:
+        cov = cov + np.asarray(own_pos_cov_m2, dtype=float)[obs]
+
+    nan = np.where(valid, 1.0, np.nan)
+    return RadarPlots(valid=valid, t_s=float(t_s), north_m=north * nan, east_m=east * nan,
+                      cov=cov * nan[:, None, None], range_m=rng * nan, bearing_rad=brg * nan)
+
+
+def step(params: RadarParams, state: RadarState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
+         x_true: np.ndarray, est_north_m: np.ndarray, est_east_m: np.ndarray,
+         est_psi_rad: np.ndarray, draws: np.ndarray,
+         own_heading_var_rad2: np.ndarray | None = None,
+         own_pos_cov_m2: np.ndarray | None = None) -> tuple[RadarState, RadarPlots]:
+    """One step: advance the scan schedule and make the plots of observers whose scan is due.
+
+    Arguments as in :func:`scan_due` and :func:`measure`.
+    """
+    state, due = scan_due(params, state, t_s)
+    plots = measure(params, due, obs, tgt, x_true, est_north_m, est_east_m, est_psi_rad, draws,
+                    t_s, own_heading_var_rad2, own_pos_cov_m2)
+    return state, plots
