@@ -88,7 +88,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         flag = "  COLLISION" if pair["collision"] else ""
         print(f"  {pair['ship_a']} - {pair['ship_b']}: min range {pair['min_range_m']:.0f} m "
               f"at t = {pair['t_min_range_s']:.0f} s{flag}")
-    print(f"results: {args.out / 'trajectories.parquet'}, {args.out / 'summary.json'}")
+    files = ["trajectories.parquet", "tracks.parquet", "summary.json"]
+    print("results: " + ", ".join(str(args.out / f) for f in files if (args.out / f).exists()))
     return 0
 
 

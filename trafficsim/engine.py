@@ -17,6 +17,7 @@ from trafficsim.control import autopilot, guidance
 from trafficsim.errors import SimulationError
 from trafficsim.metrics import PairMetrics
 from trafficsim.navigation import Navigation
+from trafficsim.observation import Observation, observes
 from trafficsim.ships import base, kernels
 from trafficsim.ships.base import EAST, NORTH, PSI, Env, R
 
@@ -43,6 +44,7 @@ class Simulation:
     rps_cmd: np.ndarray
     substeps: np.ndarray  # (n,) RK4 sub-steps per time step
     nav: Navigation | None = None  # instruments and filters; None = perfect knowledge
+    obs: Observation | None = None  # radar, AIS and tracks of other ships
     step_index: int = 0
 
     @classmethod
@@ -67,6 +69,9 @@ class Simulation:
         if any(f != "none" for f in batch.filters) or any(batch.sensors):
             sim.nav = Navigation.build(batch.sensors, batch.filters, x, seed, batch.encounter,
                                        batch.ship_in_encounter, dt)
+        if observes(batch.sensors):
+            sim.obs = Observation.build(batch.sensors, batch.pair_i, batch.pair_j, seed,
+                                        batch.encounter, batch.ship_in_encounter)
         sim._navigate_and_control()
         return sim
 
@@ -82,6 +87,8 @@ class Simulation:
         """
         b, x = self.batch, self.batch.x
         est = x if self.nav is None else self.nav.update(x, b.env)
+        if self.obs is not None:
+            self.obs.update(x, est, earth_velocity(x, b.env), self.t_s)
         self.course_order_rad = guidance.desired_course(
             self.route, b.waypoints, b.n_waypoints, est[NORTH], est[EAST], b.length_m)
         self.rudder_cmd_rad = autopilot.rudder_command(

@@ -37,7 +37,8 @@ from trafficsim.sensors import actuators, compass, gnss, speed_log, waves, wrap_
 from trafficsim.ships.base import EAST, NORTH, PSI, Env, R, U, V
 
 FILTERS = ("none", "pv")
-SENSOR_KEYS = ("gnss", "compass", "log", "actuators", "waves", "gate", "navigation")
+SENSOR_KEYS = ("gnss", "compass", "log", "actuators", "waves", "gate", "navigation", "radar",
+               "ais", "tracker")
 DEFAULT_GATE_SIGMA = 5.0  # normalised innovation; a fix beyond 5 sigma is a gross error
 #: estimate rows: the estimate has the first six rows of the ship state
 N_EST = 6
@@ -61,6 +62,12 @@ def check_sensor_config(config: Mapping[str, Any]) -> None:
             raise InputError(f"unknown sensor '{name}'; expected one of {', '.join(SENSOR_KEYS)}",
                              key=name)
     Navigation.build([dict(config)], ["pv"], np.zeros((8, 1)), 0, [0], [0], 1.0)
+    from trafficsim.estimation import tracker
+    from trafficsim.sensors import ais, radar
+
+    for name, module in (("radar", radar), ("ais", ais), ("tracker", tracker)):
+        if config.get(name) is not None:
+            module.build([dict(config[name])])
 
 
 @dataclass

@@ -21,13 +21,17 @@ import numpy as np
 
 #: every purpose that draws random numbers; append only (the index is part of the stream key)
 PURPOSES = ("gnss", "gnss_gross", "compass", "log", "actuators", "waves", "radar", "ais",
-            "initial")
+            "initial", "ais_rx")
 BLOCK_STEPS = 512
 
 
-def generator(seed: int, encounter: int, ship: int, purpose: str) -> np.random.Generator:
-    """The stream of one ship of one encounter for one purpose."""
-    key = (int(encounter), int(ship), PURPOSES.index(purpose))
+def generator(seed: int, encounter: int, ship: int, purpose: str,
+              other: int | None = None) -> np.random.Generator:
+    """The stream of one ship of one encounter for one purpose (and, for observations of
+    another ship, that ship's index ``other`` within the encounter)."""
+    key: tuple[int, ...] = (int(encounter), int(ship), PURPOSES.index(purpose))
+    if other is not None:
+        key = (*key, int(other))
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(seed, spawn_key=key)))
 
 
@@ -41,16 +45,20 @@ class NoiseBank:
         purpose: a name from :data:`PURPOSES`.
         dims: numbers drawn per ship per step.
         kind: ``"normal"`` (standard normal) or ``"uniform"`` ([0, 1)).
+        other: optional ``(n,)`` index within the encounter of the other ship of each row
+            (rows are then directed pairs: observer ``ship_in_encounter``, target ``other``).
     """
 
     def __init__(self, seed: int, encounter: Sequence[int] | np.ndarray,
                  ship_in_encounter: Sequence[int] | np.ndarray, purpose: str, dims: int,
-                 kind: str = "normal", block_steps: int = BLOCK_STEPS) -> None:
+                 kind: str = "normal", block_steps: int = BLOCK_STEPS,
+                 other: Sequence[int] | np.ndarray | None = None) -> None:
         if kind not in ("normal", "uniform"):
             raise ValueError(f"kind must be 'normal' or 'uniform', got {kind!r}")
         self.kind, self.dims, self.block_steps = kind, int(dims), int(block_steps)
-        self._gens = [generator(seed, e, s, purpose)
-                      for e, s in zip(encounter, ship_in_encounter, strict=True)]
+        others = [None] * len(encounter) if other is None else list(other)
+        self._gens = [generator(seed, e, s, purpose, o)
+                      for e, s, o in zip(encounter, ship_in_encounter, others, strict=True)]
         self._block = np.empty((self.block_steps, len(self._gens), self.dims))
         self._row = self.block_steps
 

@@ -59,6 +59,7 @@ class Recorder:
     t: np.ndarray  # (n_records,)
     meas: np.ndarray  # (n_records, 4, n) GNSS fix north, east, fix valid, compass heading
     est: np.ndarray  # (n_records, 6, n) the estimate used by guidance and autopilot
+    tracks: np.ndarray | None = None  # (n_records, 5, m) tracks of other ships and "tracked"
     count: int = 0
 
     @classmethod
@@ -80,7 +81,38 @@ class Recorder:
         self.est[k] = x[:6] if nav is None else nav.est
         if nav is not None and nav.fix is not None:
             self.meas[k] = (nav.fix.north_m, nav.fix.east_m, nav.fix.valid, nav.heading_meas)
+        if sim.obs is not None:
+            if self.tracks is None:
+                m = sim.obs.obs.shape[0]
+                self.tracks = np.full((self.t.shape[0], 5, m), np.nan)
+            xp, active = sim.obs.predicted_tracks(sim.t_s)
+            self.tracks[k, :4] = np.where(active[None, :], xp.T, np.nan)
+            self.tracks[k, 4] = active
         self.count += 1
+
+    def track_columns(self, sim: Simulation) -> dict[str, Any] | None:
+        """One row per recorded time and directed pair: the observer's track of the target
+        (predicted to the time) beside the target's true position."""
+        if self.tracks is None or sim.obs is None:
+            return None
+        k, b, o = self.count, sim.batch, sim.obs
+        m = o.obs.shape[0]
+        tr = self.tracks[:k]
+        true_n, true_e = self.x[:k, NORTH][:, o.tgt], self.x[:k, EAST][:, o.tgt]
+        names = np.array(b.names, dtype=object)
+        return {
+            "t_s": np.repeat(self.t[:k], m),
+            "observer": np.tile(names[o.obs], k).tolist(),
+            "target": np.tile(names[o.tgt], k).tolist(),
+            "tracked": (tr[:, 4] == 1.0).ravel(),
+            "track_north_m": tr[:, 0].ravel(),
+            "track_east_m": tr[:, 1].ravel(),
+            "track_sog_kn": to_kn(np.hypot(tr[:, 2], tr[:, 3])).ravel(),
+            "track_cog_deg": compass_deg(np.arctan2(tr[:, 3], tr[:, 2])).ravel(),
+            "north_m": true_n.ravel(),
+            "east_m": true_e.ravel(),
+            "error_m": np.hypot(tr[:, 0] - true_n, tr[:, 1] - true_e).ravel(),
+        }
 
     def columns(self, batch: Batch) -> dict[str, Any]:
         """Long-format table: one row per record and ship."""
@@ -161,6 +193,9 @@ def run_scenario(path: Path, out_dir: Path) -> dict[str, Any]:
     summary = _summary(scn, sim, n_steps, wall, max(n_steps - 1, 1))
     out_dir.mkdir(parents=True, exist_ok=True)
     write_parquet(out_dir / "trajectories.parquet", rec.columns(batch))
+    tracks = rec.track_columns(sim)
+    if tracks is not None:
+        write_parquet(out_dir / "tracks.parquet", tracks)
     write_json(out_dir / "summary.json", summary)
     return summary
 

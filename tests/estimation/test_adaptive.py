@@ -1,0 +1,190 @@
+"""Innovation-based adaptive estimation of R (Mehra / Myers-Tapley; the adaptive idea of
+[seed 004]) alone and inside the ship EKF."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trafficsim.estimation import adaptive, ekf
+from trafficsim.estimation.ekf import ZE, ZN
+from trafficsim.ships import base
+from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Actuators, Env, U
+from trafficsim.ships.library import load_ship
+from trafficsim.units import from_kn
+
+
+def chi2_bounds(dof: int, p: float = 0.95) -> tuple[float, float]:
+    """Two-sided chi-square quantiles (Wilson-Hilferty; < 0.5 % error for dof >= 30)."""
+    z = {0.95: 1.959963984540054, 0.99: 2.5758293035489}[p]
+    c = 2.0 / (9.0 * dof)
+    return (dof * (1 - c - z * math.sqrt(c)) ** 3, dof * (1 - c + z * math.sqrt(c)) ** 3)
+
+
+def _spd(rng: np.random.Generator, n: int, m: int, scale: float) -> np.ndarray:
+    L = rng.standard_normal((n, m, m))
+    return (L @ L.transpose(0, 2, 1) / m + 0.5 * np.eye(m)) * scale
+
+
+def test_window_estimate_is_unbiased_and_follows_a_step_change() -> None:
+    """Synthetic innovations nu ~ N(b, H P H^T + R) with a bias b: after a full window the
+    ship-averaged estimate equals R (the mean is removed, the H P H^T part subtracted); when R
+    quadruples the estimate is exactly the new R (statistically) once the window holds only new
+    innovations: after ``window_steps`` steps, and half-way in between."""
+    rng = np.random.default_rng(0)
+    n, m, w = 4000, 2, 40
+    params = adaptive.build([{"window_steps": w}] * n, "gnss")
+    R1 = _spd(rng, 1, m, 9.0)[0]
+    R2 = 4.0 * R1
+    hph = _spd(rng, n, m, 1.0)
+    bias = rng.normal(0, 3.0, (n, m))
+    state = adaptive.start(params, np.broadcast_to(np.eye(m), (n, m, m)))
+    history = []
+    for k in range(3 * w):
+        R = R1 if k < 2 * w else R2
+        L = np.linalg.cholesky(hph + R)
+        nu = bias + np.einsum("nij,nj->ni", L, rng.standard_normal((n, m)))
+        state = adaptive.step(params, state, nu, hph, np.ones(n, dtype=bool))
+        history.append(state.R.mean(axis=0))
+        if k == w // 2 - 2:  # fewer than min_samples (w / 2): still the prior
+            np.testing.assert_array_equal(state.R, np.broadcast_to(np.eye(m), (n, m, m)))
+    se = R1 * math.sqrt(2.0 / w / n) * 3 + 0.05  # 3 standard errors of the ship average
+    np.testing.assert_allclose(history[2 * w - 1], R1, atol=se.max())
+    np.testing.assert_allclose(history[3 * w - 1], R2, atol=4 * se.max())
+    mid = history[2 * w + w // 2 - 1]
+    assert 1.5 * R1[0, 0] < mid[0, 0] < 3.5 * R1[0, 0]  # half old, half new
+
+
+def test_invalid_steps_and_per_ship_windows() -> None:
+    """Invalid steps do not enter the sums; each ship's ring wraps at its own window; the running
+    sums equal the direct Myers-Tapley estimate over each ship's last valid innovations."""
+    rng = np.random.default_rng(1)
+    n, m = 6, 1
+    windows = [5, 8, 12, 5, 8, 12]
+    params = adaptive.build([{"window_steps": w, "min_samples": 3, "floor_sigma_deg": 1e-3}
+                             for w in windows], "compass")
+    state = adaptive.start(params, np.full((n, 1, 1), 0.01))
+    nus, hphs, valids = [], [], []
+    for _ in range(40):
+        nu = rng.normal(0, 0.1, (n, m))
+        hph = rng.uniform(0.0, 0.002, (n, m, m))
+        valid = rng.random(n) < 0.7
+        state = adaptive.step(params, state, nu, hph, valid)
+        nus.append(nu)
+        hphs.append(hph)
+        valids.append(valid)
+    for i, w in enumerate(windows):
+        sel = [k for k in range(40 - w, 40) if valids[k][i]]
+        v = np.array([nus[k][i, 0] for k in sel])
+        h = np.array([hphs[k][i, 0, 0] for k in sel])
+        assert state.count[i] == len(sel)
+        if len(sel) < 3:  # too few in the window: the last estimate is kept
+            continue
+        expected = max(v.var(ddof=1) - h.mean(), params.floor_var[i])
+        assert state.R[i, 0, 0] == pytest.approx(expected, rel=1e-9)
+
+
+def test_estimate_is_clamped_positive_definite() -> None:
+    """Innovations smaller than H P H^T would give a negative variance: clamped to the floor."""
+    n = 3
+    params = adaptive.build([{"window_steps": 5, "min_samples": 3}] * n, "gnss")
+    state = adaptive.start(params, np.broadcast_to(np.eye(2) * 4.0, (n, 2, 2)))
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        state = adaptive.step(params, state, rng.normal(0, 0.01, (n, 2)),
+                              np.broadcast_to(np.eye(2) * 100.0, (n, 2, 2)), np.ones(n, bool))
+    np.testing.assert_allclose(state.R, np.broadcast_to(np.eye(2) * 0.1**2, (n, 2, 2)),
+                               rtol=1e-9)
+    with pytest.raises(ValueError, match="group"):
+        adaptive.build([{}], "radar")
+    with pytest.raises(ValueError, match="unknown"):
+        adaptive.build([{"floor_sigma_m": 1.0}], "compass")
+
+
+def _ekf_run(adapt: bool, n: int = 300, steps: int = 600, window: int = 60, seed: int = 3
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Catfish ships zig-zagging; GNSS noise 5 m per axis, 10 m from half-time on.
+
+    Returns per step: mean NIS over ships (4 dof), ship-mean estimated GNSS variance (m2) and the
+    ship-mean GNSS-only NIS (2 dof)."""
+    spec = load_ship("catfish")
+    family = base.families()["modular"]
+    specs = [spec] * n
+    fp = family.build(specs)
+    act = Actuators.from_specs(specs)
+    model = ekf.ShipModel.from_specs(specs)
+    rng = np.random.default_rng(seed)
+    x = np.zeros((base.N_STATE, n))
+    x[PSI] = rng.uniform(0, 2 * np.pi, n)
+    x[U] = from_kn(7.0)
+    rps = base.steady_rps_for_speed(family, fp, act, x[U])
+    x[RPS] = rps
+    ang = rng.uniform(0, 2 * np.pi, n)
+    cur = 0.3 * np.cos(ang), 0.3 * np.sin(ang)
+    p = ekf.build([{"gnss_sigma_m": 5.0, "compass_sigma_deg": 1.0, "log_sigma_mps": 0.1}] * n)
+    ap = adaptive.build([{"window_steps": window}] * n, "gnss")
+    ast = adaptive.start(ap, np.broadcast_to(np.eye(2) * 25.0, (n, 2, 2)))
+    st = ekf.initial_state(p, x[NORTH] + 5 * rng.standard_normal(n),
+                           x[EAST] + 5 * rng.standard_normal(n), x[PSI], x[U])
+    period = rng.uniform(60, 180, n)
+    phase = rng.uniform(0, 1, n)
+    nis, r_est, nis_g = [], [], []
+    for k in range(steps):
+        sig = 5.0 if k < steps // 2 else 10.0
+        rudder_cmd = np.radians(10.0) * np.sign(np.sin(2 * np.pi * (k / period + phase)))
+        meas = x[RUDDER].copy(), x[RPS].copy()
+        x = base.step(family, fp, act, x, rudder_cmd, rps, Env(*cur), 1.0, 2)
+        st = ekf.predict(p, model, st, *meas, 1.0, rudder_cmd_rad=rudder_cmd, rps_cmd=rps)
+        z = np.stack([x[NORTH] + sig * rng.standard_normal(n),
+                      x[EAST] + sig * rng.standard_normal(n),
+                      x[PSI] + math.radians(1.0) * rng.standard_normal(n),
+                      x[U] + 0.1 * rng.standard_normal(n)], axis=1)
+        mask = np.ones((n, 4), dtype=bool)
+        R = ekf.measurement_covariance(p, gnss_cov_m2=ast.R if adapt else None)
+        st, inn = ekf.update(p, st, z, mask, R)
+        g_nu, g_hph, g_valid = adaptive.innovation_group(inn.nu, inn.hph, mask, (ZN, ZE))
+        ast = adaptive.step(ap, ast, g_nu, g_hph, g_valid)
+        S_g = inn.S[:, :2, :2]
+        nis_g.append(np.einsum("ni,ni->n", g_nu, np.linalg.solve(S_g, g_nu[..., None])[..., 0])
+                     .mean())
+        nis.append(inn.nis.mean())
+        r_est.append(np.trace(ast.R, axis1=1, axis2=2).mean() / 2)
+    return np.array(nis), np.array(r_est), np.array(nis_g)
+
+
+@pytest.fixture(scope="module")
+def runs() -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    return {"adaptive": _ekf_run(True), "fixed": _ekf_run(False)}
+
+
+def test_ekf_estimated_R_follows_the_doubled_gnss_noise(runs: dict) -> None:
+    """GNSS sigma 5 m -> 10 m at t = 300 s; window 60 steps: the estimated variance is 25 m2
+    before and 100 m2 from one window after the change (10 % tolerance, 300 ships)."""
+    _, r_est, _ = runs["adaptive"]
+    assert r_est[200:300].mean() == pytest.approx(25.0, rel=0.1)
+    assert r_est[299] == pytest.approx(25.0, rel=0.1)
+    assert r_est[300 + 60] == pytest.approx(100.0, rel=0.1)
+    assert r_est[360:].mean() == pytest.approx(100.0, rel=0.1)
+    assert 40.0 < r_est[330] < 85.0  # half a window: on its way
+
+
+def test_nis_returns_inside_its_bounds(runs: dict) -> None:
+    """NIS (4 dof, averaged over 300 ships) inside the 95 % chi-square bounds before the change
+    and again one window after it with adaptation; without, it stays far above (the GNSS
+    innovations are 4x larger than the filter believes: their 2-dof NIS averages 8, not 2)."""
+    n = 300
+    lo, hi = chi2_bounds(4 * n)
+    nis, _, nis_g = runs["adaptive"]
+    nis_fixed, _, nis_g_fixed = runs["fixed"]
+    for series, sl in ((nis, slice(100, 300)), (nis, slice(360, 600)),
+                       (nis_fixed, slice(100, 300))):
+        inside = np.mean((series[sl] * n > lo) & (series[sl] * n < hi))
+        assert inside > 0.85, (sl, inside)
+    assert np.mean(nis[301:310] * n > hi) > 0.8  # the change was felt
+    assert np.all(nis_fixed[320:] * n > hi)
+    assert nis_g_fixed[360:].mean() == pytest.approx(2 * 4.0, rel=0.1)
+    # slightly above 2 (2.10 here): R_hat from 60 samples scatters by ~18 % per ship, and a
+    # scattered denominator raises the mean of nu^2 / R_hat (Jensen)
+    assert nis_g[360:].mean() == pytest.approx(2.0, rel=0.08)

@@ -1,0 +1,621 @@
+"""The EKF on the ship model [seed 002, ch 4.4, 5.3, 7]: linear algebra, Jacobian, filter runs."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import pytest
+
+from trafficsim.estimation import ekf
+from trafficsim.estimation.ekf import XCE, XCN, XE, XN, XPSI, XR, XU, XV, ZN, ZPSI, ZU
+from trafficsim.ships import base, modular
+from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Actuators, Env, R, U, V
+from trafficsim.ships.library import load_ship
+from trafficsim.units import from_kn
+
+# thesis sensors [seed 002, ch 3.4]: Decca DRMS 10 m (South West British chain) or 100 m
+# (English chain), compass variance 0.0054 rad2, log variance 0.5 (m/s)2, Decca data every
+# 1.56 s nominally
+DECCA_DRMS_M = (10.0, 100.0)
+COMPASS_VAR_RAD2 = 0.0054
+LOG_VAR_M2PS2 = 0.5
+DECCA_INTERVAL_S = 1.56
+
+
+def chi2_bounds(dof: int, p: float = 0.95) -> tuple[float, float]:
+    """Two-sided chi-square quantiles (Wilson-Hilferty; < 0.5 % error for dof >= 30)."""
+    z = {0.95: 1.959963984540054, 0.99: 2.5758293035489}[p]
+    c = 2.0 / (9.0 * dof)
+    return (dof * (1 - c - z * math.sqrt(c)) ** 3, dof * (1 - c + z * math.sqrt(c)) ** 3)
+
+
+# --------------------------------------------------------------------------------------------
+# matrix exponential and Van Loan
+# --------------------------------------------------------------------------------------------
+
+
+def test_expm_stack_exact_cases() -> None:
+    """Zero, diagonal, nilpotent and rotation generators (norms 1e-3 .. 300: every Pade degree
+    and the scaling and squaring), and exp(A) exp(-A) = I."""
+    M = np.zeros((6, 2, 2))
+    M[1] = np.diag([0.3, -2.0])
+    M[2] = [[0.0, 7.5], [0.0, 0.0]]
+    for k, w in zip(range(3, 6), (1e-3, 3.0, 300.0), strict=True):
+        M[k] = [[0.0, -w], [w, 0.0]]
+    E = ekf.expm_stack(M)
+    np.testing.assert_allclose(E[0], np.eye(2), atol=1e-15)
+    np.testing.assert_allclose(E[1], np.diag(np.exp([0.3, -2.0])), rtol=1e-14)
+    np.testing.assert_allclose(E[2], [[1.0, 7.5], [0.0, 1.0]], rtol=1e-14)
+    for k, w in zip(range(3, 6), (1e-3, 3.0, 300.0), strict=True):
+        c, s = math.cos(w), math.sin(w)
+        np.testing.assert_allclose(E[k], [[c, -s], [s, c]], atol=1e-12 * max(1.0, w))
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((50, 8, 8)) * rng.uniform(0.01, 2.0, (50, 1, 1))
+    Ep, Em = ekf.expm_stack(A), ekf.expm_stack(-A)
+    cond = np.abs(Ep).max(axis=(1, 2)) * np.abs(Em).max(axis=(1, 2))  # rounding scale
+    err = np.abs(Ep @ Em - np.eye(8)).max(axis=(1, 2))
+    assert np.all(err < 1e-13 * cond)
+
+
+def test_expm_stack_matches_scipy() -> None:
+    sl = pytest.importorskip("scipy.linalg")
+    rng = np.random.default_rng(1)
+    for scale in (1e-3, 0.1, 1.0, 5.0, 50.0):
+        M = rng.standard_normal((40, 8, 8)) * scale / 8
+        ref = np.stack([sl.expm(m) for m in M])
+        err = np.abs(ekf.expm_stack(M) - ref).max(axis=(1, 2)) / np.abs(ref).max(axis=(1, 2))
+        assert err.max() < 1e-12, scale
+
+
+def test_van_loan_closed_forms() -> None:
+    """Scalar Ornstein-Uhlenbeck and the white-acceleration double integrator (exact Qd)."""
+    dt = 1.7
+    a, q = 0.35, 2.0
+    A, Qd = ekf.van_loan(np.full((1, 1, 1), -a), np.full((1, 1, 1), q), dt)
+    assert A[0, 0, 0] == pytest.approx(math.exp(-a * dt), rel=1e-14)
+    assert Qd[0, 0, 0] == pytest.approx(q * (1 - math.exp(-2 * a * dt)) / (2 * a), rel=1e-13)
+    F = np.array([[[0.0, 1.0], [0.0, 0.0]]])
+    Qc = np.array([[[0.0, 0.0], [0.0, q]]])
+    A, Qd = ekf.van_loan(F, Qc, dt)
+    np.testing.assert_allclose(A[0], [[1.0, dt], [0.0, 1.0]], rtol=1e-14)
+    np.testing.assert_allclose(Qd[0], q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]]),
+                               rtol=1e-13)
+
+
+def test_block_van_loan_equals_the_full_block_exponential() -> None:
+    """The block-wise evaluation for 8 states = the 16x16 exponential of Van Loan's matrix,
+    including a process noise 1e-12 times F (relative accuracy kept, no balancing needed)."""
+    rng = np.random.default_rng(2)
+    n = 60
+    F = rng.standard_normal((n, 8, 8)) * rng.uniform(0.01, 3.0, (n, 1, 1))
+    L = rng.standard_normal((n, 8, 8))
+    Qc = L @ L.transpose(0, 2, 1) * rng.choice([1e-12, 1e-4, 1.0], (n, 1, 1))
+    dt = 1.3
+    A, Qd = ekf.van_loan(F, Qc, dt)
+    M = np.zeros((n, 16, 16))
+    M[:, :8, :8] = -F * dt
+    M[:, :8, 8:] = Qc * dt
+    M[:, 8:, 8:] = F.transpose(0, 2, 1) * dt
+    E = ekf.expm_stack(M)
+    A_ref = E[:, 8:, 8:].transpose(0, 2, 1)
+    Qd_ref = A_ref @ E[:, :8, 8:]
+    scale_a = np.abs(A_ref).max(axis=(1, 2))
+    scale_q = np.abs(Qd_ref).max(axis=(1, 2))
+    assert (np.abs(A - A_ref).max(axis=(1, 2)) / scale_a).max() < 1e-11
+    assert (np.abs(Qd - Qd_ref).max(axis=(1, 2)) / scale_q).max() < 1e-9
+    np.testing.assert_allclose(Qd, Qd.transpose(0, 2, 1), rtol=0, atol=1e-15 * scale_q.max())
+
+
+# --------------------------------------------------------------------------------------------
+# Jacobians
+# --------------------------------------------------------------------------------------------
+
+FAMILY_SHIPS = ("catfish", "kvlcc2", "cargo", "bulk_carrier")  # modular, mmg, nomoto, response
+
+
+def _states(rng: np.random.Generator, specs: Sequence[Mapping[str, Any]]) -> np.ndarray:
+    """Manoeuvring states: some speed, drift, yaw rate, rudder and propeller."""
+    n = len(specs)
+    x = np.zeros((base.N_STATE, n))
+    u_service = np.array([from_kn(s["service_speed_kn"]) for s in specs])
+    L = np.array([s["particulars"]["length_m"] for s in specs])
+    x[NORTH], x[EAST] = rng.normal(0, 1e3, n), rng.normal(0, 1e3, n)
+    x[PSI] = rng.uniform(0, 2 * np.pi, n)
+    x[U] = u_service * rng.uniform(0.5, 1.0, n)
+    x[V] = x[U] * rng.uniform(-0.08, 0.08, n)
+    x[R] = x[U] / L * rng.uniform(-0.2, 0.2, n)
+    x[RUDDER] = np.radians(rng.uniform(-15, 15, n))
+    x[RPS] = np.array([s["actuators"]["rps_max"] for s in specs]) * rng.uniform(0.5, 0.9, n)
+    return x
+
+
+def _stacked_reference(family: base.ModelFamily, params: Any, x: np.ndarray, env: Env
+                       ) -> np.ndarray:
+    """Central differences as the brief describes them: one ``base.accelerations`` call with the
+    perturbed copies stacked along the ship axis (parameters tiled). ``(n, 3, 8)``."""
+    n = x.shape[1]
+    cols: list[Any] = [PSI, U, V, R, RUDDER, RPS, "cn", "ce"]
+    scales = [1.0, 1.0, 1.0, 0.01, 0.1, 1.0, 0.1, 0.1]
+    m = 2 * len(cols)
+    X = np.tile(x, (1, m))
+    env_cols = {f.name: np.tile(np.broadcast_to(getattr(env, f.name), (n,)).astype(float), m)
+                for f in dataclasses.fields(env)}
+    steps = []
+    for c, (col, scale) in enumerate(zip(cols, scales, strict=True)):
+        key = {"cn": "current_north_mps", "ce": "current_east_mps"}.get(col) if isinstance(
+            col, str) else None
+        value = np.broadcast_to(getattr(env, key), (n,)) if key else x[col]
+        h = 1e-5 * np.maximum(np.abs(value), scale)
+        steps.append(h)
+        for j, sign in ((2 * c, 1.0), (2 * c + 1, -1.0)):
+            sl = slice(j * n, (j + 1) * n)
+            if key:
+                env_cols[key][sl] = value + sign * h
+            else:
+                X[col, sl] = value + sign * h
+    tiled = dataclasses.replace(params, **{f.name: np.tile(getattr(params, f.name), m)
+                                           for f in dataclasses.fields(params)})
+    acc = np.array(base.accelerations(family, tiled, X, Env(**env_cols)))  # (3, m n)
+    acc = acc.reshape(3, m, n)
+    out = np.empty((n, 3, len(cols)))
+    for c, h in enumerate(steps):
+        out[:, :, c] = ((acc[:, 2 * c] - acc[:, 2 * c + 1]) / (2 * h)).T
+    return out
+
+
+@pytest.mark.parametrize("ship", FAMILY_SHIPS)
+def test_acceleration_jacobian_equals_stacked_base_accelerations(ship: str) -> None:
+    """The compiled Jacobian = central differences of ``base.accelerations`` on stacked copies,
+    for every family; with wind the current columns are not zero (apparent wind)."""
+    spec = load_ship(ship)
+    n = 25
+    rng = np.random.default_rng(4)
+    specs = [spec] * n
+    family = base.families()[spec["model"]]
+    params = family.build(specs)
+    x = _states(rng, specs)
+    env = Env(current_north_mps=rng.normal(0, 0.5, n), current_east_mps=rng.normal(0, 0.5, n),
+              wind_speed_mps=rng.uniform(5, 20, n), wind_from_rad=rng.uniform(0, 6.28, n))
+    ref = _stacked_reference(family, params, x, env)
+    got = ekf.acceleration_jacobian(ekf.ShipModel.from_specs(specs), x, base.env_table(env, n))
+    scale = np.abs(ref).max(axis=0, keepdims=True) + 1e-12
+    assert np.abs(got - ref).max() / scale.max() < 1e-9
+    np.testing.assert_allclose(got / scale, ref / scale, atol=1e-8)
+    if ship == "kvlcc2":  # the mmg family has Isherwood wind loads: current matters
+        assert np.abs(got[:, :, 6:]).max() > 1e-6
+
+
+def test_filter_transition_linearises_the_simulation_step() -> None:
+    """A = expm(F dt) [seed 002, eq 4.14] is how a small state error propagates through the
+    simulated step: x(t+dt; x + d) - x(t+dt; x) = A d.
+
+    Catfish (the fastest dynamics of the library), 1 s step, RK4 made fine (0.025 s) so that the
+    comparison sees the linearisation, not the integrator. On a steady straight run (F constant
+    along the step) they agree to 1e-3. In a turn with 15 deg rudder F changes within the step
+    and the frozen-F transition differs by several per cent in the u, v, r rows: the EKF's
+    'constant course and speed during each sample period' assumption [seed 002, ch 7.1],
+    measured here (< 15 %)."""
+    spec = load_ship("catfish")
+    n = 40
+    rng = np.random.default_rng(5)
+    specs = [spec] * n
+    model = ekf.ShipModel.from_specs(specs)
+    fine_model = dataclasses.replace(model, substeps_per_s=np.full(n, 40.0))
+    turning = _states(rng, specs)
+    straight = turning.copy()
+    straight[[V, R, RUDDER]] = 0.0
+    family = base.families()["modular"]
+    straight[RPS] = base.steady_rps_for_speed(family, family.build(specs),
+                                              Actuators.from_specs(specs), straight[U])
+    cur = rng.normal(0, 0.5, (2, n))
+    d = rng.normal(0, 1, (n, 8)) * np.array([1.0, 1.0, 1e-3, 1e-3, 1e-3, 1e-4, 1e-3, 1e-3])
+    d *= 0.01
+    dt = 1.0
+
+    def rel_error(x0: np.ndarray) -> np.ndarray:
+        xf = ekf.truth_state(x0, cur[0], cur[1])
+        F, _ = ekf.filter_jacobian(model, xf, x0[RUDDER], x0[RPS])
+        A, _ = ekf.van_loan(F, np.zeros_like(F), dt)
+        lin = np.einsum("nij,nj->ni", A, d)
+
+        def step(xfilt: np.ndarray) -> np.ndarray:
+            prior = ekf.EkfState(xfilt, np.broadcast_to(np.eye(8), (n, 8, 8)).copy())
+            return ekf.predict(ekf.build([{}] * n), fine_model, prior, x0[RUDDER], x0[RPS],
+                               dt).x
+
+        diff = ekf.state_error(step(xf + d), step(xf))
+        return (np.abs(diff - lin) / (np.abs(lin).max(axis=0) + 1e-12)).max(axis=0)
+
+    steady = rel_error(straight)
+    assert steady.max() < 1e-3, steady
+    turn = rel_error(turning)
+    assert turn[[XN, XE, XCN, XCE]].max() < 1e-3, turn
+    assert 0.01 < turn[[XU, XV, XR]].max() < 0.15, turn
+
+
+def test_modular_jacobian_against_linearised_F_and_eq_9_9() -> None:
+    """Catfish at 8.9 kn straight running [seed 002, eq 9.9 = appendix D at that speed].
+
+    What matches (asserted): the kinematic, actuator-lag, rudder, v and rps columns of the v and r
+    rows, and the rudder, v and r columns of the u row, so Y1 = 0.573, N1 = -0.273, Y6 = -0.308,
+    N6 = -0.092 of eq 9.9 are the Jacobian's (thesis rudder sign). What differs, by construction
+    of appendix D's factorisation F(x) x = f(x): the quadratic surge terms (Jacobian = 2 F:
+    X4 = -0.138 is half of d(du)/du = -0.276, likewise X2), the r column of the v and r rows
+    (the Jacobian has the Coriolis term -m u through the added-mass coupling: Y8 = 1 of eq 9.9
+    vs Jacobian 1 - m u m33 / det), and the heading column of the position rows (eq 4.10
+    integrates along the body axes, the Jacobian carries d(north)/d(psi) = -u sin psi)."""
+    spec = load_ship("catfish")
+    params = modular.FAMILY.build([spec])
+    act = Actuators.from_specs([spec])
+    x = np.zeros((base.N_STATE, 1))
+    x[PSI] = 0.7
+    x[U] = from_kn(8.9)
+    x[RPS] = base.steady_rps_for_speed(modular.FAMILY, params, act, x[U])
+    model = ekf.ShipModel.from_family(modular.FAMILY, params, act)
+    J, Jc = ekf.ship_jacobian(model, x, base.env_table(Env(), 1))
+    J, F = J[0], modular.linearised_F(params, x)[0]
+    tol = {"rel": 1e-7, "abs": 1e-10}
+    same = [(row, col) for row in (V, R) for col in (RUDDER, U, V, RPS)]
+    same += [(U, RUDDER), (U, V), (U, R), (NORTH, U), (NORTH, V), (EAST, U), (EAST, V),
+             (PSI, R), (RUDDER, RUDDER), (RPS, RPS)]
+    for ij in same:
+        assert J[ij] == pytest.approx(F[ij], **tol), ij
+    assert J[U, U] == pytest.approx(2 * F[U, U], rel=1e-7)
+    assert J[U, RPS] == pytest.approx(2 * F[U, RPS], rel=1e-7)
+    det = params.m22 * params.m33 - params.y_rdot * params.n_vdot
+    coriolis = -params.mass * x[U]
+    assert J[V, R] - F[V, R] == pytest.approx((params.m33 * coriolis / det)[0], rel=1e-6)
+    assert J[R, R] - F[R, R] == pytest.approx((params.n_vdot * coriolis / det)[0], rel=1e-6)
+    assert F[NORTH, PSI] == 0.0
+    assert J[NORTH, PSI] == pytest.approx(-x[U, 0] * math.sin(0.7), rel=1e-12)
+    # eq 9.9 in the thesis' units (rudder + = port, n in rad/s): Y1, N1, Y6, N6 and 2 X4
+    assert -J[V, RUDDER] == pytest.approx(0.573, abs=0.003)
+    assert -J[R, RUDDER] == pytest.approx(-0.273, abs=0.002)
+    assert J[V, V] == pytest.approx(-0.308, abs=0.002)
+    assert J[R, V] == pytest.approx(-0.092, abs=0.001)
+    assert J[U, U] == pytest.approx(2 * -0.138, abs=0.002)
+    # the current enters the kinematics only (no wind terms in the modular family)
+    np.testing.assert_array_equal(Jc[0, [NORTH, EAST]], np.eye(2))
+    np.testing.assert_array_equal(Jc[0, U:R + 1], 0.0)
+
+
+# --------------------------------------------------------------------------------------------
+# predict and update mechanics
+# --------------------------------------------------------------------------------------------
+
+
+def _mixed_specs(n_each: int) -> list[Mapping[str, Any]]:
+    return [load_ship(s) for s in FAMILY_SHIPS for _ in range(n_each)]
+
+
+def test_predict_is_the_simulation_step_and_A_P_At_plus_Qd() -> None:
+    """Mixed families: the predicted state is exactly ``base.step`` of each family with the
+    estimated current (commands given or held); P- = A P A^T + Qd from ``van_loan``."""
+    specs = _mixed_specs(5)
+    n = len(specs)
+    rng = np.random.default_rng(6)
+    x0 = _states(rng, specs)
+    cur = rng.normal(0, 0.4, (2, n))
+    model = ekf.ShipModel.from_specs(specs)
+    params = ekf.build([{"rudder_noise_deg": 0.0}] * n)
+    L = rng.standard_normal((n, 8, 8))
+    P0 = L @ L.transpose(0, 2, 1) * 0.01 + np.eye(8) * 0.1
+    state = ekf.EkfState(ekf.truth_state(x0, cur[0], cur[1]), P0)
+    dt = 2.0
+    rudder_cmd = np.radians(rng.uniform(-20, 20, n))
+    rps_cmd = x0[RPS] * 0.9
+    for cmds in ({"rudder_cmd_rad": rudder_cmd, "rps_cmd": rps_cmd}, {}):
+        pred = ekf.predict(params, model, state, x0[RUDDER], x0[RPS], dt, **cmds)
+        for name in FAMILY_SHIPS:
+            idx = np.array([k for k, s in enumerate(specs) if s["name"] == name])
+            group = [specs[k] for k in idx]
+            family = base.families()[group[0]["model"]]
+            fp = family.build(group)
+            sub = math.ceil(dt / group[0]["integration"]["max_dt_s"] - 1e-9)
+            truth = base.step(family, fp, Actuators.from_specs(group), x0[:, idx],
+                              cmds.get("rudder_cmd_rad", x0[RUDDER])[idx],
+                              cmds.get("rps_cmd", x0[RPS])[idx],
+                              Env(cur[0, idx], cur[1, idx]), dt, sub)
+            np.testing.assert_allclose(pred.x[idx, :6], truth[:6].T, rtol=1e-13, atol=1e-12)
+        np.testing.assert_array_equal(pred.x[:, XCN:], state.x[:, XCN:])
+        F, _ = ekf.filter_jacobian(model, state.x, x0[RUDDER], x0[RPS])
+        A, Qd = ekf.van_loan(F, ekf.process_noise_density(params), dt)
+        np.testing.assert_allclose(pred.P, A @ P0 @ A.transpose(0, 2, 1) + Qd, rtol=1e-12,
+                                   atol=1e-14)
+
+
+def test_measured_input_noise_adds_gamma_sigma_gamma_t() -> None:
+    specs = _mixed_specs(2)
+    n = len(specs)
+    x0 = _states(np.random.default_rng(7), specs)
+    model = ekf.ShipModel.from_specs(specs)
+    state = ekf.EkfState(ekf.truth_state(x0, 0.0, 0.0), np.broadcast_to(np.eye(8), (n, 8, 8)))
+    quiet = ekf.predict(ekf.build([{}] * n), model, state, x0[RUDDER], x0[RPS], 1.0)
+    noisy_params = ekf.build([{"rudder_noise_deg": 2.0, "rps_noise": 0.05}] * n)
+    noisy = ekf.predict(noisy_params, model, state, x0[RUDDER], x0[RPS], 1.0)
+    F, B = ekf.filter_jacobian(model, state.x, x0[RUDDER], x0[RPS])
+    A, _ = ekf.van_loan(F, np.zeros_like(F), 1.0)
+    G = 0.5 * (B + A @ B)
+    Su = np.array([math.radians(2.0) ** 2, 0.05**2])
+    np.testing.assert_allclose(noisy.P - quiet.P, G @ (Su[:, None] * G.transpose(0, 2, 1)),
+                               rtol=1e-7, atol=1e-14)  # difference of P ~ 1: cancellation
+    assert np.all(noisy.P[:, XR, XR] > quiet.P[:, XR, XR])
+
+
+def test_update_is_the_textbook_kalman_update_on_valid_components() -> None:
+    """Masked update = K = P H^T (H P H^T + R)^-1 etc. [seed 002, E17-E19] on the valid rows;
+    heading innovation wrapped; an all-invalid row leaves the ship unchanged."""
+    rng = np.random.default_rng(8)
+    n = 64
+    params = ekf.build([{}] * n)
+    L = rng.standard_normal((n, 8, 8))
+    P = L @ L.transpose(0, 2, 1) + np.eye(8)
+    x = rng.standard_normal((n, 8))
+    x[:, XPSI] = rng.uniform(0, 2 * np.pi, n)
+    z = x[:, :4] + rng.standard_normal((n, 4))
+    z[0, ZPSI] = x[0, XPSI] + 2 * np.pi + 0.1  # wraps to +0.1
+    mask = rng.random((n, 4)) < 0.7
+    mask[1] = False
+    mask[0] = True
+    Rm = rng.standard_normal((n, 4, 4)) * 0.3
+    R = Rm @ Rm.transpose(0, 2, 1) + np.eye(4)
+    new, inn = ekf.update(params, ekf.EkfState(x, P), z, mask, R)
+    for i in range(n):  # reference per ship (test only)
+        sel = np.flatnonzero(mask[i])
+        if sel.size == 0:
+            np.testing.assert_array_equal(new.x[i], x[i])
+            np.testing.assert_array_equal(new.P[i], P[i])
+            assert inn.dof[i] == 0 and inn.nis[i] == 0.0
+            continue
+        H = np.eye(8)[sel]
+        nu = z[i, sel] - x[i, sel]
+        nu[sel == ZPSI] = (nu[sel == ZPSI] + np.pi) % (2 * np.pi) - np.pi
+        S = H @ P[i] @ H.T + R[i][np.ix_(sel, sel)]
+        K = P[i] @ H.T @ np.linalg.inv(S)
+        xr = x[i] + K @ nu
+        xr[XPSI] %= 2 * np.pi
+        Pr = (np.eye(8) - K @ H) @ P[i]
+        np.testing.assert_allclose(new.x[i], xr, rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(new.P[i], Pr, rtol=1e-9, atol=1e-10)
+        assert inn.nis[i] == pytest.approx(nu @ np.linalg.solve(S, nu), rel=1e-10)
+        assert inn.dof[i] == sel.size
+        np.testing.assert_allclose(inn.S[i][np.ix_(sel, sel)], S, rtol=1e-12)
+        np.testing.assert_allclose(inn.hph[i][np.ix_(sel, sel)], H @ P[i] @ H.T, rtol=1e-12)
+    assert inn.nu[0, ZPSI] == pytest.approx(0.1, abs=1e-12)
+
+
+# --------------------------------------------------------------------------------------------
+# filter runs on simulated ships
+# --------------------------------------------------------------------------------------------
+
+
+@dataclasses.dataclass
+class Run:
+    err: np.ndarray  # (steps, n, 8) estimate - truth
+    raw: np.ndarray  # (steps, n, 2) GNSS fix - truth
+    nees_pos_psi: np.ndarray  # (steps, n)
+    nees_all: np.ndarray  # (steps, n)
+    nees_current: np.ndarray  # (steps, n)
+    sigma: np.ndarray  # (steps, n, 8) sqrt of P's diagonal
+    current: np.ndarray  # (n, 2) true current at the end
+
+
+def simulate(specs: Sequence[Mapping[str, Any]], steps: int, dt: float, *, seed: int,
+             current_mps: float, gnss_sigma_m: float, compass_var_rad2: float,
+             log_var_m2ps2: float, cfg: Mapping[str, Any] | None = None,
+             truth_noise: bool = False, use_log: bool = True,
+             gnss_gap: tuple[float, float] | None = None) -> Run:
+    """Ships zig-zagging with 10 deg rudder in a current the filter does not know.
+
+    The truth is ``base.step`` (the simulation); with ``truth_noise`` it is disturbed by the
+    filter's own process noise (white accelerations and a random-walk current), applied every
+    ``dt / 10`` so that it approximates continuous white noise.
+    """
+    n = len(specs)
+    rng = np.random.default_rng(seed)
+    model = ekf.ShipModel.from_specs(specs)
+    fams = {s["model"] for s in specs}
+    assert len(fams) == 1
+    family = base.families()[fams.pop()]
+    fp = family.build(specs)
+    act = Actuators.from_specs(specs)
+    x = np.zeros((base.N_STATE, n))
+    x[PSI] = rng.uniform(0, 2 * np.pi, n)
+    u0 = np.array([from_kn(0.8 * s["service_speed_kn"]) for s in specs])
+    x[U] = u0
+    rps = base.steady_rps_for_speed(family, fp, act, u0)
+    x[RPS] = rps
+    ang = rng.uniform(0, 2 * np.pi, n)
+    cn, ce = current_mps * np.cos(ang), current_mps * np.sin(ang)
+    config = {"gnss_sigma_m": gnss_sigma_m, "compass_sigma_deg": math.degrees(
+        math.sqrt(compass_var_rad2)), "log_sigma_mps": math.sqrt(log_var_m2ps2), **(cfg or {})}
+    params = ekf.build([config] * n)
+    p0 = {k: math.sqrt(float(getattr(params, k)[0])) for k in (
+        "init_position_var_m2", "init_heading_var_rad2", "init_velocity_var_m2ps2")}
+    state = ekf.initial_state(
+        params, x[NORTH] + p0["init_position_var_m2"] * rng.standard_normal(n),
+        x[EAST] + p0["init_position_var_m2"] * rng.standard_normal(n),
+        x[PSI] + p0["init_heading_var_rad2"] * rng.standard_normal(n),
+        x[U] + p0["init_velocity_var_m2ps2"] * rng.standard_normal(n))
+    period = rng.uniform(60, 180, n)
+    phase = rng.uniform(0, 1, n)
+    max_dt = np.array([s["integration"]["max_dt_s"] for s in specs])
+    out: dict[str, list[np.ndarray]] = {k: [] for k in ("err", "raw", "n3", "n8", "nc", "sig")}
+    fine = 10 if truth_noise else 1
+    h = dt / fine
+    sub = max(1, math.ceil(h / max_dt.min() - 1e-9))
+    for k in range(steps):
+        t = k * dt
+        rudder_cmd = np.radians(10.0) * np.sign(np.sin(2 * np.pi * (t / period + phase)))
+        rudder_meas, rps_meas = x[RUDDER].copy(), x[RPS].copy()
+        for _ in range(fine):
+            x = base.step(family, fp, act, x, rudder_cmd, rps, Env(cn, ce), h, sub)
+            if truth_noise:
+                for row, q in ((U, params.q_surge), (V, params.q_sway), (R, params.q_yaw)):
+                    x[row] += np.sqrt(q * h) * rng.standard_normal(n)
+                cn = cn + np.sqrt(params.q_current * h) * rng.standard_normal(n)
+                ce = ce + np.sqrt(params.q_current * h) * rng.standard_normal(n)
+        state = ekf.predict(params, model, state, rudder_meas, rps_meas, dt,
+                            rudder_cmd_rad=rudder_cmd, rps_cmd=rps)
+        z = np.stack([x[NORTH] + gnss_sigma_m * rng.standard_normal(n),
+                      x[EAST] + gnss_sigma_m * rng.standard_normal(n),
+                      x[PSI] + math.sqrt(compass_var_rad2) * rng.standard_normal(n),
+                      x[U] + math.sqrt(log_var_m2ps2) * rng.standard_normal(n)], axis=1)
+        mask = np.ones((n, 4), dtype=bool)
+        mask[:, ZU] = use_log
+        if gnss_gap is not None and gnss_gap[0] <= t < gnss_gap[1]:
+            mask[:, ZN:ZN + 2] = False
+        state, _ = ekf.update(params, state, z, mask)
+        truth = ekf.truth_state(x, cn, ce)
+        e = ekf.state_error(state.x, truth)
+        out["err"].append(e)
+        out["raw"].append(z[:, :2] - x[:2].T)
+        out["n3"].append(ekf.nees(e, state.P, [XN, XE, XPSI]))
+        out["n8"].append(ekf.nees(e, state.P))
+        out["nc"].append(ekf.nees(e, state.P, [XCN, XCE]))
+        out["sig"].append(np.sqrt(np.diagonal(state.P, axis1=1, axis2=2)))
+    arr = {k: np.array(v) for k, v in out.items()}
+    return Run(arr["err"], arr["raw"], arr["n3"], arr["n8"], arr["nc"], arr["sig"],
+               np.stack([cn, ce], axis=1))
+
+
+def drms(e: np.ndarray) -> float:
+    """Horizontal root-mean-square error [seed 002, ch 2.3]: sqrt(mean(dn^2 + de^2))."""
+    return float(np.sqrt((e[..., 0] ** 2 + e[..., 1] ** 2).mean()))
+
+
+@pytest.fixture(scope="module")
+def catfish_current_run() -> Run:
+    return simulate([load_ship("catfish")] * 150, 900, 1.0, seed=11, current_mps=0.5,
+                    gnss_sigma_m=5.0, compass_var_rad2=math.radians(1.0) ** 2,
+                    log_var_m2ps2=0.1**2)
+
+
+def test_ekf_estimates_the_unknown_current(catfish_current_run: Run) -> None:
+    """0.5 m/s current in random directions, unknown to the filter (initial sigma 1 m/s, estimate
+    0): after 10 min the current is known to 0.02 m/s rms [seed 002, ch 7.3]. The truth's
+    current is constant while the filter models a random walk, so P is conservative: the current
+    NEES averaged over ships stays below its upper chi-square bound (never overconfident)."""
+    run = catfish_current_run
+    late = slice(600, None)
+    cur_err = run.err[late][..., XCN:]
+    rms = float(np.sqrt((cur_err**2).mean()))
+    assert rms < 0.02
+    assert np.sqrt((run.err[0][:, XCN:] ** 2).mean()) > 0.3  # it did start ignorant
+    _, hi = chi2_bounds(2 * run.err.shape[1])
+    anees = run.nees_current[late].mean(axis=1) * run.err.shape[1]
+    assert np.all(anees < hi)
+    n = run.err.shape[1]
+    assert 0.15 < anees.mean() / (2 * n) < 1.0  # conservative (about a quarter), not absurdly
+
+
+def test_filtered_track_better_than_raw_fixes(catfish_current_run: Run) -> None:
+    run = catfish_current_run
+    late = slice(300, None)
+    assert drms(run.err[late]) < 0.3 * drms(run.raw[late])
+    # heading better than the compass
+    assert np.sqrt((run.err[late][..., XPSI] ** 2).mean()) < 0.5 * math.radians(1.0)
+
+
+def test_nees_consistent_with_matched_process_noise() -> None:
+    """With the truth disturbed by the filter's own process model, the position/heading NEES and
+    the full 8-state NEES averaged over ships (150) stay inside the 95 % chi-square bounds (3 dof:
+    mean 2.92-3.03, 95-97 % of steps inside over two seeds; 8 dof: mean 8.1-8.3, 85-95 % inside:
+    slightly high from the frozen-F linearisation in turns, see
+    test_filter_transition_linearises_the_simulation_step)."""
+    n = 150
+    run = simulate([load_ship("catfish")] * n, 600, 1.0, seed=12, current_mps=0.3,
+                   gnss_sigma_m=5.0, compass_var_rad2=math.radians(1.0) ** 2,
+                   log_var_m2ps2=0.1**2, truth_noise=True,
+                   cfg={"yaw_noise_degps2_per_rthz": 0.05, "surge_noise_mps2_per_rthz": 0.005,
+                        "sway_noise_mps2_per_rthz": 0.005, "current_noise_mps_per_rts": 0.001})
+    late = slice(200, None)
+    for nees, dof, share in ((run.nees_pos_psi, 3, 0.85), (run.nees_all, 8, 0.75)):
+        lo, hi = chi2_bounds(dof * n)
+        anees = nees[late].sum(axis=1)
+        inside = np.mean((anees > lo) & (anees < hi))
+        assert inside > share, (dof, inside, anees.mean() / n)
+        assert abs(anees.mean() / n / dof - 1.0) < 0.06, (dof, anees.mean() / n)
+
+
+@pytest.mark.parametrize("drms_m", DECCA_DRMS_M)
+def test_decca_cases_filtered_error_vs_raw(drms_m: float) -> None:
+    """The thesis' two Decca cases with its sensor variances [seed 002, ch 3.4] and 1.56 s fix
+    interval: the filter on Catfish reduces the DRMS of the fixes to below a fifth. The thesis
+    reports 10 m -> 2 m for its trials once the model was identified [seed 002, ch 8.6, 10.2]
+    (with a correct model here: about 10 m -> 1.5 m, 100 m -> 8 m after convergence)."""
+    n = 100
+    run = simulate([load_ship("catfish")] * n, 900, DECCA_INTERVAL_S, seed=13,
+                   current_mps=0.3, gnss_sigma_m=drms_m / math.sqrt(2.0),
+                   compass_var_rad2=COMPASS_VAR_RAD2, log_var_m2ps2=LOG_VAR_M2PS2,
+                   cfg={"init_position_sigma_m": drms_m})
+    late = slice(600, None)
+    raw, filt = drms(run.raw[late]), drms(run.err[late])
+    assert raw == pytest.approx(drms_m, rel=0.03)
+    assert filt < 0.2 * raw
+    if drms_m == 10.0:
+        assert filt < 2.0  # the thesis' 2 m [seed 002, ch 10.2]
+    # and consistent: the position error is within its own sigma (somewhat conservative: the
+    # truth has no process noise here, the filter assumes some)
+    sig = np.sqrt((run.sigma[late][..., XN] ** 2 + run.sigma[late][..., XE] ** 2).mean())
+    assert 0.7 * sig < filt < 1.1 * sig
+
+
+@pytest.mark.parametrize("ship", ["kvlcc2", "cargo", "bulk_carrier"])
+def test_other_families(ship: str) -> None:
+    """The same filter on the mmg, nomoto and response families: current found, track better
+    than the fixes, position/heading NEES near 3."""
+    n = 60
+    run = simulate([load_ship(ship)] * n, 900, 1.0, seed=14, current_mps=0.5,
+                   gnss_sigma_m=5.0, compass_var_rad2=math.radians(1.0) ** 2,
+                   log_var_m2ps2=0.1**2)
+    late = slice(600, None)
+    assert drms(run.err[late]) < 0.4 * drms(run.raw[late])
+    assert np.sqrt((run.err[late][..., XCN:] ** 2).mean()) < 0.05
+    anees = run.nees_pos_psi[late].mean()
+    assert 1.5 < anees < 4.5, anees
+
+
+def test_gnss_outage_covariance_grows_and_recovers() -> None:
+    """No fixes for 2 min: dead reckoning on the model and the estimated current; P grows,
+    the error stays consistent with it, and the filter recovers after the outage."""
+    n = 100
+    run = simulate([load_ship("catfish")] * n, 700, 1.0, seed=15, current_mps=0.5,
+                   gnss_sigma_m=5.0, compass_var_rad2=math.radians(1.0) ** 2,
+                   log_var_m2ps2=0.1**2, gnss_gap=(450.0, 570.0))
+    sig_pos = run.sigma[..., XN]
+    before, end_gap, after = 440, 568, 690
+    assert sig_pos[end_gap].mean() > 2.0 * sig_pos[before].mean()
+    assert sig_pos[after].mean() == pytest.approx(sig_pos[before].mean(), rel=0.2)
+    _, hi = chi2_bounds(3 * n, 0.99)
+    gap_nees = run.nees_pos_psi[455:570].sum(axis=1)
+    assert np.mean(gap_nees < hi) > 0.9
+    assert drms(run.err[end_gap]) < 4 * drms(run.err[before]) + 5.0
+
+
+def test_build_rejects_unknown_keys() -> None:
+    with pytest.raises(ValueError, match="unknown EKF config"):
+        ekf.build([{"gnss_sigma": 3.0}])
+    with pytest.raises(ValueError, match=">= 0"):
+        ekf.build([{"gnss_sigma_m": -1.0}])
+    p = ekf.build([{"compass_sigma_deg": 2.0}, {}])
+    assert p.compass_var_rad2[0] == pytest.approx(math.radians(2.0) ** 2)
+    assert p.gnss_var_m2[1] == ekf.DEFAULTS["gnss_sigma_m"] ** 2
+
+
+def test_initial_state_and_measurement_covariance_layout() -> None:
+    p = ekf.build([{"gnss_sigma_m": 3.0, "log_sigma_mps": 0.3}] * 2)
+    st = ekf.initial_state(p, np.array([1.0, 2.0]), np.array([3.0, 4.0]),
+                           np.array([-0.1, 7.0]), np.array([5.0, 6.0]))
+    assert st.x[0, XPSI] == pytest.approx(2 * np.pi - 0.1)
+    assert st.x[1, XPSI] == pytest.approx(7.0 - 2 * np.pi)
+    np.testing.assert_array_equal(st.x[:, XV:], 0.0)
+    assert st.P[0, XN, XN] == p.init_position_var_m2[0]
+    R = ekf.measurement_covariance(p, gnss_cov_m2=np.array([[[4.0, 1.0], [1.0, 9.0]]] * 2))
+    np.testing.assert_array_equal(R[0, :2, :2], [[4.0, 1.0], [1.0, 9.0]])
+    assert R[0, ZU, ZU] == pytest.approx(0.09)
+    assert R[0, ZPSI, ZPSI] == p.compass_var_rad2[0]

@@ -1,0 +1,257 @@
+"""Fusion of GNSS receivers by weight matrices with cross-covariances [seed 003, eqs 2-6]."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from trafficsim.estimation import fusion
+
+
+def _random_spd(rng: np.random.Generator, n: int, d: int, scale: float = 1.0) -> np.ndarray:
+    L = rng.standard_normal((n, d, d))
+    return (L @ L.transpose(0, 2, 1) + 0.2 * np.eye(d)) * scale
+
+
+def _min_eig(m: np.ndarray) -> np.ndarray:
+    return np.linalg.eigvalsh(0.5 * (m + np.swapaxes(m, -1, -2)))[..., 0]
+
+
+def test_without_cross_covariance_the_blue_is_eq_3() -> None:
+    """Zero cross-covariances: the general weights = A_i = (sum P_jj^-1)^-1 P_ii^-1 [eq 3]."""
+    rng = np.random.default_rng(0)
+    n, k = 50, 3
+    cov = _random_spd(rng, n * k, 2, 4.0).reshape(n, k, 2, 2)
+    fixes = rng.normal(0, 10, (n, k, 2))
+    sigma = fusion.joint_covariance(cov, 0.0)
+    general = fusion.fuse(fixes, sigma)
+    eq3 = fusion.fuse_uncorrelated(fixes, cov)
+    np.testing.assert_allclose(general.weights, eq3.weights, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(general.position, eq3.position, rtol=1e-10)
+    np.testing.assert_allclose(general.cov, eq3.cov, rtol=1e-10)
+    np.testing.assert_allclose(general.weights.sum(axis=1), np.broadcast_to(np.eye(2), (n, 2, 2)),
+                               atol=1e-12)
+
+
+def test_fused_covariance_below_every_receiver_and_equal_to_the_blue_bound() -> None:
+    """Random joint covariances with cross-covariances (k = 2..4 receivers): P_f <= P_ii for every
+    receiver (matrix order), and any other unbiased weights (sum A_i = I) give a covariance
+    >= P_f: P_f is the BLUE bound (e^T Sigma^-1 e)^-1. Monte Carlo: the fused error has
+    covariance P_f and zero mean."""
+    rng = np.random.default_rng(1)
+    for k in (2, 3, 4):
+        n = 400
+        S = _random_spd(rng, n, 2 * k)
+        fixes = np.zeros((n, k, 2))
+        out = fusion.fuse(fixes, S)
+        for i in range(k):
+            Pii = S[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2]
+            assert np.all(_min_eig(Pii - out.cov) > -1e-10)
+        W = rng.standard_normal((n, k, 2, 2))
+        W[:, -1] = np.eye(2) - W[:, :-1].sum(axis=1)  # unbiased: weights sum to I
+        Wflat = W.transpose(0, 2, 1, 3).reshape(n, 2, 2 * k)  # [A_1 ... A_k]
+        cov_w = Wflat @ S @ Wflat.transpose(0, 2, 1)
+        assert np.all(_min_eig(cov_w - out.cov) > -1e-10)
+        E = np.tile(np.eye(2), (k, 1))
+        bound = np.linalg.inv(E.T @ np.linalg.solve(S, np.broadcast_to(E, (n, 2 * k, 2))))
+        np.testing.assert_allclose(out.cov, bound, rtol=1e-10)
+
+    # Monte Carlo on one joint covariance
+    k = 3
+    S = _random_spd(np.random.default_rng(2), 1, 2 * k)[0]
+    m = 200_000
+    err = np.random.default_rng(3).multivariate_normal(np.zeros(2 * k), S, m).reshape(m, k, 2)
+    truth = np.array([100.0, -50.0])
+    out = fusion.fuse(truth + err, np.broadcast_to(S, (m, 2 * k, 2 * k)))
+    e = out.position - truth
+    np.testing.assert_allclose(e.mean(axis=0), 0.0, atol=4 * math.sqrt(S.max() / m))
+    np.testing.assert_allclose(np.cov(e.T), out.cov[0], rtol=0.02, atol=0.01 * out.cov[0].max())
+
+
+@pytest.mark.parametrize(("s1", "s2"), [(3.0, 3.0), (2.0, 5.0)])
+def test_positive_cross_covariance_reduces_the_gain_from_fusion(s1: float, s2: float) -> None:
+    """Two receivers with correlated errors (common-mode rho): the fused variance is
+    s1^2 s2^2 (1 - rho^2)/(s1^2 + s2^2 - 2 rho s1 s2). For equal receivers it is s^2 (1 + rho)/2,
+    growing with rho (no gain at all at rho = 1). For unequal ones (s1 < s2) it grows up to
+    rho = s1/s2, where fusion gains nothing (variance s1^2: the better receiver alone), and falls
+    beyond it (the worse receiver then gets a negative weight and cancels the common error).
+    Eq 3 ignores the correlation: it claims too small a variance and is worse than the BLUE."""
+    rng = np.random.default_rng(4)
+    m = 100_000
+    previous = 0.0
+    for rho in (0.0, 0.3, 0.6, 0.9):
+        cov = np.zeros((m, 2, 2, 2))
+        cov[:, 0] = np.eye(2) * s1**2
+        cov[:, 1] = np.eye(2) * s2**2
+        sigma = fusion.joint_covariance(cov, rho)
+        assert sigma[0, 0, 2] == pytest.approx(rho * s1 * s2)
+        assert sigma[0, 0, 3] == 0.0
+        L = np.linalg.cholesky(sigma[0])
+        err = (rng.standard_normal((m, 4)) @ L.T).reshape(m, 2, 2)
+        blue = fusion.fuse(err, sigma)
+        eq3 = fusion.fuse_uncorrelated(err, cov)
+        expected = fusion.two_receiver_variance(s1, s2, rho)
+        assert blue.cov[0, 0, 0] == pytest.approx(expected, rel=1e-12)
+        assert blue.cov[0, 0, 0] <= min(s1, s2) ** 2 + 1e-12
+        if s1 == s2 or rho <= s1 / s2:
+            assert blue.cov[0, 0, 0] >= previous
+        previous = blue.cov[0, 0, 0]
+        var_blue = blue.position.var(axis=0).mean()
+        var_eq3 = eq3.position.var(axis=0).mean()
+        assert var_blue == pytest.approx(expected, rel=0.02)
+        claimed_eq3 = s1**2 * s2**2 / (s1**2 + s2**2)
+        assert eq3.cov[0, 0, 0] == pytest.approx(claimed_eq3)
+        w1 = s2**2 / (s1**2 + s2**2)
+        true_eq3 = w1**2 * s1**2 + (1 - w1) ** 2 * s2**2 + 2 * w1 * (1 - w1) * rho * s1 * s2
+        assert var_eq3 == pytest.approx(true_eq3, rel=0.02)
+        assert true_eq3 >= expected - 1e-12
+        if rho > 0:
+            assert true_eq3 > claimed_eq3  # eq 3 is overconfident with correlated errors
+    if s1 == s2:
+        assert previous == pytest.approx(s1**2 * (1 + 0.9) / 2)
+    else:
+        assert fusion.two_receiver_variance(s1, s2, s1 / s2) == pytest.approx(s1**2)
+
+
+def test_invalid_receivers_are_removed_exactly() -> None:
+    """A receiver without a fix: the result is the BLUE of the others; none: flagged, NaN."""
+    rng = np.random.default_rng(5)
+    n, k = 30, 3
+    S = _random_spd(rng, n, 2 * k)
+    fixes = rng.normal(0, 5, (n, k, 2))
+    valid = np.ones((n, k), dtype=bool)
+    valid[:, 1] = False
+    valid[0] = False
+    out = fusion.fuse(fixes, S, valid)
+    keep = [0, 1, 4, 5]
+    sub = fusion.fuse(fixes[:, [0, 2]], S[:, keep][:, :, keep])
+    np.testing.assert_allclose(out.position[1:], sub.position[1:], rtol=1e-10)
+    np.testing.assert_allclose(out.cov[1:], sub.cov[1:], rtol=1e-10)
+    np.testing.assert_array_equal(out.weights[1:, 1], 0.0)
+    assert not out.valid[0] and out.valid[1:].all()
+    assert np.isnan(out.position[0]).all() and np.isnan(out.cov[0]).all()
+    single = fusion.fuse(fixes, S, np.eye(k, dtype=bool)[[0] * n])  # only receiver 0
+    np.testing.assert_allclose(single.position, fixes[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(single.cov, S[:, :2, :2], rtol=1e-12)
+
+
+def _local_filters(steps: int, n: int, R: tuple[float, float], q: float, dt: float,
+                   rng: np.random.Generator):
+    """Two local Kalman filters (1-D constant velocity, position sensors with variances R) on the
+    SAME truth: their errors are correlated through the common process noise. Returns the last
+    errors (n, 2 filters, 2 states) and the covariances P_11, P_22, P_12 from eq 4."""
+    Phi = np.array([[1.0, dt], [0.0, 1.0]])
+    Q = q * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    H = np.array([[1.0, 0.0]])
+    Lq = np.linalg.cholesky(Q)
+    truth = np.zeros((n, 2))
+    est = np.zeros((2, n, 2))
+    P = [np.eye(2) * 100.0, np.eye(2) * 100.0]
+    P12 = np.eye(2) * 100.0  # both start from the same prior: fully correlated initial errors
+    est[:] = truth + rng.standard_normal((n, 2)) @ np.linalg.cholesky(P[0]).T
+    for _ in range(steps):
+        truth = truth @ Phi.T + rng.standard_normal((n, 2)) @ Lq.T
+        K = []
+        for i in range(2):
+            Pp = Phi @ P[i] @ Phi.T + Q
+            Ki = Pp @ H.T / (H @ Pp @ H.T + R[i])
+            z = truth[:, 0] + math.sqrt(R[i]) * rng.standard_normal(n)
+            pred = est[i] @ Phi.T
+            est[i] = pred + (z - pred[:, 0])[:, None] * Ki[:, 0]
+            P[i] = (np.eye(2) - Ki @ H) @ Pp @ (np.eye(2) - Ki @ H).T + R[i] * Ki @ Ki.T
+            K.append(Ki)
+        P12 = fusion.cross_covariance_step(P12, Phi, Q, K[0], H, K[1], H)
+    return np.stack([est[0] - truth, est[1] - truth], axis=1), P[0], P[1], P12
+
+
+def test_eq_4_cross_covariance_of_local_filters_and_their_fusion() -> None:
+    """[seed 003, eq 4] predicts the cross-covariance of two local filters' errors (Monte Carlo
+    over 40 000 tracks); fusing the local estimates with the joint covariance [[P11, P12],
+    [P21, P22]] gives an error covariance P_f below both, as measured; eq 3 (cross-covariance
+    ignored) claims less than it achieves."""
+    rng = np.random.default_rng(6)
+    n = 40_000
+    err, P11, P22, P12 = _local_filters(40, n, (4.0, 9.0), 0.05, 1.0, rng)
+    emp12 = err[:, 0].T @ err[:, 1] / n
+    np.testing.assert_allclose(emp12, P12, rtol=0.05, atol=0.02 * np.abs(P12).max())
+    np.testing.assert_allclose(err[:, 0].T @ err[:, 0] / n, P11, rtol=0.05,
+                               atol=0.02 * np.abs(P11).max())
+    assert P12[0, 0] > 0.1 * math.sqrt(P11[0, 0] * P22[0, 0])  # clearly correlated
+    # fuse the position components of the two local estimates
+    S = np.array([[P11[0, 0], P12[0, 0]], [P12[0, 0], P22[0, 0]]])
+    sigma = np.zeros((n, 4, 4))
+    sigma[:, ::2, ::2] = S  # north components; the east ones are a copy here (decoupled)
+    sigma[:, 1::2, 1::2] = S
+    fixes = np.stack([err[:, :, 0], err[:, :, 0]], axis=-1)  # (n, 2 filters, 2)
+    out = fusion.fuse(fixes, sigma)
+    measured = out.position[:, 0].var()
+    assert measured == pytest.approx(out.cov[0, 0, 0], rel=0.03)
+    assert out.cov[0, 0, 0] < min(P11[0, 0], P22[0, 0])
+    cov = np.zeros((n, 2, 2, 2))
+    cov[:, 0] = np.eye(2) * P11[0, 0]
+    cov[:, 1] = np.eye(2) * P22[0, 0]
+    eq3 = fusion.fuse_uncorrelated(fixes, cov)
+    assert eq3.cov[0, 0, 0] < out.cov[0, 0, 0]  # claims better than the optimum ...
+    assert eq3.position[:, 0].var() > eq3.cov[0, 0, 0] * 1.05  # ... but does not deliver
+
+
+def test_lever_arm_eq_5_and_heading_error_eq_6_with_the_papers_set_up() -> None:
+    """The paper's receivers are 1 m apart (w = [0, 1]) [seed 003, ch 3]. Moving the second
+    receiver's fix to the first: at heading 0 the second antenna is 1 m east (starboard) of the
+    first, at heading 90 deg 1 m south. A heading error of 1 deg moves the result by
+    2 * 1 m * sin(0.5 deg) = 0.01745 m [eq 6]."""
+    ref = np.array([1000.0, 2000.0])
+    for heading_deg, antenna in ((0.0, (1000.0, 2001.0)), (90.0, (999.0, 2000.0))):
+        psi = math.radians(heading_deg)
+        n_ref, e_ref = fusion.to_reference_point(np.array(antenna[0]), np.array(antenna[1]),
+                                                 np.array(psi), 0.0, -1.0)
+        assert n_ref == pytest.approx(ref[0], abs=1e-9)
+        assert e_ref == pytest.approx(ref[1], abs=1e-9)
+        wrong = fusion.to_reference_point(np.array(antenna[0]), np.array(antenna[1]),
+                                          np.array(psi + math.radians(1.0)), 0.0, -1.0)
+        shift = math.hypot(wrong[0] - ref[0], wrong[1] - ref[1])
+        assert shift == pytest.approx(float(fusion.lever_arm_error_m(0.0, 1.0, math.radians(1))))
+    assert float(fusion.lever_arm_error_m(0.0, 1.0, math.radians(1.0))) == pytest.approx(
+        0.017453, abs=1e-6)
+
+
+def test_fuse_receivers_on_board() -> None:
+    """Three antennas at different places on board, exact fixes: the fused position is the
+    reference point; sigma from the 95 % figures (half of them [seed 003, ch 2])."""
+    params = fusion.build([
+        {"receivers": [{"error95_m": 6.0, "offset_x_m": -10.0, "offset_y_m": 2.0},
+                       {"sigma_m": 5.0, "offset_x_m": 20.0},
+                       {"error95_m": 20.0, "offset_y_m": -3.0}], "correlation": 0.4},
+        {"receivers": [{}]},
+    ])
+    np.testing.assert_allclose(params.sigma_m[0], [3.0, 5.0, 10.0])
+    assert params.present.tolist() == [[True, True, True], [True, False, False]]
+    assert params.sigma_m[1, 0] == fusion.RECEIVER_DEFAULTS["sigma_m"]
+    psi = np.array([math.radians(35.0), math.radians(200.0)])
+    ref = np.array([[500.0, -300.0], [10.0, 20.0]])
+    c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
+    # antenna = reference - R(psi) w (w = antenna -> reference, body frame)
+    ant_n = ref[:, :1] - (params.offset_x_m * c - params.offset_y_m * s)
+    ant_e = ref[:, 1:] - (params.offset_y_m * c + params.offset_x_m * s)
+    out = fusion.fuse_receivers(params, ant_n, ant_e, psi, np.ones((2, 3), dtype=bool))
+    np.testing.assert_allclose(out.position, ref, atol=1e-9)
+    assert out.valid.all()
+    assert out.cov[1, 0, 0] == pytest.approx(25.0)
+    assert out.cov[0, 0, 0] < 9.0
+    with pytest.raises(ValueError, match="correlation"):
+        fusion.build([{"correlation": 1.0}])
+    with pytest.raises(ValueError, match="unknown receiver"):
+        fusion.build([{"receivers": [{"sigma": 1.0}]}])
+
+
+def test_joint_covariance_is_positive_definite_and_structured() -> None:
+    rng = np.random.default_rng(7)
+    n, k = 20, 3
+    cov = _random_spd(rng, n * k, 2, 3.0).reshape(n, k, 2, 2)
+    S = fusion.joint_covariance(cov, rng.uniform(0, 0.95, n))
+    assert np.all(_min_eig(S) > 0)
+    for i in range(k):
+        np.testing.assert_allclose(S[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2], cov[:, i], rtol=1e-12)
+    np.testing.assert_allclose(S, S.transpose(0, 2, 1))

@@ -1,0 +1,104 @@
+"""Observations of other ships: radar/ARPA plots and AIS reports feeding one tracker per pair.
+
+Every ordered pair (observer, target) of ships in the same encounter is one track
+(:func:`trafficsim.sensors.radar.directed_pairs`). A ship observes with the ``radar`` and
+``ais`` of its ``sensors:`` (a ship without an ``ais`` section carries no transponder, one
+without ``radar`` has no radar); ``tracker`` tunes its tracker
+(:mod:`trafficsim.estimation.tracker`). Radar plots are placed on the chart with the observer's
+own estimated position and heading, so own navigation errors reach the tracks.
+
+Random draws: every directed pair has its own ``radar`` and ``ais_rx`` streams, keyed by
+(encounter, observer, purpose, target) within the encounter; each ship's ``ais`` stream holds its
+transmitter's noise. A pair's numbers therefore depend only on its two ships, never on the rest
+of the batch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from trafficsim.estimation import tracker
+from trafficsim.noise import NoiseBank
+from trafficsim.sensors import ais, radar
+from trafficsim.ships.base import EAST, NORTH, PSI
+
+#: pair streams are filled in shorter blocks: there are many more pairs than ships
+PAIR_BLOCK_STEPS = 64
+
+
+def observes(configs: Sequence[Mapping[str, Any]]) -> bool:
+    """Whether any ship carries radar or AIS."""
+    return any(c.get("radar") is not None or c.get("ais") is not None for c in configs)
+
+
+@dataclass
+class Observation:
+    """Radar, AIS and tracks of every directed pair ``(m,)`` of a batch."""
+
+    obs: np.ndarray  # (m,) observer ship
+    tgt: np.ndarray  # (m,) target ship
+    radar_p: radar.RadarParams
+    radar_s: radar.RadarState
+    ais_p: ais.AisParams
+    ais_s: ais.AisState
+    tracker_p: tracker.TrackerParams
+    tracks: tracker.TrackState
+    banks: dict[str, NoiseBank]
+    has_radar: bool
+    has_ais: bool
+
+    @classmethod
+    def build(cls, configs: Sequence[Mapping[str, Any]], pair_i: np.ndarray,
+              pair_j: np.ndarray, seed: int, encounter: Sequence[int],
+              ship_in_encounter: np.ndarray) -> Observation:
+        """Instruments and tracks for the directed pairs of ``pair_i < pair_j``."""
+        obs, tgt = radar.directed_pairs(pair_i, pair_j)
+        slot = np.asarray(ship_in_encounter)
+        enc = np.asarray(encounter)
+
+        def section(name: str) -> list[dict[str, Any]]:
+            return [dict(c[name] or {}) if c.get(name) is not None else {"enabled": False}
+                    for c in configs]
+
+        radar_p, ais_p = radar.build(section("radar")), ais.build(section("ais"))
+
+        def pair_bank(purpose: str, dims: int) -> NoiseBank:
+            return NoiseBank(seed, enc[obs], slot[obs], purpose, dims,
+                             block_steps=PAIR_BLOCK_STEPS, other=slot[tgt])
+
+        banks = {
+            "radar": pair_bank(radar.RADAR_PURPOSE, radar.RADAR_NORMAL_DIMS),
+            "ais_rx": pair_bank("ais_rx", ais.AIS_RX_NORMAL_DIMS),
+            "ais": NoiseBank(seed, enc, slot, ais.AIS_PURPOSE, ais.AIS_TX_NORMAL_DIMS),
+        }
+        return cls(obs=obs, tgt=tgt,
+                   radar_p=radar_p, radar_s=radar.init(radar_p), ais_p=ais_p,
+                   ais_s=ais.init(ais_p, obs.shape[0]),
+                   tracker_p=tracker.build([dict(c.get("tracker") or {}) for c in configs]),
+                   tracks=tracker.init(obs.shape[0]), banks=banks,
+                   has_radar=any(c.get("radar") is not None for c in configs),
+                   has_ais=any(c.get("ais") is not None for c in configs))
+
+    def update(self, x: np.ndarray, est: np.ndarray, vel_ne: np.ndarray, t_s: float) -> None:
+        """Observe at time ``t_s``: ``x`` true ``(8, n)``, ``est`` own estimates ``(6, n)``,
+        ``vel_ne`` true ground velocity ``(2, n)``."""
+        plots = reports = None
+        if self.has_radar:
+            self.radar_s, plots = radar.step(
+                self.radar_p, self.radar_s, t_s, self.obs, self.tgt, x, est[NORTH], est[EAST],
+                est[PSI], self.banks["radar"].next())
+        if self.has_ais:
+            self.ais_s, reports = ais.step(
+                self.ais_p, self.ais_s, t_s, self.obs, self.tgt, x, vel_ne,
+                self.banks["ais"].next(), self.banks["ais_rx"].next())
+        self.tracks = tracker.step(self.tracker_p, self.tracks, self.obs, t_s, plots, reports)
+
+    def predicted_tracks(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Tracks predicted to ``t_s``: state ``(m, 4)`` north, east, v_north, v_east and
+        ``active`` ``(m,)``."""
+        xp, _ = tracker.predict(self.tracker_p, self.tracks, self.obs, t_s)
+        return xp, self.tracks.active
