@@ -88,3 +88,13 @@ def test_unknown_filter_is_rejected(tmp_path):
     path.write_text(text)
     with pytest.raises(ScenarioError, match="filter"):
         load_scenario(path)
+
+
+def test_ekf_on_the_ship_model_estimates_the_unknown_current_and_beats_the_fixes():
+    sensors = {"gnss": {"sigma_m": 5.0}, "compass": {"sigma_deg": 0.5}, "log": {"kind": "em"}}
+    sim, truth, est, fixes = _run([_ship(sensors=sensors, filt="ekf")], seconds=900)
+    err_est = np.hypot(*(est[:, :2, 0] - truth[:, :2, 0]).T)
+    err_fix = np.hypot(*(fixes[:, :, 0] - truth[:, :2, 0]).T)
+    assert np.sqrt(np.mean(err_est[200:] ** 2)) < 0.4 * np.sqrt(np.mean(err_fix[200:] ** 2))
+    current = sim.nav.ekf_s.x[0, 6:8]  # north, east; the truth is 0.4 m/s towards 1 rad
+    np.testing.assert_allclose(current, [0.4 * np.cos(1.0), 0.4 * np.sin(1.0)], atol=0.05)

@@ -89,6 +89,7 @@ class Batch:
     ship_in_encounter: np.ndarray  # (n,) int, keys the random streams
     sensors: list[Mapping[str, Any]]  # per-ship instrument configs
     filters: list[str]  # per-ship own-ship filter
+    specs: list[Mapping[str, Any]]  # per-ship ship files (the EKF runs the ship's own model)
     t_s: float = 0.0
 
     @property
@@ -178,6 +179,7 @@ def build_batch(ships: Sequence[ShipSetup], envs: Sequence[EncounterEnv]) -> Bat
         ship_in_encounter=np.array([s.ship_in_encounter for s in ships], dtype=np.int64),
         sensors=[s.sensors for s in ships],
         filters=[s.filter for s in ships],
+        specs=specs,
     )
     batch.x[RPS] = batch.rps_for_speed(batch.x[U])
     return batch

@@ -68,7 +68,7 @@ class Simulation:
         )
         if any(f != "none" for f in batch.filters) or any(batch.sensors):
             sim.nav = Navigation.build(batch.sensors, batch.filters, x, seed, batch.encounter,
-                                       batch.ship_in_encounter, dt)
+                                       batch.ship_in_encounter, dt, batch.specs)
         if observes(batch.sensors):
             sim.obs = Observation.build(batch.sensors, batch.pair_i, batch.pair_j, seed,
                                         batch.encounter, batch.ship_in_encounter)

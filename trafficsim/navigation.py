@@ -10,7 +10,13 @@ Decisions are taken on estimates, outcomes measured on truth. Per ship the scena
   heading [seed 003, eq 5]); heading and yaw rate come from a steady-state alpha-beta filter on
   the compass (the same closed-form gain, :func:`trafficsim.estimation.pv.steady_state_gain`,
   with the heading noise and an angular acceleration spectral density ``heading_sp_rad2ps3``).
-  ``u, v`` of the estimate are the over-ground velocity in the body frame. Gross errors are
+  ``u, v`` of the estimate are the over-ground velocity in the body frame;
+* ``ekf``: the extended Kalman filter on the ship's own model with current estimation
+  [seed 002, ch 4.4, 5.3, 7, 7.3] (:mod:`trafficsim.estimation.ekf`), driven by the measured
+  rudder and rpm, updated with the GNSS fix, the compass and (if fitted) the speed log; its
+  noise settings default to the instruments' (``ekf:`` overrides any of them).
+
+In both filters gross GNSS errors are
   gated [seed 002, 6.6] on the normalised innovation (``gate``: ``gate_sigma``, default 5, or
   ``window_diameter_m``; ``reopen_factor``, ``max_rejections``,
   :mod:`trafficsim.estimation.gating`); after several consecutive rejections the filter restarts
@@ -31,14 +37,22 @@ from typing import Any
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.estimation import gating, pv
+from trafficsim.estimation import ekf, gating, pv
 from trafficsim.noise import NoiseBank
-from trafficsim.sensors import actuators, compass, gnss, speed_log, waves, wrap_pi
-from trafficsim.ships.base import EAST, NORTH, PSI, Env, R, U, V
+from trafficsim.sensors import (
+    actuators,
+    compass,
+    gnss,
+    rotate_body_to_earth,
+    speed_log,
+    waves,
+    wrap_pi,
+)
+from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Env, R, U, V
 
-FILTERS = ("none", "pv")
-SENSOR_KEYS = ("gnss", "compass", "log", "actuators", "waves", "gate", "navigation", "radar",
-               "ais", "tracker")
+FILTERS = ("none", "pv", "ekf")
+SENSOR_KEYS = ("gnss", "compass", "log", "actuators", "waves", "gate", "navigation", "ekf",
+               "radar", "ais", "tracker")
 DEFAULT_GATE_SIGMA = 5.0  # normalised innovation; a fix beyond 5 sigma is a gross error
 #: estimate rows: the estimate has the first six rows of the ship state
 N_EST = 6
@@ -95,6 +109,11 @@ class Navigation:
     banks: dict[str, NoiseBank]
     dt: float
     est: np.ndarray
+    ekf_idx: np.ndarray | None = None  # ships using the ekf filter
+    ekf_p: Any = None  # ekf.EkfParams of those ships
+    ekf_model: Any = None  # ekf.ShipModel of those ships
+    ekf_s: Any = None  # ekf.EkfState of those ships
+    ekf_rejections: np.ndarray | None = None
     has_waves: bool = False
     has_log: bool = False
     has_actuator_sensors: bool = False
@@ -106,7 +125,7 @@ class Navigation:
     @classmethod
     def build(cls, configs: Sequence[Mapping[str, Any]], filters: Sequence[str], x: np.ndarray,
               seed: int, encounter: Sequence[int], ship_in_encounter: Sequence[int],
-              dt: float) -> Navigation:
+              dt: float, specs: Sequence[Mapping[str, Any]] | None = None) -> Navigation:
         """Instruments and filters for ``n`` ships.
 
         Args:
@@ -114,6 +133,7 @@ class Navigation:
             filters: per-ship filter name, one of :data:`FILTERS`.
             x: ``(8, n)`` initial true state (filters start converged on it).
             seed, encounter, ship_in_encounter: key the random streams.
+            specs: ship files (needed by the ``ekf`` filter, which runs the ship's own model).
         """
         for f in filters:
             if f not in FILTERS:
@@ -159,6 +179,25 @@ class Navigation:
         heading_gain = pv.steady_state_gain(np.maximum(compass_p.sigma_rad, 1e-6), heading_sp, dt)
         heading_gain = np.asarray(heading_gain).reshape(n, 2)
         est = x[:N_EST].copy()
+        ekf_idx = np.flatnonzero([f == "ekf" for f in filters])
+        ekf_p = ekf_model = ekf_s = None
+        if ekf_idx.size:
+            if specs is None:
+                raise InputError("the ekf filter needs the ships' model files", key="filter")
+            log_p = speed_log.build(section("log"))
+            ekf_cfg = [{"gnss_sigma_m": float(gnss_p.sigma_m[i]),
+                        "compass_sigma_deg": float(np.degrees(compass_p.sigma_rad[i])),
+                        "log_sigma_mps": float(log_p.sigma_mps[i]),
+                        **(configs[i].get("ekf") or {})} for i in ekf_idx]
+            try:
+                ekf_p = ekf.build(ekf_cfg)
+            except ValueError as err:
+                raise InputError(str(err), key="ekf") from None
+            ekf_model = ekf.ShipModel.from_specs([specs[i] for i in ekf_idx])
+            xe = x[:, ekf_idx]
+            ekf_s = ekf.initial_state(ekf_p, xe[NORTH] - vel[0, ekf_idx] * dt,
+                                      xe[EAST] - vel[1, ekf_idx] * dt, xe[PSI] - xe[R] * dt,
+                                      xe[U], xe[V], xe[R])
         return cls(
             filter_pv=np.array([f == "pv" for f in filters]),
             gnss_p=gnss_p, gnss_s=gnss.init(gnss_p, init_draws[:, :a]),
@@ -170,7 +209,9 @@ class Navigation:
                                  for c in section("gate")]),
             gate_rejections=gating.init_state(n),
             heading_est=np.stack([x[PSI] - x[R] * dt, x[R].copy()]), banks=banks, dt=dt,
-            est=est, has_waves=any(c.get("waves") for c in configs),
+            est=est, ekf_idx=ekf_idx, ekf_p=ekf_p, ekf_model=ekf_model, ekf_s=ekf_s,
+            ekf_rejections=gating.init_state(ekf_idx.size),
+            has_waves=any(c.get("waves") for c in configs),
             has_log=any(c.get("log") is not None for c in configs),
             has_actuator_sensors=any(c.get("actuators") is not None for c in configs))
 
@@ -218,9 +259,51 @@ class Navigation:
         filtered = np.stack([self.pv_s.x[:, 0], self.pv_s.x[:, 1], psi_new,
                              vn * c + ve * s, -vn * s + ve * c, r_new])
         self.est = np.where(self.filter_pv[None, :], filtered, x[:N_EST])
+        if self.ekf_idx is not None and self.ekf_idx.size:
+            self.est[:, self.ekf_idx] = self._ekf_update(x, env)
         return self.est
+
+    def _ekf_update(self, x: np.ndarray, env: Env) -> np.ndarray:
+        """Predict with the measured rudder and rpm, gate the fix, update; estimate (6, k)."""
+        i = self.ekf_idx
+        if self.act_meas is not None:
+            rudder, rps = self.act_meas.rudder_rad[i], self.act_meas.rps[i]
+        else:
+            rudder, rps = x[RUDDER, i], x[RPS, i]
+        wind = _take(env.wind_speed_mps, i), _take(env.wind_from_rad, i)
+        pred = ekf.predict(self.ekf_p, self.ekf_model, self.ekf_s, rudder, rps, self.dt,
+                           wind_speed_mps=wind[0], wind_from_rad=wind[1])
+        dn, de = rotate_body_to_earth(pred.x[:, 2], self.gnss_p.antenna_x_m[i],
+                                      self.gnss_p.antenna_y_m[i])
+        z = np.stack([self.fix.north_m[i] - dn, self.fix.east_m[i] - de, self.heading_meas[i],
+                      self.log_meas.u_mps[i] if self.log_meas is not None
+                      else np.zeros(i.size)], axis=1)
+        valid = self.fix.valid[i]
+        innov = z[:, :2] - pred.x[:, :2]
+        s_pos = pred.P[:, :2, :2] + np.eye(2)[None] * self.ekf_p.gnss_var_m2[:, None, None]
+        d = np.where(valid, gating.normalised_distance(innov, s_pos), np.nan)
+        g = gating.gate(_take_gate(self.gate_p, i), d, self.ekf_rejections)
+        self.ekf_rejections = g.rejections
+        mask = np.stack([g.accept, g.accept, np.ones(i.size, bool),
+                         np.full(i.size, self.log_meas is not None)], axis=1)
+        state, _ = ekf.update(self.ekf_p, pred, np.nan_to_num(z), mask)
+        if g.restart.any():  # genuine jump: restart the position on the fix
+            xs = state.x.copy()
+            xs[g.restart, 0], xs[g.restart, 1] = z[g.restart, 0], z[g.restart, 1]
+            state = ekf.EkfState(xs, state.P)
+        self.ekf_s = state
+        return state.x[:, :N_EST].T
 
 
 def _earth_velocity(x: np.ndarray) -> np.ndarray:
     c, s = np.cos(x[PSI]), np.sin(x[PSI])
     return np.stack([x[U] * c - x[V] * s, x[U] * s + x[V] * c])
+
+
+def _take(value: Any, idx: np.ndarray) -> Any:
+    return value[idx] if isinstance(value, np.ndarray) and value.ndim else value
+
+
+def _take_gate(params: gating.GateParams, idx: np.ndarray) -> gating.GateParams:
+    return gating.GateParams(params.threshold[idx], params.reopen_factor[idx],
+                             params.max_rejections[idx])

@@ -3,8 +3,8 @@
 With ``--sensors`` the trial also records what the instruments report and what the filters make
 of it, beside the truth: the GNSS receiver's output (``gnss_*``: a DGPS receiver, sigma 2 m, with
 its internal position-velocity Kalman filter at S_p = 0.01 m^2/s^3 [seed 000]) and the ship's own
-navigation estimate (``est_*``, :mod:`trafficsim.navigation`), so the receiver-filter experiment
-of [seed 000] is one command.
+navigation estimate (``est_*``: the EKF on the ship's own model, :mod:`trafficsim.navigation`),
+so the receiver-filter experiment of [seed 000] is one command.
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def sensor_columns(track: Mapping[str, np.ndarray], spec: Mapping[str, Any],
     x[RUDDER], x[RPS] = np.radians(track["rudder_deg"]), np.asarray(track["rpm"]) / 60.0
     config = merge_sensors(spec.get("sensors"), {"navigation": {"pv_sp_m2ps3": sp_m2ps3}})
     config.setdefault("gnss", {}).setdefault("sigma_m", 2.0)
-    nav = Navigation.build([config], ["pv"], x[:, :1], seed, [0], [0], dt)
+    nav = Navigation.build([config], ["ekf"], x[:, :1], seed, [0], [0], dt, [spec])
     receiver_p = pv.build([{"sigma_m": float(nav.gnss_p.sigma_m[0]), "sp_m2ps3": sp_m2ps3,
                             "dt_s": dt}])
     vn0, ve0 = _earth_velocity(x[:, 0])

@@ -131,7 +131,7 @@ class ShipEntry(Strict):
     speed_kn: Annotated[Number, Field(ge=0.0, le=60.0)] | None = None
     route: tuple[RoutePoint, ...] = ()
     sensors: dict[str, dict[str, Any]] | None = None
-    filter: Literal["none", "pv"] = "none"
+    filter: Literal["none", "pv", "ekf"] = "none"
 
     @field_validator("sensors")
     @classmethod
