@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from trafficsim.errors import InputError
+from trafficsim.jit import kernel
 
 #: state layout of ``PVState.x``: north, east position (m), north, east velocity (m/s)
 N_STATE = 4
@@ -224,22 +225,28 @@ def init(params: PVParams, north_m: Any, east_m: Any, v_north_mps: Any = 0.0,
 def predict(params: PVParams, state: PVState) -> PVState:
     """Time update over one cycle ``params.dt_s``: ``x = Phi x``, ``P = Phi P Phi^T + Q``.
 
-    [seed 000, eqs 3-4 and recursion step 1], per axis in closed form.
+    [seed 000, eqs 3-4 and recursion step 1], per axis in closed form (one compiled loop).
     """
-    dt = params.dt_s
-    q = params.sp
-    x = state.x.copy()
-    x[:, POS_N] += dt * state.x[:, VEL_N]
-    x[:, POS_E] += dt * state.x[:, VEL_E]
-    P = state.P
-    pp, pv, vv = P[:, :, POS, POS], P[:, :, POS, VEL], P[:, :, VEL, VEL]
-    dtc = dt[:, None]
-    qc = q[:, None]
-    new = np.empty_like(P)
-    new[:, :, POS, POS] = pp + 2.0 * dtc * pv + dtc * dtc * vv + qc * dtc**3 / 3.0
-    new[:, :, POS, VEL] = new[:, :, VEL, POS] = pv + dtc * vv + 0.5 * qc * dtc * dtc
-    new[:, :, VEL, VEL] = vv + qc * dtc
-    return PVState(x=x, P=new)
+    x, P = np.empty_like(state.x), np.empty_like(state.P)
+    _predict(state.x, state.P, params.dt_s, params.sp, x, P)
+    return PVState(x=x, P=P)
+
+
+@kernel
+def _predict(x0: np.ndarray, P0: np.ndarray, dt_s: np.ndarray, sp: np.ndarray, x: np.ndarray,
+             P: np.ndarray) -> None:
+    for i in range(x0.shape[0]):
+        dt, q = dt_s[i], sp[i]
+        x[i, POS_N] = x0[i, POS_N] + dt * x0[i, VEL_N]
+        x[i, POS_E] = x0[i, POS_E] + dt * x0[i, VEL_E]
+        x[i, VEL_N] = x0[i, VEL_N]
+        x[i, VEL_E] = x0[i, VEL_E]
+        for a in range(2):
+            pp, pv, vv = P0[i, a, POS, POS], P0[i, a, POS, VEL], P0[i, a, VEL, VEL]
+            P[i, a, POS, POS] = pp + 2.0 * dt * pv + dt * dt * vv + q * dt**3 / 3.0
+            P[i, a, POS, VEL] = pv + dt * vv + 0.5 * q * dt * dt
+            P[i, a, VEL, POS] = P[i, a, POS, VEL]
+            P[i, a, VEL, VEL] = vv + q * dt
 
 
 def gain(params: PVParams, predicted: PVState) -> np.ndarray:
@@ -271,27 +278,34 @@ def update(params: PVParams, predicted: PVState, z_north: Any, z_east: Any,
         The updated state.
     """
     n = params.n
-    ok = np.broadcast_to(np.asarray(valid, bool), (n,))
-    z = np.stack([np.broadcast_to(np.asarray(z_north, float), (n,)),
-                  np.broadcast_to(np.asarray(z_east, float), (n,))], axis=1)  # (n, 2)
-    P = predicted.P
-    pp, pv, vv = P[:, :, POS, POS], P[:, :, POS, VEL], P[:, :, VEL, VEL]
-    r = np.square(params.sigma_m)[:, None]
-    s = pp + r
-    k_pos, k_vel = pp / s, pv / s
-    okc = ok[:, None]
-    pos = predicted.x[:, [POS_N, POS_E]]
-    nu = np.where(okc, z - pos, 0.0)  # innovation, m (0 without fix, so NaN fixes cannot leak)
-    x = predicted.x.copy()
-    x[:, [POS_N, POS_E]] = pos + k_pos * nu
-    x[:, [VEL_N, VEL_E]] = predicted.x[:, [VEL_N, VEL_E]] + k_vel * nu
-    # P = (I - K H) P in closed form; symmetric by construction and positive definite
-    # (vv - pv^2 / s > 0 since pv^2 <= pp vv < s vv)
-    new = np.empty_like(P)
-    new[:, :, POS, POS] = np.where(okc, pp * r / s, pp)
-    new[:, :, POS, VEL] = new[:, :, VEL, POS] = np.where(okc, pv * r / s, pv)
-    new[:, :, VEL, VEL] = np.where(okc, vv - pv * pv / s, vv)
-    return PVState(x=x, P=new)
+    ok = np.ascontiguousarray(np.broadcast_to(np.asarray(valid, bool), (n,)))
+    zn = np.ascontiguousarray(np.broadcast_to(np.asarray(z_north, float), (n,)))
+    ze = np.ascontiguousarray(np.broadcast_to(np.asarray(z_east, float), (n,)))
+    x, P = predicted.x.copy(), predicted.P.copy()
+    _update(x, P, params.sigma_m, zn, ze, ok)
+    return PVState(x=x, P=P)
+
+
+@kernel
+def _update(x: np.ndarray, P: np.ndarray, sigma_m: np.ndarray, zn: np.ndarray, ze: np.ndarray,
+            ok: np.ndarray) -> None:
+    for i in range(x.shape[0]):
+        if not ok[i]:  # no fix: keep the prediction (a NaN fix cannot leak)
+            continue
+        r = sigma_m[i] * sigma_m[i]
+        for a in range(2):
+            pos, vel = (POS_N, VEL_N) if a == 0 else (POS_E, VEL_E)
+            z = zn[i] if a == 0 else ze[i]
+            pp, pv, vv = P[i, a, POS, POS], P[i, a, POS, VEL], P[i, a, VEL, VEL]
+            s = pp + r
+            nu = z - x[i, pos]
+            x[i, pos] += pp / s * nu
+            x[i, vel] += pv / s * nu
+            # P = (I - K H) P in closed form; symmetric by construction and positive definite
+            # (vv - pv^2 / s > 0 since pv^2 <= pp vv < s vv)
+            P[i, a, POS, POS] = pp * r / s
+            P[i, a, POS, VEL] = P[i, a, VEL, POS] = pv * r / s
+            P[i, a, VEL, VEL] = vv - pv * pv / s
 
 
 def step(params: PVParams, state: PVState, z_north: Any, z_east: Any,

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -70,6 +71,12 @@ class CompassParams:
     drift_q: np.ndarray
     drift_sigma_rad: np.ndarray
 
+
+    @cached_property
+    def has_deviation(self) -> bool:
+        """Whether any ship has a deviation curve (else it is skipped)."""
+        return bool(any(np.any(c) for c in (self.dev_a, self.dev_b, self.dev_c, self.dev_d,
+                                            self.dev_e)))
 
 @dataclass(frozen=True)
 class CompassState:
@@ -160,6 +167,7 @@ def step(params: CompassParams, state: CompassState, psi: np.ndarray, normals: n
     """
     drift = params.drift_a * state.drift_rad + params.drift_q * normals[:, 1]
     hull = psi if wave_psi_rad is None else psi + wave_psi_rad
-    reading = (hull + params.bias_rad + deviation(params, hull) + drift
-               + params.sigma_rad * normals[:, 0])
+    reading = hull + params.bias_rad + drift + params.sigma_rad * normals[:, 0]
+    if params.has_deviation:
+        reading = reading + deviation(params, hull)
     return CompassState(drift_rad=drift), wrap_2pi(reading)

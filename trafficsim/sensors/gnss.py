@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -93,6 +94,11 @@ class GnssParams:
     antenna_y_m: np.ndarray
     dt: float
 
+
+    @cached_property
+    def has_lever_arm(self) -> bool:
+        """Whether any antenna sits off the reference point (else the shift is skipped)."""
+        return bool(np.any(self.antenna_x_m) or np.any(self.antenna_y_m))
 
 @dataclass(frozen=True)
 class GnssState:
@@ -179,6 +185,8 @@ def antenna_position(params: GnssParams, x: np.ndarray,
         x: ``(8, n)`` truth state (rows NORTH, EAST, PSI used).
         psi_offset_rad: optional ``(n,)`` extra yaw (e.g. wave-induced) turning the lever arm.
     """
+    if not params.has_lever_arm:
+        return x[NORTH].copy(), x[EAST].copy()
     psi = x[PSI] if psi_offset_rad is None else x[PSI] + psi_offset_rad
     dn, de = rotate_body_to_earth(psi, params.antenna_x_m, params.antenna_y_m)
     return x[NORTH] + dn, x[EAST] + de
@@ -194,6 +202,8 @@ def to_reference_point(params: GnssParams, north_m: np.ndarray, east_m: np.ndarr
         north_m, east_m: ``(n,)`` antenna fixes, m.
         psi_rad: ``(n,)`` heading used for the shift (e.g. the compass reading), rad.
     """
+    if not params.has_lever_arm:
+        return north_m, east_m
     dn, de = rotate_body_to_earth(psi_rad, params.antenna_x_m, params.antenna_y_m)
     return north_m - dn, east_m - de
 
