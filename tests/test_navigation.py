@@ -1,13 +1,16 @@
 """Ships steer on what their instruments and filters tell them; outcomes are measured on truth."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from tests.conftest import SCENARIOS
 from trafficsim.batch import EncounterEnv, ShipSetup, build_batch
 from trafficsim.engine import Simulation
-from trafficsim.errors import ScenarioError
+from trafficsim.errors import InputError, ScenarioError
 from trafficsim.io.scenario import load_scenario
+from trafficsim.sensors import gnss as gnss_module
 from trafficsim.ships.base import EAST, NORTH, PSI
 from trafficsim.ships.library import load_ship
 from trafficsim.units import from_kn
@@ -98,3 +101,219 @@ def test_ekf_on_the_ship_model_estimates_the_unknown_current_and_beats_the_fixes
     assert np.sqrt(np.mean(err_est[200:] ** 2)) < 0.4 * np.sqrt(np.mean(err_fix[200:] ** 2))
     current = sim.nav.ekf_s.x[0, 6:8]  # north, east; the truth is 0.4 m/s towards 1 rad
     np.testing.assert_allclose(current, [0.4 * np.cos(1.0), 0.4 * np.sin(1.0)], atol=0.05)
+
+
+# --------------------------------------------------------------------------------------------
+# several GNSS receivers fused [seed 003, eqs 2-5]; adaptive GNSS noise in the ekf
+# --------------------------------------------------------------------------------------------
+
+FIVE_M = {"gnss": {"sigma_m": 5.0}, "compass": {"sigma_deg": 0.5}, "log": {"kind": "em"}}
+
+
+def _run_nav(sensors, filt, seconds, seed=3, each_step=None):
+    """One ship; per step the truth (N, E), estimate (N, E), receiver-1 fix and fused fix."""
+    sim = Simulation.start(build_batch([_ship(sensors=sensors, filt=filt)], [CURRENT]), 1.0, seed)
+    rec = {k: [] for k in ("truth", "est", "fix", "fused", "fused_valid")}
+    for k in range(seconds):
+        if each_step is not None:
+            each_step(sim, k)
+        sim.step()
+        nav = sim.nav
+        rec["truth"].append(sim.batch.x[[NORTH, EAST], 0].copy())
+        rec["est"].append(nav.est[[NORTH, EAST], 0].copy())
+        rec["fix"].append([nav.fix.north_m[0], nav.fix.east_m[0]])
+        fused = nav.fused
+        rec["fused"].append(fused.position[0].copy() if fused is not None else [np.nan] * 2)
+        rec["fused_valid"].append(bool(fused.valid[0]) if fused is not None else False)
+    return sim, {k: np.array(v) for k, v in rec.items()}
+
+
+def _rms(a, b, start=100):
+    return float(np.sqrt(np.nanmean(np.sum((a[start:] - b[start:]) ** 2, axis=1))))
+
+
+@pytest.mark.parametrize("filt", ["pv", "ekf"])
+def test_two_receivers_fused_beat_one(filt):
+    """Two receivers with independent 5 m noise (the second 50 m forward of the first): the
+    fused fix has 1/sqrt(2) of one fix's error [seed 003, eq 3 with P_12 = 0] and the filtered
+    position is clearly better than with receiver 1 alone (same streams for receiver 1)."""
+    two = dict(FIVE_M, gnss2={"sigma_m": 5.0, "antenna_x_m": 50.0})
+    _, one_r = _run_nav(FIVE_M, filt, 1500)
+    sim, two_r = _run_nav(two, filt, 1500)
+    # receiver 1 draws the same errors (the tracks differ: the ships steer on their estimates)
+    np.testing.assert_allclose(one_r["fix"] - one_r["truth"], two_r["fix"] - two_r["truth"],
+                               atol=1e-6)
+    raw = _rms(two_r["fix"], two_r["truth"])
+    fused = _rms(two_r["fused"], two_r["truth"])
+    assert 0.66 < fused / raw < 0.75  # 1/sqrt(2) = 0.707; measured 0.705
+    est_one, est_two = _rms(one_r["est"], one_r["truth"]), _rms(two_r["est"], two_r["truth"])
+    assert est_two < 0.85 * est_one  # measured 0.75 (pv), 0.78 (ekf)
+    # the fused variance the filter is given: 5^2 / 2 per axis
+    np.testing.assert_allclose(sim.nav.fusion_var, [12.5])
+    assert sim.route.wp_index[0] >= 2
+
+
+def test_a_receiver_without_fix_drops_out_and_none_means_no_update():
+    """Receiver 1 has long outages, receiver 2 updates every other second with short ones: the
+    fused fix is receiver 2's alone while 1 is out, the mean of both when both have a fix, and
+    without any fix the pv filter only predicts; the estimate coasts far less than with
+    receiver 1 alone."""
+    gnss1 = {"sigma_m": 5.0, "dropout_rate_per_h": 120.0, "dropout_mean_s": 60.0}
+    one = {"gnss": gnss1, "compass": {"sigma_deg": 0.5}}
+    two = dict(one, gnss2={"sigma_m": 5.0, "rate_hz": 0.5, "antenna_x_m": 40.0,
+                           "dropout_rate_per_h": 60.0, "dropout_mean_s": 20.0})
+    seen = {"valid1": [], "valid2": [], "ref2": [], "pv_x": []}
+
+    def record(sim, k):  # at k: what the update of step k - 1 saw (index k - 1 of the run)
+        if k:
+            nav = sim.nav
+            rec = nav.extra[0]
+            psi = nav.heading_est[0]  # the heading the fixes were moved with
+            seen["valid1"].append(bool(nav.fix.valid[0]))
+            seen["valid2"].append(bool(rec.fix.valid[0]))
+            ref = gnss_module.to_reference_point(rec.params, rec.fix.north_m, rec.fix.east_m, psi)
+            seen["ref2"].append([ref[0][0], ref[1][0]])
+            seen["pv_x"].append(nav.pv_s.x[0].copy())
+
+    _, r1 = _run_nav(one, "pv", 1500)
+    _, r2 = _run_nav(two, "pv", 1501, each_step=record)
+    v1, v2 = np.array(seen["valid1"]), np.array(seen["valid2"])
+    valid = r2["fused_valid"][:-1]
+    assert (~v1).sum() > 300 and (v2 & ~v1).sum() > 100 and (~v1 & ~v2).sum() > 100
+    np.testing.assert_array_equal(valid, v1 | v2)
+    only2 = v2 & ~v1
+    np.testing.assert_allclose(r2["fused"][:-1][only2], np.array(seen["ref2"])[only2], atol=1e-9)
+    both = v1 & v2
+    mean = 0.5 * (r2["fix"][:-1] + np.array(seen["ref2"]))  # receiver 1 is at the reference
+    np.testing.assert_allclose(r2["fused"][:-1][both], mean[both], atol=1e-9)
+    # no fix from any receiver: no update, the pv state is its prediction (dt = 1 s)
+    x = np.array(seen["pv_x"])
+    none = ~valid[1:]
+    np.testing.assert_allclose(x[1:, :2][none], (x[:-1, :2] + x[:-1, 2:])[none], atol=1e-9)
+    np.testing.assert_array_equal(x[1:, 2:][none], x[:-1, 2:][none])
+    # receiver 1's outages: coasting with one receiver, still updating with two
+    out = ~v1[100:]
+    err1 = np.hypot(*(r1["est"] - r1["truth"])[100:][out].T)
+    err2 = np.hypot(*(r2["est"] - r2["truth"])[:-1][100:][out].T)
+    rms1, rms2 = np.sqrt(np.mean(err1**2)), np.sqrt(np.mean(err2**2))
+    assert rms2 < 0.3 * rms1  # measured 9.3 m against 57.7 m
+
+
+def test_correlated_receivers_gain_less():
+    """With correlation rho of the two receivers' errors the filter is given the BLUE variance
+    s^2 (1 + rho) / 2 [seed 003, eq 4 cross-covariances] (two_receiver_variance)."""
+    from trafficsim.estimation import fusion
+
+    sensors = dict(FIVE_M, gnss2={"sigma_m": 3.0}, fusion={"correlation": 0.5})
+    sim = Simulation.start(build_batch([_ship(sensors=sensors)], [CURRENT]), 1.0, 3)
+    np.testing.assert_allclose(sim.nav.fusion_var, [fusion.two_receiver_variance(5.0, 3.0, 0.5)])
+    sim.step()
+    np.testing.assert_allclose(sim.nav.fused.cov[0], np.eye(2) * sim.nav.fusion_var[0])
+
+
+def _gnss_nis(sim):
+    inn = sim.nav.ekf_innovation
+    nu, S = inn.nu[0, :2], inn.S[0, :2, :2]
+    return float(nu @ np.linalg.solve(S, nu)) if S[0, 0] > 0 else np.nan
+
+
+def _doubling_run(sensors):
+    """EKF ship whose GNSS noise doubles (5 m -> 10 m) at 600 s; the GNSS NIS per step."""
+    nis = []
+
+    def double_at_600(sim, k):
+        if k == 600:  # the instrument changes, the configured filter noise does not
+            sim.nav.gnss_p = dataclasses.replace(sim.nav.gnss_p,
+                                                 sigma_m=2.0 * sim.nav.gnss_p.sigma_m)
+        if k:
+            nis.append(_gnss_nis(sim))
+
+    sim, _ = _run_nav(sensors, "ekf", 1201, each_step=double_at_600)
+    return sim, np.array(nis)
+
+
+def test_adaptive_ekf_follows_a_doubling_gnss_noise():
+    """NIS of the GNSS innovations (2 dof, mean 2): in bounds for both filters before the
+    change; after it the fixed filter stays far out (about (P + 100) / (P + 25) * 2), the
+    adaptive one (window 60 steps) is back in bounds and its R follows 10 m."""
+    fixed_sim, fixed = _doubling_run(FIVE_M)
+    sim, adapt = _doubling_run(dict(FIVE_M, navigation={"adaptive_window_steps": 60}))
+    before, after = slice(300, 600), slice(900, 1200)
+    # 95 % bounds of the mean of 300 chi-square(2) samples: [1.78, 2.23]; the filter's
+    # innovations are not exactly white, so a little wider
+    for nis in (fixed, adapt):
+        assert 1.6 < np.nanmean(nis[before]) < 2.5
+    assert np.nanmean(fixed[after]) > 5.0  # measured 6.7
+    assert 1.6 < np.nanmean(adapt[after]) < 2.5  # measured 2.0
+    assert fixed_sim.nav.adapt_s is None
+    np.testing.assert_allclose(np.sqrt(np.diag(sim.nav.adapt_s.R[0])), [10.0, 10.0], rtol=0.2)
+
+
+def test_ships_without_the_new_keys_are_bit_identical_beside_ships_with_them():
+    """A pv and an ekf ship without gnss2 / adaptive R run the unchanged code path: their
+    estimates are bit for bit the same alone and beside ships with two receivers and adaptive
+    R (whose streams are their own)."""
+    plain = {"gnss": {"sigma_m": 4.0, "gross_prob": 0.02, "antenna_x_m": -30.0},
+             "compass": {"sigma_deg": 0.5}, "log": {"kind": "em"}}
+    fancy = dict(plain, gnss2={"sigma_m": 3.0, "antenna_x_m": 30.0},
+                 navigation={"adaptive_window_steps": 30})
+
+    def run(ships):
+        sim = Simulation.start(build_batch(ships, [CURRENT] * 2), 1.0, 5)
+        out = []
+        for _ in range(300):
+            sim.step()
+            out.append(sim.nav.est[:, :2].copy())
+        return sim, np.array(out)
+
+    alone_sim, alone = run([_ship("a", 0, plain, "pv"), _ship("b", 1, plain, "ekf", north=5e3)])
+    assert not alone_sim.nav.extra and alone_sim.nav.fused is None
+    assert alone_sim.nav.adapt_s is None
+    beside_sim, beside = run([
+        _ship("a", 0, plain, "pv"), _ship("b", 1, plain, "ekf", north=5e3),
+        _ship("c", 2, fancy, "ekf", north=-5e3),
+        _ship("d", 3, dict(fancy, navigation={}), "pv", north=1e4)])
+    np.testing.assert_array_equal(alone, beside[:, :, :2])
+    assert beside_sim.nav.adapt_rows.tolist() == [1]  # ship c within the ekf ships
+
+
+def _scenario_with(tmp_path, lines):
+    # the cargo ship's sensors, with the given lines instead of any it has for those sections
+    sections = tuple(f"      {t.split(':', 1)[0]}:" for t in lines)
+    text = "".join(t for t in (SCENARIOS / "crossing_sensors.yaml").read_text()
+                   .splitlines(keepends=True) if not t.startswith(sections))
+    anchor = "      compass: {kind: gyro, sigma_deg: 0.3"
+    assert anchor in text
+    text = text.replace(anchor, "".join(f"      {t}\n" for t in lines) + anchor, 1)
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    return path, text
+
+
+@pytest.mark.parametrize(("lines", "bad"), [
+    (["gnss2: {sigma_mm: 2.0, antenna_x_m: 40}"], "sigma_mm"),
+    (["gnss2: {sigma_m: 2.0}", "fusion: {corelation: 0.2}"], "corelation"),
+    (["gnss2: {sigma_m: 2.0}", "fusion: {correlation: 1.5}"], "correlation"),
+    (["navigation: {adaptive_window_step: 60}"], "adaptive_window_step"),
+    (["navigation: {adaptive_window_steps: 2}"], "adaptive_window_steps: 2"),
+])
+def test_bad_receiver_fusion_or_adaptive_config_is_located_in_the_scenario(tmp_path, lines,
+                                                                             bad):
+    path, text = _scenario_with(tmp_path, lines)
+    line = next(k for k, t in enumerate(text.splitlines(), 1) if bad in t)
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    assert f"s.yaml:{line}:" in str(err.value)
+
+
+def test_valid_second_receiver_and_adaptive_settings_load(tmp_path):
+    path, _ = _scenario_with(tmp_path, ["gnss2: {sigma_m: 2.0, antenna_x_m: 40}",
+                                        "fusion: {correlation: 0.2}",
+                                        "navigation: {adaptive_window_steps: 60}"])
+    load_scenario(path)
+
+
+def test_adaptive_r_needs_the_ekf():
+    sensors = dict(FIVE_M, navigation={"adaptive_window_steps": 60})
+    with pytest.raises(InputError, match="ekf"):
+        Simulation.start(build_batch([_ship(sensors=sensors, filt="pv")], [CURRENT]), 1.0, 3)

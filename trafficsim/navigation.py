@@ -26,18 +26,44 @@ Instruments (``sensors:`` of the ship file, overridden key by key by the scenari
 ``compass``, ``log``, ``actuators`` (rudder and rpm feedback) and ``waves`` (wave-frequency
 motion seen by GNSS and compass), each as documented in its module under
 :mod:`trafficsim.sensors`. Random draws come from keyed streams (:mod:`trafficsim.noise`).
+
+Several GNSS receivers: ``gnss2`` (and ``gnss3``) take the same keys as ``gnss`` (own sigma,
+antenna lever arm, Gauss-Markov error, gross errors, outages, rate) and are measured by the same
+:mod:`trafficsim.sensors.gnss` model with their own random streams (purposes ``gnss2``,
+``gnss2_gross``, ...). ``fusion: {correlation: rho}`` (default 0, in [0, 1)) is the correlation
+of any two receivers' errors on that ship (common-mode error). For a ship with more than one
+receiver, each fix is moved to the reference point with the filter's heading [seed 003, eq 5] and
+the fixes of this step are fused by the minimum-variance weight matrices with cross-covariances
+[seed 003, eqs 2-4] (:func:`trafficsim.estimation.fusion.fuse`; the receivers' ``sigma_m`` give
+the covariances, a Gauss-Markov part is not modelled, as for one receiver). The filter then sees
+the fused fix with its covariance ``P_f``: the ekf uses ``P_f`` as the GNSS block of ``R``, the
+pv filter its per-axis variance as the measurement variance of the step (``P_f = p I`` exactly,
+because the receivers are isotropic and the correlation one scalar); the gates use the same.
+A receiver without a fix this step drops out of the fusion; with no fix from any receiver the
+filter only predicts. ``gnss`` stays receiver 1 (``Navigation.fix`` is its reading);
+``Navigation.fused`` is the last fused fix of the ships with several receivers.
+
+Adaptive GNSS noise (``ekf`` only): ``navigation: {adaptive_window_steps: N}`` turns on the
+innovation-based estimate of the GNSS measurement covariance over the last ``N`` update steps
+(:mod:`trafficsim.estimation.adaptive`, the adaptive filtering idea of [seed 004]); once
+``adaptive_min_samples`` (default ``N // 2``, at least 3) accepted fixes are in the window the
+estimate replaces the configured (or fused) GNSS block of ``R`` in the gate and the update.
+``adaptive_floor_sigma_m`` (default 0.1 m) bounds it from below. Default: off.
+
+Ships without these keys run exactly the code path, and produce bit for bit the results, they had
+before the keys existed.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.estimation import ekf, gating, pv
+from trafficsim.estimation import adaptive, ekf, fusion, gating, pv
 from trafficsim.noise import NoiseBank
 from trafficsim.sensors import (
     actuators,
@@ -51,8 +77,16 @@ from trafficsim.sensors import (
 from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Env, R, U, V
 
 FILTERS = ("none", "pv", "ekf")
+#: further GNSS receivers a ship may carry, in their fusion slot order after ``gnss`` (slot 0);
+#: each has the noise purposes ``<name>`` and ``<name>_gross`` in :data:`trafficsim.noise.PURPOSES`
+EXTRA_GNSS = ("gnss2", "gnss3")
 SENSOR_KEYS = ("gnss", "compass", "log", "actuators", "waves", "gate", "navigation", "ekf",
-               "radar", "ais", "tracker")
+               "radar", "ais", "tracker", *EXTRA_GNSS, "fusion")
+#: keys of the ``navigation`` section
+NAVIGATION_KEYS = ("pv_sp_m2ps3", "heading_sp_rad2ps3", "adaptive_window_steps",
+                   "adaptive_min_samples", "adaptive_floor_sigma_m")
+#: keys of the ``fusion`` section
+FUSION_KEYS = ("correlation",)
 DEFAULT_GATE_SIGMA = 5.0  # normalised innovation; a fix beyond 5 sigma is a gross error
 #: estimate rows: the estimate has the first six rows of the ship state
 N_EST = 6
@@ -75,13 +109,34 @@ def check_sensor_config(config: Mapping[str, Any]) -> None:
         if name not in SENSOR_KEYS:
             raise InputError(f"unknown sensor '{name}'; expected one of {', '.join(SENSOR_KEYS)}",
                              key=name)
-    Navigation.build([dict(config)], ["pv"], np.zeros((8, 1)), 0, [0], [0], 1.0)
+    # filter "none": every instrument and setting is built and checked; whether a setting suits
+    # the ship's filter (adaptive R needs the ekf) is checked when the run starts
+    Navigation.build([dict(config)], ["none"], np.zeros((8, 1)), 0, [0], [0], 1.0)
     from trafficsim.estimation import tracker
     from trafficsim.sensors import ais, radar
 
     for name, module in (("radar", radar), ("ais", ais), ("tracker", tracker)):
         if config.get(name) is not None:
             module.build([dict(config[name])])
+
+
+@dataclass
+class ExtraReceiver:
+    """A further GNSS receiver (``gnss2``, ...) on the ships that carry it.
+
+    ``idx`` ``(k,)``: those ships' indices in the batch; ``rows`` ``(k,)``: their rows in the
+    fusion tables (:attr:`Navigation.multi_idx`); ``slot``: its fusion slot (1, 2, ...).
+    """
+
+    name: str
+    idx: np.ndarray
+    rows: np.ndarray
+    slot: int
+    params: gnss.GnssParams
+    state: gnss.GnssState
+    normals: NoiseBank
+    uniforms: NoiseBank
+    fix: gnss.GnssFix | None = None
 
 
 @dataclass
@@ -121,6 +176,21 @@ class Navigation:
     heading_meas: np.ndarray | None = None
     log_meas: speed_log.LogReading | None = None
     act_meas: actuators.ActuatorReading | None = None
+    # several receivers (empty / None when no ship has gnss2, ...)
+    extra: list[ExtraReceiver] = field(default_factory=list)
+    multi_idx: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    fusion_p: fusion.FusionParams | None = None  # (m, k) tables of the ships in multi_idx
+    fusion_sigma: np.ndarray | None = None  # (m, 2k, 2k) joint covariance of their fixes, m2
+    fusion_var: np.ndarray | None = None  # (m,) per-axis variance of the fix of all receivers
+    receiver_fixes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (m, k) N, E, valid
+    fused: fusion.Fused | None = None  # last fused fix of the ships in multi_idx
+    ekf_multi: np.ndarray | None = None  # rows of ekf_idx with several receivers
+    ekf_multi_rows: np.ndarray | None = None  # ... and their rows in multi_idx
+    # adaptive GNSS noise of the ekf (None when no ship uses it)
+    adapt_rows: np.ndarray | None = None  # rows of ekf_idx with adaptive R
+    adapt_p: adaptive.AdaptiveParams | None = None
+    adapt_s: adaptive.AdaptiveState | None = None
+    ekf_innovation: ekf.Innovation | None = None  # last ekf update's innovations (diagnostic)
 
     @classmethod
     def build(cls, configs: Sequence[Mapping[str, Any]], filters: Sequence[str], x: np.ndarray,
@@ -145,10 +215,10 @@ class Navigation:
 
         nav_cfg = section("navigation")
         for c in nav_cfg:
-            unknown = set(c) - {"pv_sp_m2ps3", "heading_sp_rad2ps3"}
+            unknown = set(c) - set(NAVIGATION_KEYS)
             if unknown:
-                raise InputError(f"unknown key(s) {sorted(unknown)}; expected pv_sp_m2ps3, "
-                                 "heading_sp_rad2ps3", key="navigation")
+                raise InputError(f"unknown key(s) {sorted(unknown)}; expected some of "
+                                 f"{', '.join(NAVIGATION_KEYS)}", key="navigation")
         gnss_p = gnss.build(section("gnss"), dt)
         compass_p = compass.build(section("compass"), dt)
         waves_p = waves.build(section("waves"), dt)
@@ -168,8 +238,13 @@ class Navigation:
                                gnss.GNSS_NORMAL_DIMS + compass.COMPASS_NORMAL_DIMS
                                + waves.WAVE_NORMAL_DIMS).next()
         a, b = gnss.GNSS_NORMAL_DIMS, gnss.GNSS_NORMAL_DIMS + compass.COMPASS_NORMAL_DIMS
+        multi = _Receivers.build(configs, gnss_p, dt, seed, encounter, ship_in_encounter)
+        pv_sigma = gnss_p.sigma_m
+        if multi.idx.size:  # the filter starts converged for the fix of all receivers
+            pv_sigma = pv_sigma.copy()
+            pv_sigma[multi.idx] = np.sqrt(multi.var)
         pv_p = pv.build([{"sigma_m": s, "sp_m2ps3": c.get("pv_sp_m2ps3", DEFAULT_PV_SP),
-                          "dt_s": dt} for s, c in zip(gnss_p.sigma_m, nav_cfg, strict=True)])
+                          "dt_s": dt} for s, c in zip(pv_sigma, nav_cfg, strict=True)])
         # filters start converged one step before the first fix, so the first update
         # predicts to the time of the first fix
         vel = _earth_velocity(x)
@@ -198,6 +273,19 @@ class Navigation:
             ekf_s = ekf.initial_state(ekf_p, xe[NORTH] - vel[0, ekf_idx] * dt,
                                       xe[EAST] - vel[1, ekf_idx] * dt, xe[PSI] - xe[R] * dt,
                                       xe[U], xe[V], xe[R])
+        adapt_cfg = _adaptive_configs(nav_cfg)
+        for i, (f, c) in enumerate(zip(filters, adapt_cfg, strict=True)):
+            if c is not None and f == "pv":
+                raise InputError(f"ship {i}: adaptive_window_steps needs filter: ekf",
+                                 key="navigation")
+        adapt_rows = adapt_p = adapt_s = None
+        rows = [j for j, i in enumerate(ekf_idx) if adapt_cfg[i] is not None]
+        if rows:
+            adapt_rows = np.array(rows, dtype=np.int64)
+            adapt_p = adaptive.build([adapt_cfg[ekf_idx[j]] for j in rows], "gnss")
+            adapt_s = adaptive.start(adapt_p, np.eye(2)[None] * ekf_p.gnss_var_m2[adapt_rows,
+                                                                                None, None])
+        ekf_multi = np.flatnonzero(np.isin(ekf_idx, multi.idx))
         return cls(
             filter_pv=np.array([f == "pv" for f in filters]),
             gnss_p=gnss_p, gnss_s=gnss.init(gnss_p, init_draws[:, :a]),
@@ -213,7 +301,12 @@ class Navigation:
             ekf_rejections=gating.init_state(ekf_idx.size),
             has_waves=any(c.get("waves") for c in configs),
             has_log=any(c.get("log") is not None for c in configs),
-            has_actuator_sensors=any(c.get("actuators") is not None for c in configs))
+            has_actuator_sensors=any(c.get("actuators") is not None for c in configs),
+            extra=multi.extra, multi_idx=multi.idx, fusion_p=multi.params,
+            fusion_sigma=multi.sigma, fusion_var=multi.var,
+            ekf_multi=ekf_multi if ekf_multi.size else None,
+            ekf_multi_rows=np.searchsorted(multi.idx, ekf_idx[ekf_multi]),
+            adapt_rows=adapt_rows, adapt_p=adapt_p, adapt_s=adapt_s)
 
     def update(self, x: np.ndarray, env: Env) -> np.ndarray:
         """Measure the true state ``x`` ``(8, n)``, update the filters; returns ``est`` (6, n)."""
@@ -224,6 +317,8 @@ class Navigation:
             wave_ne = waves.position_offset(self.waves_p, self.waves_s, x[PSI])
         self.gnss_s, self.fix = gnss.step(self.gnss_p, self.gnss_s, x, self.banks["gnss"].next(),
                                           self.banks["gnss_gross"].next(), wave_ne, wave_psi)
+        if self.extra:
+            self._measure_extra_receivers(x, wave_ne, wave_psi)
         self.compass_s, self.heading_meas = compass.step(
             self.compass_p, self.compass_s, x[PSI], self.banks["compass"].next(), wave_psi)
         if self.has_log:  # recorded only: the filters here do not use the log or rudder/rpm
@@ -242,13 +337,23 @@ class Navigation:
         # position: the receiver's PV filter on the fix moved to the reference point
         ref_n, ref_e = gnss.to_reference_point(self.gnss_p, self.fix.north_m, self.fix.east_m,
                                                psi_new)
-        pred = pv.predict(self.pv_p, self.pv_s)
+        fix_valid, pv_p = self.fix.valid, self.pv_p
+        if self.multi_idx.size:  # several receivers: the fused fix and its variance
+            mi = self.multi_idx
+            self.fused = self._fuse(np.arange(mi.size), psi_new[mi])
+            ref_n, ref_e, fix_valid = ref_n.copy(), ref_e.copy(), fix_valid.copy()
+            ref_n[mi], ref_e[mi] = self.fused.position[:, 0], self.fused.position[:, 1]
+            fix_valid[mi] = self.fused.valid
+            sigma = pv_p.sigma_m.copy()
+            sigma[mi] = np.sqrt(self._fused_variance(self.fused, np.arange(mi.size)))
+            pv_p = replace(pv_p, sigma_m=sigma)
+        pred = pv.predict(pv_p, self.pv_s)
         innov = np.stack([ref_n - pred.x[:, 0], ref_e - pred.x[:, 1]], axis=1)
-        s_innov = pred.P[:, :, 0, 0] + (self.pv_p.sigma_m ** 2)[:, None]
-        d = np.where(self.fix.valid, gating.normalised_distance(innov, s_innov), np.nan)
+        s_innov = pred.P[:, :, 0, 0] + (pv_p.sigma_m ** 2)[:, None]
+        d = np.where(fix_valid, gating.normalised_distance(innov, s_innov), np.nan)
         g = gating.gate(self.gate_p, d, self.gate_rejections)
         self.gate_rejections = g.rejections
-        self.pv_s = pv.update(self.pv_p, pred, np.nan_to_num(ref_n), np.nan_to_num(ref_e),
+        self.pv_s = pv.update(pv_p, pred, np.nan_to_num(ref_n), np.nan_to_num(ref_e),
                               g.accept)
         if g.restart.any():  # genuine jump: restart on the fix, keep the velocity
             x_pv = self.pv_s.x.copy()
@@ -279,20 +384,173 @@ class Navigation:
                       self.log_meas.u_mps[i] if self.log_meas is not None
                       else np.zeros(i.size)], axis=1)
         valid = self.fix.valid[i]
+        gnss_cov = None  # (k, 2, 2) GNSS block of R when it is not the configured one
+        if self.ekf_multi is not None:  # several receivers: the fused fix and its covariance
+            em = self.ekf_multi
+            fused = self._fuse(self.ekf_multi_rows, pred.x[em, 2])
+            z[em, 0], z[em, 1] = fused.position[:, 0], fused.position[:, 1]
+            valid = valid.copy()
+            valid[em] = fused.valid
+            gnss_cov = np.eye(2)[None] * self.ekf_p.gnss_var_m2[:, None, None]
+            # no fix from any receiver: no update; any finite covariance keeps R invertible
+            gnss_cov[em] = np.where(fused.valid[:, None, None], fused.cov, np.eye(2)[None]
+                                    * self.fusion_var[self.ekf_multi_rows, None, None])
+        if self.adapt_rows is not None:  # adapted R where its window holds enough fixes
+            ready = self.adapt_s.count >= self.adapt_p.min_samples
+            if ready.any():
+                if gnss_cov is None:
+                    gnss_cov = np.eye(2)[None] * self.ekf_p.gnss_var_m2[:, None, None]
+                gnss_cov[self.adapt_rows[ready]] = self.adapt_s.R[ready]
         innov = z[:, :2] - pred.x[:, :2]
-        s_pos = pred.P[:, :2, :2] + np.eye(2)[None] * self.ekf_p.gnss_var_m2[:, None, None]
+        if gnss_cov is None:
+            s_pos = pred.P[:, :2, :2] + np.eye(2)[None] * self.ekf_p.gnss_var_m2[:, None, None]
+            R_meas = None
+        else:
+            s_pos = pred.P[:, :2, :2] + gnss_cov
+            R_meas = ekf.measurement_covariance(self.ekf_p, gnss_cov_m2=gnss_cov)
         d = np.where(valid, gating.normalised_distance(innov, s_pos), np.nan)
         g = gating.gate(_take_gate(self.gate_p, i), d, self.ekf_rejections)
         self.ekf_rejections = g.rejections
         mask = np.stack([g.accept, g.accept, np.ones(i.size, bool),
                          np.full(i.size, self.log_meas is not None)], axis=1)
-        state, _ = ekf.update(self.ekf_p, pred, np.nan_to_num(z), mask)
+        state, self.ekf_innovation = ekf.update(self.ekf_p, pred, np.nan_to_num(z), mask, R_meas)
+        if self.adapt_rows is not None:
+            nu, hph, ok = adaptive.innovation_group(self.ekf_innovation.nu,
+                                                    self.ekf_innovation.hph, mask,
+                                                    (ekf.ZN, ekf.ZE))
+            a = self.adapt_rows
+            self.adapt_s = adaptive.step(self.adapt_p, self.adapt_s, nu[a], hph[a], ok[a])
         if g.restart.any():  # genuine jump: restart the position on the fix
             xs = state.x.copy()
             xs[g.restart, 0], xs[g.restart, 1] = z[g.restart, 0], z[g.restart, 1]
             state = ekf.EkfState(xs, state.P)
         self.ekf_s = state
         return state.x[:, :N_EST].T
+
+    def _measure_extra_receivers(self, x: np.ndarray, wave_ne: np.ndarray | None,
+                                 wave_psi: np.ndarray | None) -> None:
+        """Step ``gnss2``, ... on the ships carrying them; collect every receiver's antenna fix
+        of the ships with several receivers into :attr:`receiver_fixes` ``(m, k)``."""
+        mi = self.multi_idx
+        m, k = self.fusion_p.sigma_m.shape
+        north, east = np.full((m, k), np.nan), np.full((m, k), np.nan)
+        valid = np.zeros((m, k), dtype=bool)
+        north[:, 0], east[:, 0], valid[:, 0] = (self.fix.north_m[mi], self.fix.east_m[mi],
+                                                self.fix.valid[mi])
+        for rec in self.extra:  # one vectorised step per receiver name, not per ship
+            j = rec.idx
+            rec.state, rec.fix = gnss.step(
+                rec.params, rec.state, x[:, j], rec.normals.next(), rec.uniforms.next(),
+                None if wave_ne is None else wave_ne[:, j],
+                None if wave_psi is None else wave_psi[j])
+            north[rec.rows, rec.slot], east[rec.rows, rec.slot] = rec.fix.north_m, rec.fix.east_m
+            valid[rec.rows, rec.slot] = rec.fix.valid
+        self.receiver_fixes = north, east, valid
+
+    def _fuse(self, rows: np.ndarray, heading: np.ndarray) -> fusion.Fused:
+        """Fused fix at the reference point of the ships ``multi_idx[rows]``, moved with
+        ``heading`` ``(len(rows),)`` rad [seed 003, eqs 2-5]."""
+        north, east, valid = self.receiver_fixes
+        p = self.fusion_p
+        ref_n, ref_e = fusion.to_reference_point(north[rows], east[rows], heading[:, None],
+                                                 p.offset_x_m[rows], p.offset_y_m[rows])
+        return fusion.fuse(np.stack([ref_n, ref_e], axis=-1), self.fusion_sigma[rows],
+                           valid[rows] & p.present[rows])
+
+    def _fused_variance(self, fused: fusion.Fused, rows: np.ndarray) -> np.ndarray:
+        """Per-axis variance (m2, ``(len(rows),)``) of a fused fix: ``P_f = p I`` for isotropic
+        receivers; without any fix (no update) the all-receiver value keeps the algebra finite."""
+        var = 0.5 * (fused.cov[:, 0, 0] + fused.cov[:, 1, 1])
+        return np.where(fused.valid, var, self.fusion_var[rows])
+
+
+@dataclass
+class _Receivers:
+    """The further receivers of a batch and the fusion tables of the ships carrying any."""
+
+    extra: list[ExtraReceiver]
+    idx: np.ndarray  # (m,) ships with several receivers
+    params: fusion.FusionParams | None
+    sigma: np.ndarray | None  # (m, 2k, 2k) joint covariance, m2
+    var: np.ndarray  # (m,) per-axis variance of the fusion of all receivers, m2
+
+    @classmethod
+    def build(cls, configs: Sequence[Mapping[str, Any]], gnss_p: gnss.GnssParams, dt: float,
+              seed: int, encounter: Sequence[int], ship_in_encounter: Sequence[int]
+              ) -> _Receivers:
+        for c in configs:
+            fcfg = c.get("fusion")
+            if fcfg is None:
+                continue
+            unknown = set(fcfg) - set(FUSION_KEYS)
+            if unknown:
+                raise InputError(f"unknown key(s) {sorted(unknown)}; expected "
+                                 f"{', '.join(FUSION_KEYS)}", key="fusion")
+            if not any(name in c for name in EXTRA_GNSS):
+                raise InputError("fusion needs a second receiver (gnss2)", key="fusion")
+        has = np.array([[name in c for name in EXTRA_GNSS] for c in configs],
+                       dtype=bool).reshape(len(configs), len(EXTRA_GNSS))
+        idx = np.flatnonzero(has.any(axis=1))
+        if not idx.size:
+            return cls([], idx, None, None, np.zeros(0))
+        names = [name for j, name in enumerate(EXTRA_GNSS) if has[:, j].any()]
+        m, k = idx.size, 1 + len(names)
+        sigma, ox, oy = np.ones((m, k)), np.zeros((m, k)), np.zeros((m, k))
+        present = np.zeros((m, k), dtype=bool)
+        # offsets of fusion are antenna -> reference point, the antenna's position negated
+        sigma[:, 0], present[:, 0] = gnss_p.sigma_m[idx], True
+        ox[:, 0], oy[:, 0] = -gnss_p.antenna_x_m[idx], -gnss_p.antenna_y_m[idx]
+        enc, sie = np.asarray(encounter), np.asarray(ship_in_encounter)
+        extra = []
+        for slot, name in enumerate(names, start=1):
+            ships = np.flatnonzero(has[:, EXTRA_GNSS.index(name)])
+            try:
+                params = gnss.build([dict(configs[i].get(name) or {}) for i in ships], dt)
+            except InputError as err:  # the gnss module names its section "gnss"
+                raise InputError(err.message, key=(err.key or "gnss").replace(
+                    "gnss", name, 1)) from None
+            normals = NoiseBank(seed, enc[ships], sie[ships], name, gnss.GNSS_NORMAL_DIMS)
+            uniforms = NoiseBank(seed, enc[ships], sie[ships], f"{name}_gross",
+                                 gnss.GNSS_UNIFORM_DIMS, "uniform")
+            # the receiver's own stream starts it (the shared "initial" stream is left as is)
+            state = gnss.init(params, normals.next())
+            rows = np.searchsorted(idx, ships)
+            sigma[rows, slot], present[rows, slot] = params.sigma_m, True
+            ox[rows, slot], oy[rows, slot] = -params.antenna_x_m, -params.antenna_y_m
+            extra.append(ExtraReceiver(name, ships, rows, slot, params, state, normals,
+                                       uniforms))
+        for slot, name in enumerate(("gnss", *names)):  # the fusion weighs by 1 / sigma^2
+            if np.any(sigma[present[:, slot], slot] <= 0.0):
+                raise InputError("each receiver of a ship with several needs sigma_m > 0",
+                                 key=name)
+        rho = np.array([float((configs[i].get("fusion") or {}).get("correlation", 0.0))
+                        for i in idx])
+        if np.any(~np.isfinite(rho) | (rho < 0.0) | (rho >= 1.0)):
+            raise InputError("correlation must be in [0, 1)", key="fusion")
+        params = fusion.FusionParams(sigma, ox, oy, present, rho)
+        joint = fusion.joint_covariance(fusion.receiver_covariance(params), rho)
+        full = fusion.fuse(np.zeros((m, k, 2)), joint, present)
+        var = 0.5 * (full.cov[:, 0, 0] + full.cov[:, 1, 1])
+        return cls(extra, idx, params, joint, var)
+
+
+def _adaptive_configs(nav_cfg: Sequence[Mapping[str, Any]]) -> list[dict[str, Any] | None]:
+    """Per ship the settings of :func:`trafficsim.estimation.adaptive.build` from the
+    ``adaptive_*`` keys of ``navigation`` (None: adaptive R off), checked."""
+    out: list[dict[str, Any] | None] = []
+    for i, c in enumerate(nav_cfg):
+        cfg = {key[len("adaptive_"):]: value for key, value in c.items()
+               if key.startswith("adaptive_")}
+        if cfg and "window_steps" not in cfg:
+            raise InputError(f"ship {i}: adaptive_* keys need adaptive_window_steps",
+                             key="navigation")
+        if cfg:
+            try:
+                adaptive.build([cfg], "gnss")
+            except (ValueError, TypeError) as err:  # its messages name the keys unprefixed
+                raise InputError(f"adaptive settings: {err}", key="navigation") from None
+        out.append(cfg or None)
+    return out
 
 
 def _earth_velocity(x: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ import numpy as np
 
 #: every purpose that draws random numbers; append only (the index is part of the stream key)
 PURPOSES = ("gnss", "gnss_gross", "compass", "log", "actuators", "waves", "radar", "ais",
-            "initial", "ais_rx")
+            "initial", "ais_rx", "gnss2", "gnss2_gross", "gnss3", "gnss3_gross")
 BLOCK_STEPS = 512
 
 
