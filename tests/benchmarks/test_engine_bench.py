@@ -50,13 +50,17 @@ def test_engine_scaling_with_batch_size(benchmark, n_encounters):
         print(f"\n{2 * n_encounters} ships: {rate:,.0f} ship-steps/s")
 
 
-@pytest.mark.parametrize("filter_name", ["pv", "ekf"])
-def test_engine_with_instruments_and_filter_10000_ships(benchmark, filter_name):
-    """Engine plus DGPS, gyro, wave motion and a gated own-ship filter on every ship."""
+@pytest.mark.parametrize("filter_name, tracking", [("pv", False), ("ekf", False),
+                                                   ("pv", True)])
+def test_engine_with_instruments_and_filter_10000_ships(benchmark, filter_name, tracking):
+    """Engine plus DGPS, gyro, wave motion and a gated own-ship filter on every ship (and with
+    ``tracking``: radar, AIS and a tracker of the other ship)."""
     batch = _batch("container", 5000)
     sensors = {"gnss": {"sigma_m": 2.0, "gross_prob": 0.001},
                "compass": {"kind": "gyro", "sigma_deg": 0.3},
                "waves": {"heading_sigma_deg": 0.3, "sway_sigma_m": 0.5}}
+    if tracking:
+        sensors = {**sensors, "radar": {}, "ais": {}}
     batch.sensors = [sensors] * batch.n_ships
     batch.filters = [filter_name] * batch.n_ships
     sim = Simulation.start(batch, 1.0, seed=1)
@@ -65,4 +69,5 @@ def test_engine_with_instruments_and_filter_10000_ships(benchmark, filter_name):
     if benchmark.stats is not None:
         rate = sim.batch.n_ships * STEPS / benchmark.stats.stats.mean
         benchmark.extra_info["ship_steps_per_s"] = rate
-        print(f"\nwith instruments and {filter_name} filter: {rate:,.0f} ship-steps/s")
+        extra = " and tracking" if tracking else ""
+        print(f"\nwith instruments, {filter_name} filter{extra}: {rate:,.0f} ship-steps/s")
