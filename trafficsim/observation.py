@@ -95,7 +95,8 @@ class Observation:
             self.ais_s, reports = ais.step(
                 self.ais_p, self.ais_s, t_s, self.obs, self.tgt, x, vel_ne,
                 self.banks["ais"].next(), self.banks["ais_rx"].next())
-        self.tracks = tracker.step(self.tracker_p, self.tracks, self.obs, t_s, plots, reports)
+        self.tracks = tracker.step(self.tracker_p, self.tracks, self.obs, t_s, plots, reports,
+                                   inplace=True)
 
     def predicted_tracks(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Tracks predicted to ``t_s``: state ``(m, 4)`` north, east, v_north, v_east and

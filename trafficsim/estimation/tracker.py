@@ -286,7 +286,8 @@ def ais_measurement(reports: AisReports, sigma_position_m: np.ndarray,
 
 
 def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
-         radar: RadarPlots | None = None, ais: AisReports | None = None) -> TrackState:
+         radar: RadarPlots | None = None, ais: AisReports | None = None,
+         inplace: bool = False) -> TrackState:
     """Use this step's radar plots and AIS reports, start and delete tracks.
 
     Args:
@@ -296,6 +297,7 @@ def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
         t_s: time of this step, s (plots are stamped now; AIS reports carry their own stamp).
         radar: this step's plots, or None.
         ais: this step's received reports, or None.
+        inplace: update ``state`` itself instead of a copy (the engine's step path).
 
     Returns: the new tracks (each held at the time of its newest measurement; use
     :func:`predict` for the state at another time).
@@ -319,7 +321,7 @@ def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
         a_valid, a_t = np.zeros(m, dtype=bool), np.full(m, t_s)
         a_z, a_R = np.zeros((m, 4)), np.zeros((m, 4, 4))
 
-    new = state.copy()
+    new = state if inplace else state.copy()
 
     def c(a: np.ndarray, dtype: type = float) -> np.ndarray:
         return np.ascontiguousarray(a, dtype=dtype)
