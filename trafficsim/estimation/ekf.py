@@ -93,7 +93,7 @@ from trafficsim.estimation.linalg import (  # noqa: F401  (expm_stack, van_loan:
 )
 from trafficsim.jit import kernel
 from trafficsim.ships import base, kernels
-from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, R, U, V
+from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, R, U, V, gather_ship
 
 #: number of filter states and their indices (see the module docstring)
 N_X = 8
@@ -393,10 +393,7 @@ def _accel_jacobian(codes: np.ndarray, P: np.ndarray, X: np.ndarray, E: np.ndarr
     x = np.empty(8)
     env = np.empty(4)
     for i in range(n):
-        for j in range(8):
-            x[j] = X[j, i]
-        for j in range(4):
-            env[j] = E[j, i]
+        gather_ship(X, E, i, x, env)
         _accel_jacobian_one(codes[i], P[i], x, env, rows, scale, rel, out[i])
 
 
@@ -413,10 +410,7 @@ def _filter_matrices(codes: np.ndarray, P: np.ndarray, X: np.ndarray, E: np.ndar
     env = np.empty(4)
     a = np.empty((3, rows.shape[0]))
     for i in range(n):
-        for j in range(8):
-            x[j] = X[j, i]
-        for j in range(4):
-            env[j] = E[j, i]
+        gather_ship(X, E, i, x, env)
         _accel_jacobian_one(codes[i], P[i], x, env, rows, scale, rel, a)
         Fi = F[i]
         Bi = B[i]

@@ -36,6 +36,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from trafficsim.jit import kernel
+
 N_STATE = 8
 NORTH, EAST, PSI, U, V, R, RUDDER, RPS = range(N_STATE)
 STATE_NAMES = ("north_m", "east_m", "psi_rad", "u_mps", "v_mps", "r_radps", "rudder_rad", "rps")
@@ -149,6 +151,16 @@ class Actuators:
             rps_min=stack(a, "rps_min"),
             engine_tau_s=stack(a, "engine_tau_s"),
         )
+
+
+@kernel
+def gather_ship(X: np.ndarray, E: np.ndarray, i: int, x: np.ndarray, env: np.ndarray) -> None:
+    """Copy ship ``i``'s state column of ``X (8, n)`` into ``x (8,)`` and its environment
+    column of ``E (4, n)`` into ``env (4,)`` (compiled loops over ships start with this)."""
+    for j in range(8):
+        x[j] = X[j, i]
+    for j in range(4):
+        env[j] = E[j, i]
 
 
 def stack(dicts: Sequence[Mapping[str, Any]], key: str, default: float | None = None) -> np.ndarray:

@@ -20,6 +20,7 @@ import numpy as np
 
 from trafficsim.jit import kernel
 from trafficsim.ships import mmg, modular, nomoto, response
+from trafficsim.ships.base import gather_ship
 
 #: integer codes of the model families in the compiled dispatch
 FAMILY_CODE = {"nomoto": 0, "response": 1, "mmg": 2, "modular": 3}
@@ -77,10 +78,7 @@ def step_ships(codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
     k4 = np.empty(8)
     env = np.empty(4)
     for i in range(n):
-        for j in range(8):
-            x[j] = X[j, i]
-        for j in range(4):
-            env[j] = E[j, i]
+        gather_ship(X, E, i, x, env)
         code, p, a = codes[i], P[i], A[i]
         rc, nc = rudder_cmd[i], rps_cmd[i]
         h = dt / substeps[i]
@@ -110,10 +108,7 @@ def accelerations(codes: np.ndarray, P: np.ndarray, X: np.ndarray, E: np.ndarray
     x = np.empty(8)
     env = np.empty(4)
     for i in range(n):
-        for j in range(8):
-            x[j] = X[j, i]
-        for j in range(4):
-            env[j] = E[j, i]
+        gather_ship(X, E, i, x, env)
         du, dv, dr = accel(codes[i], P[i], x, env)
         out[0, i] = du
         out[1, i] = dv

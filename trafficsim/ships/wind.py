@@ -62,7 +62,7 @@ from typing import Any
 import numpy as np
 
 from trafficsim.jit import kernel
-from trafficsim.ships.base import PSI, RHO_AIR, Env, U, V, env_table
+from trafficsim.ships.base import PSI, RHO_AIR, Env, U, V, env_table, gather_ship
 
 #: Table angles, degrees (Isherwood 1972, Table; 10 deg steps from head to stern wind).
 ANGLES_DEG = np.arange(0.0, 181.0, 10.0)
@@ -283,10 +283,7 @@ def _loads_all(W: np.ndarray, X: np.ndarray, E: np.ndarray) -> np.ndarray:
     x = np.empty(8)
     env = np.empty(4)
     for i in range(n):
-        for j in range(8):
-            x[j] = X[j, i]
-        for j in range(4):
-            env[j] = E[j, i]
+        gather_ship(X, E, i, x, env)
         out[0, i], out[1, i], out[2, i] = loads1(W[i], x, env)
     return out
 
