@@ -100,7 +100,7 @@ import numpy as np
 from trafficsim.errors import InputError
 from trafficsim.geometry import cpa
 from trafficsim.jit import kernel
-from trafficsim.sensors import check_keys, column
+from trafficsim.sensors import check_keys, column, flags
 from trafficsim.sensors.ais import COG_STEP_RAD, POSITION_STEP_M, SOG_STEP_MPS, AisReports
 from trafficsim.sensors.radar import RadarPlots
 
@@ -206,16 +206,6 @@ def chi2_quantile_even(p: float, dof: int) -> float:
     return 0.5 * (lo + hi)
 
 
-def _flags(configs: Sequence[Mapping], key: str, what: str) -> np.ndarray:
-    out = []
-    for i, cfg in enumerate(configs):
-        value = cfg.get(key, True)
-        if not isinstance(value, bool):
-            raise InputError(f"expected true or false, got {value!r}", key=f"{what}[{i}].{key}")
-        out.append(value)
-    return np.array(out, dtype=bool)
-
-
 def build(configs: Sequence[Mapping]) -> TrackerParams:
     """Tracker settings from per-observer config dicts (keys and defaults: module docstring)."""
     what = "tracker"
@@ -234,9 +224,9 @@ def build(configs: Sequence[Mapping]) -> TrackerParams:
         gate2=np.array([chi2_quantile_even(p, 2) for p in p_gate]),
         gate4=np.array([chi2_quantile_even(p, 4) for p in p_gate]),
         max_gate_failures=fails.astype(np.int64),
-        latency_compensation=_flags(configs, "latency_compensation", what),
-        use_radar=_flags(configs, "use_radar", what),
-        use_ais=_flags(configs, "use_ais", what),
+        latency_compensation=flags(configs, "latency_compensation", what),
+        use_radar=flags(configs, "use_radar", what),
+        use_ais=flags(configs, "use_ais", what),
         ais_sigma_position_m=column(configs, "ais_sigma_position_m", 5.0, what, minimum=0.0),
         ais_sigma_velocity_mps=column(configs, "ais_sigma_velocity_mps", 0.1, what,
                                       minimum=0.0),

@@ -78,6 +78,17 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
     return out * scale
 
 
+def flags(configs: Sequence[Mapping], key: str, what: str, default: bool = True) -> np.ndarray:
+    """``(n,)`` bool array of ``cfg.get(key, default)``; a non-boolean value is an error."""
+    out = []
+    for i, cfg in enumerate(configs):
+        value = cfg.get(key, default)
+        if not isinstance(value, bool):
+            raise InputError(f"expected true or false, got {value!r}", key=f"{what}[{i}].{key}")
+        out.append(value)
+    return np.array(out, dtype=bool)
+
+
 def choice(configs: Sequence[Mapping], key: str, options: Sequence[str], default: str | None,
            what: str) -> list[str]:
     """Per-ship string option; ``default=None`` makes the key required."""

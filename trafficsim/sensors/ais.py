@@ -60,7 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.sensors import KNOT_MPS, check_keys, column, wrap_2pi
+from trafficsim.sensors import KNOT_MPS, check_keys, column, flags, wrap_2pi
 from trafficsim.sensors.radar import probit
 from trafficsim.ships.base import EAST, NORTH, PSI, R
 
@@ -179,14 +179,8 @@ def build(configs: Sequence[Mapping]) -> AisParams:
     if np.any(np.abs(lat) >= math.pi / 2):
         raise InputError("ref_latitude_deg must be inside (-90, 90)",
                          key=f"{what}.ref_latitude_deg")
-    enabled = []
-    for i, cfg in enumerate(configs):
-        value = cfg.get("enabled", True)
-        if not isinstance(value, bool):
-            raise InputError(f"expected true or false, got {value!r}", key=f"{what}[{i}].enabled")
-        enabled.append(value)
     return AisParams(
-        enabled=np.array(enabled, dtype=bool),
+        enabled=flags(configs, "enabled", what),
         sigma_position_m=column(configs, "sigma_position_m", 5.0, what, minimum=0.0),
         sigma_velocity_mps=column(configs, "sigma_velocity_mps", 0.1, what, minimum=0.0),
         sigma_heading_rad=column(configs, "sigma_heading_deg", 0.5, what, scale=math.pi / 180.0,

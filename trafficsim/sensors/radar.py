@@ -62,7 +62,7 @@ from statistics import NormalDist
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.sensors import check_keys, column, rotate_body_to_earth, wrap_pi
+from trafficsim.sensors import check_keys, column, flags, rotate_body_to_earth, wrap_pi
 from trafficsim.ships.base import EAST, NORTH, PSI
 
 #: standard normals per directed pair per step: range noise, bearing noise, detection draw
@@ -161,12 +161,6 @@ def build(configs: Sequence[Mapping]) -> RadarParams:
     p_detect = column(configs, "p_detect", 0.8, what, minimum=0.0)
     if np.any(p_detect > 1.0):
         raise InputError(f"p_detect must be <= 1, got {p_detect.max()}", key=f"{what}.p_detect")
-    enabled = []
-    for i, cfg in enumerate(configs):
-        value = cfg.get("enabled", True)
-        if not isinstance(value, bool):
-            raise InputError(f"expected true or false, got {value!r}", key=f"{what}[{i}].enabled")
-        enabled.append(value)
     return RadarParams(
         sigma_range_m=column(configs, "sigma_range_m", DEFAULT_SIGMA_RANGE_M, what, minimum=0.0),
         sigma_bearing_rad=column(configs, "sigma_bearing_deg", DEFAULT_SIGMA_BEARING_DEG, what,
@@ -179,7 +173,7 @@ def build(configs: Sequence[Mapping]) -> RadarParams:
         scan_phase_s=column(configs, "scan_phase_s", 0.0, what),
         antenna_x_m=column(configs, "antenna_x_m", 0.0, what),
         antenna_y_m=column(configs, "antenna_y_m", 0.0, what),
-        enabled=np.array(enabled, dtype=bool),
+        enabled=flags(configs, "enabled", what),
     )
 
 
