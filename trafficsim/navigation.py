@@ -169,6 +169,7 @@ class Navigation:
     ekf_model: Any = None  # ekf.ShipModel of those ships
     ekf_s: Any = None  # ekf.EkfState of those ships
     ekf_rejections: np.ndarray | None = None
+    ekf_qc: np.ndarray | None = None  # process noise density of the ekf ships (formed once)
     has_waves: bool = False
     has_log: bool = False
     has_actuator_sensors: bool = False
@@ -376,8 +377,11 @@ class Navigation:
         else:
             rudder, rps = x[RUDDER, i], x[RPS, i]
         wind = _take(env.wind_speed_mps, i), _take(env.wind_from_rad, i)
+        if self.ekf_qc is None:
+            self.ekf_qc = ekf.process_noise_density(self.ekf_p)
         pred = ekf.predict(self.ekf_p, self.ekf_model, self.ekf_s, rudder, rps, self.dt,
-                           wind_speed_mps=wind[0], wind_from_rad=wind[1])
+                           wind_speed_mps=wind[0], wind_from_rad=wind[1],
+                           process_noise=self.ekf_qc)
         dn, de = rotate_body_to_earth(pred.x[:, 2], self.gnss_p.antenna_x_m[i],
                                       self.gnss_p.antenna_y_m[i])
         z = np.stack([self.fix.north_m[i] - dn, self.fix.east_m[i] - de, self.heading_meas[i],

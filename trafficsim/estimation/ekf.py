@@ -587,8 +587,8 @@ def _propagate_covariance(F: np.ndarray, Qc: np.ndarray, B: np.ndarray, Su: np.n
 
 def predict(params: EkfParams, model: ShipModel, state: EkfState, rudder_rad: np.ndarray,
             rps: np.ndarray, dt: float, *, wind_speed_mps: Any = 0.0, wind_from_rad: Any = 0.0,
-            rudder_cmd_rad: np.ndarray | None = None, rps_cmd: np.ndarray | None = None
-            ) -> EkfState:
+            rudder_cmd_rad: np.ndarray | None = None, rps_cmd: np.ndarray | None = None,
+            process_noise: np.ndarray | None = None) -> EkfState:
     """Time update over ``dt`` seconds [seed 002, eqs 4.13-4.14, 5.8-5.9, 7.1].
 
     Args:
@@ -601,6 +601,8 @@ def predict(params: EkfParams, model: ShipModel, state: EkfState, rudder_rad: np
         rudder_cmd_rad, rps_cmd: ``(n,)`` commands over the step if known: the prediction then
             runs the steering gear and engine lags from the measured values towards them exactly
             as the simulation does; default: the measured values held (zero-order hold).
+        process_noise: ``Q_c`` of ``params`` (:func:`process_noise_density`), to save forming
+            it on every step.
 
     Returns:
         The predicted estimate and covariance.
@@ -618,7 +620,8 @@ def predict(params: EkfParams, model: ShipModel, state: EkfState, rudder_rad: np
     Su = np.stack([params.rudder_var_rad2, params.rps_var], axis=1)
     P_new = np.empty((n, N_X, N_X))
     A = np.empty((n, N_X, N_X))  # workspace: the transition of each ship
-    _propagate_covariance(F, process_noise_density(params), B, Su,
+    Qc = process_noise_density(params) if process_noise is None else process_noise
+    _propagate_covariance(F, Qc, B, Su,
                           np.ascontiguousarray(state.P, dtype=float), float(dt), _PADE, _THETA,
                           P_new, A)
 
