@@ -30,7 +30,8 @@ class ShipSetup:
         route_m: ``(k, 2)`` waypoints north/east in metres (may be empty: hold course).
         ship_in_encounter: index within the encounter (keys the ship's random streams).
         sensors: instrument configs (ship-file defaults merged with scenario overrides).
-        filter: own-ship filter, ``none`` (perfect knowledge) or ``pv``.
+        filter: own-ship filter, ``none`` (perfect knowledge), ``pv`` or ``ekf``.
+        behaviour: collision-avoidance behaviour (:mod:`trafficsim.colregs.decider`).
     """
 
     name: str
@@ -44,6 +45,7 @@ class ShipSetup:
     ship_in_encounter: int = 0
     sensors: Mapping[str, Any] = field(default_factory=dict)
     filter: str = "none"
+    behaviour: str = "colregs"
 
 
 @dataclass(frozen=True)
@@ -90,6 +92,7 @@ class Batch:
     sensors: list[Mapping[str, Any]]  # per-ship instrument configs
     filters: list[str]  # per-ship own-ship filter
     specs: list[Mapping[str, Any]]  # per-ship ship files (the EKF runs the ship's own model)
+    behaviours: list[str] = field(default_factory=list)  # per-ship collision avoidance
     t_s: float = 0.0
 
     @property
@@ -179,6 +182,7 @@ def build_batch(ships: Sequence[ShipSetup], envs: Sequence[EncounterEnv]) -> Bat
         ship_in_encounter=np.array([s.ship_in_encounter for s in ships], dtype=np.int64),
         sensors=[s.sensors for s in ships],
         filters=[s.filter for s in ships],
+        behaviours=[s.behaviour for s in ships],
         specs=specs,
     )
     batch.x[RPS] = batch.rps_for_speed(batch.x[U])

@@ -1,4 +1,4 @@
-"""Command line: ``trafficsim run | trial | validate``.
+"""Command line: ``trafficsim run | explain | trial | validate``.
 
 Every user error ends as one line on stderr (``trafficsim: error: file:line: key: message``) and
 exit code 2, never a traceback. Heavy imports happen inside the commands so ``--help`` is fast.
@@ -50,6 +50,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, required=True, help="output folder")
     run.set_defaults(func=_cmd_run)
 
+    why = sub.add_parser("explain", help="why a ship of a run did what it did")
+    why.add_argument("run_dir", type=Path, help="output folder of 'trafficsim run'")
+    why.add_argument("--ship", required=True, help="ship name")
+    why.add_argument("--at-s", type=float, default=None,
+                     help="explain the decisions at this time (default: the last change)")
+    why.set_defaults(func=_cmd_explain)
+
     trial = sub.add_parser("trial", help="standard manoeuvre of one ship with IMO indices")
     trial.add_argument("ship", help="ship type from the library (e.g. kvlcc2) or ship-file path")
     trial.add_argument("--manoeuvre", required=True, choices=["turning", "zigzag", "crash-stop"])
@@ -71,7 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_argument("--out", type=Path, required=True, help="output folder")
     trial.set_defaults(func=_cmd_trial)
 
-    val = sub.add_parser("validate", help="check scenario or ship files without running them")
+    val = sub.add_parser("validate", help="check scenario, ship or rules files without running "
+                         "them")
     val.add_argument("files", type=Path, nargs="+")
     val.set_defaults(func=_cmd_validate)
     return p
@@ -88,8 +96,18 @@ def _cmd_run(args: argparse.Namespace) -> int:
         flag = "  COLLISION" if pair["collision"] else ""
         print(f"  {pair['ship_a']} - {pair['ship_b']}: min range {pair['min_range_m']:.0f} m "
               f"at t = {pair['t_min_range_s']:.0f} s{flag}")
-    files = ["trajectories.parquet", "tracks.parquet", "summary.json"]
+    for spot in summary.get("blind_spots", []):
+        print(f"  BLIND SPOT: {spot['ship']} and {spot['other']} both {spot['role']} "
+              f"from t = {spot['from_s']:.0f} s")
+    files = ["trajectories.parquet", "tracks.parquet", "decisions.parquet", "summary.json"]
     print("results: " + ", ".join(str(args.out / f) for f in files if (args.out / f).exists()))
+    return 0
+
+
+def _cmd_explain(args: argparse.Namespace) -> int:
+    from trafficsim.colregs.explain import explain_run
+
+    print(explain_run(args.run_dir, args.ship, args.at_s))
     return 0
 
 
@@ -109,18 +127,9 @@ def _cmd_trial(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from trafficsim.validate import validate_file
+    from trafficsim.validate import validate_files
 
-    bad = 0
-    for path in args.files:
-        errors = validate_file(path)
-        for err in errors:
-            print(f"trafficsim: error: {err}", file=sys.stderr)
-        if errors:
-            bad += 1
-        else:
-            print(f"{path}: ok")
-    return EXIT_USER_ERROR if bad else 0
+    return validate_files(args.files)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

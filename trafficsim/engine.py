@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trafficsim.batch import Batch
+from trafficsim.colregs.decider import Decider
 from trafficsim.control import autopilot, guidance
 from trafficsim.errors import SimulationError
 from trafficsim.metrics import PairMetrics
@@ -45,11 +46,16 @@ class Simulation:
     substeps: np.ndarray  # (n,) RK4 sub-steps per time step
     nav: Navigation | None = None  # instruments and filters; None = perfect knowledge
     obs: Observation | None = None  # radar, AIS and tracks of other ships
+    decider: Decider | None = None  # collision avoidance; None = every ship follows its route
+    decision_steps: int = 10  # steps between decisions
+    route_speed_mps: np.ndarray | None = None  # (n,) speed of each ship on its route
     step_index: int = 0
 
     @classmethod
-    def start(cls, batch: Batch, dt: float, seed: int = 0) -> Simulation:
-        """Start at t = 0; ``seed`` keys every random stream (instruments)."""
+    def start(cls, batch: Batch, dt: float, seed: int = 0, decider: Decider | None = None,
+              decision_period_s: float = 10.0) -> Simulation:
+        """Start at t = 0; ``seed`` keys every random stream (instruments); ``decider`` takes
+        the collision-avoidance decisions every ``decision_period_s`` (a multiple of ``dt``)."""
         x = batch.x
         n = batch.n_ships
         speed = x[base.U].copy()
@@ -72,6 +78,9 @@ class Simulation:
         if observes(batch.sensors):
             sim.obs = Observation.build(batch.sensors, batch.pair_i, batch.pair_j, seed,
                                         batch.encounter, batch.ship_in_encounter)
+        sim.decider = decider
+        sim.decision_steps = max(1, round(decision_period_s / dt))
+        sim.route_speed_mps = speed.copy()
         sim._navigate_and_control()
         return sim
 
@@ -91,9 +100,39 @@ class Simulation:
             self.obs.update(x, est, earth_velocity(x, b.env), self.t_s)
         self.course_order_rad = guidance.desired_course(
             self.route, b.waypoints, b.n_waypoints, est[NORTH], est[EAST], b.length_m)
+        if self.decider is not None:
+            if self.step_index % self.decision_steps == 0:
+                self._decide(est)
+            override = self.decider.course_order_rad
+            self.course_order_rad = np.where(np.isnan(override), self.course_order_rad,
+                                             override)
         self.rudder_cmd_rad = autopilot.rudder_command(
             self.course_order_rad, est[PSI], est[R], self.integral, b.kp, b.kd_s, b.ki_per_s,
             b.rudder_max_rad, self.dt)
+
+    def _decide(self, est: np.ndarray) -> None:
+        """Collision-avoidance decisions on what each ship knows: its own estimate and, per
+        directed pair, its track of the other ship (the truth where it has no radar or AIS)."""
+        b, x, d = self.batch, self.batch.x, self.decider
+        if self.nav is None:
+            own_vel = earth_velocity(x, b.env)
+        else:  # the filter's ground velocity, rotated back from the body frame
+            c, s = np.cos(est[PSI]), np.sin(est[PSI])
+            own_vel = np.stack([est[base.U] * c - est[base.V] * s,
+                                est[base.U] * s + est[base.V] * c])
+        if self.obs is not None:
+            xp, active = self.obs.predicted_tracks(self.t_s)
+            other = np.where(active[None, :], xp.T, np.nan)
+        else:
+            vel = earth_velocity(x, b.env)
+            other = np.concatenate([x[[NORTH, EAST]][:, d.tgt], vel[:, d.tgt]])
+        factor_before = d.speed_factor.copy()
+        d.decide(self.t_s, est[[NORTH, EAST, PSI]], own_vel, b.length_m, other,
+                 self.course_order_rad, self.route_speed_mps)
+        changed = d.speed_factor != factor_before
+        if changed.any():
+            self.speed_order_mps = self.route_speed_mps * d.speed_factor
+            self.rps_cmd = np.where(changed, b.rps_for_speed(self.speed_order_mps), self.rps_cmd)
 
     def step(self) -> None:
         """Advance all ships by one time step with the current orders, then navigate."""

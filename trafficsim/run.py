@@ -13,6 +13,7 @@ import numpy as np
 
 from trafficsim import __version__
 from trafficsim.batch import Batch, EncounterEnv, ShipSetup, build_batch
+from trafficsim.colregs.decider import Decider
 from trafficsim.engine import Simulation, earth_velocity
 from trafficsim.io.results import write_json, write_parquet
 from trafficsim.io.scenario import Scenario, load_scenario
@@ -20,6 +21,18 @@ from trafficsim.navigation import merge_sensors
 from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, R, U, V
 from trafficsim.ships.library import load_ship
 from trafficsim.units import compass_deg, from_kn, to_kn
+
+
+def scenario_decider(scn: Scenario, batch: Batch, record: bool = True) -> Decider | None:
+    """The collision-avoidance decisions of a scenario (None when no ship decides or there is
+    no other ship); ``record`` keeps every decision step for ``decisions.parquet``."""
+    if batch.pair_i.size == 0 or all(b == "keep_course" for b in batch.behaviours):
+        return None
+    rules = None if scn.rules is None else Path(scn.path).parent / scn.rules
+    decider = Decider.build(batch.behaviours, batch.pair_i, batch.pair_j, rules, scn.domain,
+                            scn.visibility_nm)
+    decider.record = record
+    return decider
 
 
 def scenario_setups(scn: Scenario, encounter: int = 0) -> tuple[list[ShipSetup], EncounterEnv]:
@@ -34,7 +47,7 @@ def scenario_setups(scn: Scenario, encounter: int = 0) -> tuple[list[ShipSetup],
                                east_m=s.east_m, heading_rad=float(np.radians(s.heading_deg)),
                                speed_mps=from_kn(speed_kn), route_m=route, ship_in_encounter=k,
                                sensors=merge_sensors(spec.get("sensors"), s.sensors),
-                               filter=s.filter))
+                               filter=s.filter, behaviour=s.behaviour))
     env = scn.environment
     enc_env = EncounterEnv()
     if env is not None:
@@ -176,7 +189,8 @@ def run_scenario(path: Path, out_dir: Path) -> dict[str, Any]:
     scn = load_scenario(path)
     ships, env = scenario_setups(scn)
     batch = build_batch(ships, [env])
-    sim = Simulation.start(batch, scn.dt_s, scn.seed)
+    decider = scenario_decider(scn, batch)
+    sim = Simulation.start(batch, scn.dt_s, scn.seed, decider, scn.decision_period_s)
     n_steps = round(scn.duration_s / scn.dt_s)
     every = max(1, round(scn.record_every_s / scn.dt_s))
     rec = Recorder.allocate(n_steps // every + 1, batch.n_ships, batch.x.shape[0])
@@ -196,6 +210,8 @@ def run_scenario(path: Path, out_dir: Path) -> dict[str, Any]:
     tracks = rec.track_columns(sim)
     if tracks is not None:
         write_parquet(out_dir / "tracks.parquet", tracks)
+    if decider is not None:
+        write_parquet(out_dir / "decisions.parquet", decider.records(batch.names))
     write_json(out_dir / "summary.json", summary)
     return summary
 
@@ -226,6 +242,7 @@ def _summary(scn: Scenario, sim: Simulation, n_steps: int, wall_s: float, timed_
         "n_ships": b.n_ships,
         "n_steps": n_steps,
         "collisions": int(m.collision.sum()),
+        "blind_spots": [] if sim.decider is None else sim.decider.blind_spot_report(b.names),
         "pairs": pairs,
         "ships": ships,
         "wall_time_s": wall_s,

@@ -1,18 +1,80 @@
-"""``trafficsim validate``: check scenario and ship files without running them."""
+"""``trafficsim validate``: check scenario, ship and rules files without running them.
+
+The kind of a file is told by its top-level keys: a rules file has ``nodes`` or ``extends``
+(checked against the COLREGS vocabulary, :data:`trafficsim.colregs.vocabulary.VOCABULARY`), a
+ship file has ``model`` and no ``ships``, anything else is read as a scenario (whose ship files
+are checked too).
+"""
 
 from __future__ import annotations
 
+import re
+import sys
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any, TextIO
 
 from trafficsim.errors import InputError
 
+EXIT_INVALID = 2
+"""Exit code of :func:`validate_files` when a file has errors (the CLI's user-error code)."""
 
-def validate_file(path: Path) -> list[InputError]:
-    """All errors found in ``path`` (a scenario or a ship file, told apart by its keys)."""
+_RULES_KEYS = ("nodes", "extends")
+# A top-level ``nodes:`` or ``extends:`` line, to recognise a rules file that is not valid YAML
+_RULES_LINE = re.compile(r"^(?:nodes|extends|[\"']nodes[\"']|[\"']extends[\"'])[ \t]*:",
+                         re.MULTILINE)
+
+
+def is_rules_data(data: Any) -> bool:
+    """True if loaded YAML data is a decision-network rules file (a mapping with ``nodes``, or
+    with ``extends`` for a file that takes its nodes from another)."""
+    return isinstance(data, dict) and any(key in data for key in _RULES_KEYS)
+
+
+def _looks_like_rules(path: Path) -> bool:
+    try:
+        text = path.read_bytes()[:1_000_000].decode("utf-8", "replace")
+    except OSError:
+        return False
+    return _RULES_LINE.search(text) is not None
+
+
+def _errors(err: InputError) -> list[InputError]:
+    return list(getattr(err, "errors", None) or [err])
+
+
+def _check_rules(path: Path) -> tuple[list[InputError], str]:
+    from trafficsim.colregs.rulefile import parse_file
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    try:
+        rules = parse_file(path, VOCABULARY)
+    except InputError as err:
+        return _errors(err), ""
+    n = len(rules.nodes)
+    return [], f"ok ({n} node{'' if n == 1 else 's'})"
+
+
+def check_file(path: Path) -> tuple[list[InputError], str]:
+    """Check one file.
+
+    Returns:
+        ``(errors, summary)``: every error found (located, sorted as the loaders sort them),
+        and, when there is none, what to print after the file name: ``"ok"``, or ``"ok (N
+        nodes)"`` for a rules file (N counts the nodes it inherits).
+    """
     from trafficsim.io.yamlio import load_yaml
 
     try:
         doc = load_yaml(path)
+    except InputError as err:
+        if _looks_like_rules(path):
+            # the rules reader adds hints for unquoted operators ("!=", ">")
+            return _check_rules(path)
+        return _errors(err), ""
+    if is_rules_data(doc.data):
+        return _check_rules(path)
+    try:
         if isinstance(doc.data, dict) and "model" in doc.data and "ships" not in doc.data:
             from trafficsim.ships.library import load_ship
 
@@ -24,5 +86,34 @@ def validate_file(path: Path) -> list[InputError]:
             for ship_file in load_scenario(path).ship_files:
                 load_ship(str(ship_file))
     except InputError as err:
-        return list(getattr(err, "errors", None) or [err])
-    return []
+        return _errors(err), ""
+    return [], "ok"
+
+
+def validate_file(path: Path) -> list[InputError]:
+    """All errors found in ``path`` (a scenario, ship or rules file, told apart by its keys)."""
+    return check_file(path)[0]
+
+
+def validate_files(paths: Sequence[Path], out: TextIO | None = None,
+                   err: TextIO | None = None) -> int:
+    """Check files and report as ``trafficsim validate`` does.
+
+    Prints ``FILE: ok`` (``FILE: ok (N nodes)`` for a rules file) on ``out`` for a good file,
+    and one ``trafficsim: error: file:line: key: message`` line per error on ``err``.
+
+    Returns:
+        0 if every file is valid, else :data:`EXIT_INVALID`.
+    """
+    out = sys.stdout if out is None else out
+    err = sys.stderr if err is None else err
+    bad = 0
+    for path in paths:
+        errors, summary = check_file(path)
+        for error in errors:
+            print(f"trafficsim: error: {error}", file=err)
+        if errors:
+            bad += 1
+        else:
+            print(f"{path}: {summary}", file=out)
+    return EXIT_INVALID if bad else 0

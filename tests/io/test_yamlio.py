@@ -198,11 +198,77 @@ def test_top_level_must_be_mapping(source: str, got: str) -> None:
 
 
 @pytest.mark.parametrize(("source", "line"), [
-    ("a: 1\n2: b\n", 2), ("yes: 1\n", 1), ("~: 1\n", 1), ("a:\n  ? [x, y]\n  : 1\n", 2),
-    ("a: 1\n? {k: v}\n: 2\n", 2)])
+    ("a: 1\n2: b\n", 2), ("a:\n  ? [x, y]\n  : 1\n", 2), ("a: 1\n? {k: v}\n: 2\n", 2),
+    ("a: 1\n1.5: b\n", 2), ("!!bool yes: 1\n", 1), ("a:\n  !!null ~: 1\n", 2),
+    ("? \n: 1\n", 1)])
 def test_keys_must_be_text(source: str, line: int) -> None:
     err = _error(source)
     assert err.line == line and "keys must be text" in err.message
+
+
+def test_empty_key_is_named_without_a_quote_hint() -> None:
+    err = _error("a: 1\n? \n: 2\n")
+    assert err.message == "keys must be text, got an empty key"
+
+
+WORD_KEYS = ["yes", "Yes", "YES", "no", "No", "NO", "true", "True", "TRUE", "false", "False",
+             "FALSE", "on", "On", "ON", "off", "Off", "OFF", "y", "Y", "n", "N", "null",
+             "Null", "NULL", "~"]
+
+
+@pytest.mark.parametrize("word", WORD_KEYS)
+def test_plain_word_keys_are_text_and_values_keep_yaml_meaning(word: str) -> None:
+    # As a value the word keeps its YAML 1.1 meaning (what yaml.safe_load gives).
+    expected_value = yaml.safe_load(f"k: {word}\n")["k"]
+    text = f"top:\n  other: 1\n  {word}: {word}\nflow: {{{word}: [{word}]}}\n"
+    doc = parse_yaml(text, "w.yaml")
+    assert doc.data == {"top": {"other": 1, word: expected_value},
+                        "flow": {word: [expected_value]}}
+    assert doc.line_of(("top", word)) == 3 and doc.line_of(("flow", word)) == 4
+    err = doc.error("bad", ("top", word))
+    assert str(err) == f"w.yaml:3: top.{word}: bad"
+
+
+# value as written -> as loaded: words are booleans / null as values, text as nested keys
+_WORD_VALUES = {"1": 1, "yes": True, "~": None, "x": "x", "[on, 2]": [True, 2],
+                "{off: no}": {"off": False}, "{~: null, Y: n}": {"~": None, "Y": "n"}}
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(st.sampled_from([*WORD_KEYS, "a", "b_c", "speed_kn"]),
+                          st.sampled_from(list(_WORD_VALUES))),
+                min_size=1, max_size=8, unique_by=lambda kv: kv[0]))
+def test_plain_word_keys_are_text_at_their_lines(items: list[tuple[str, str]]) -> None:
+    text = "# header\n" + "".join(f"{k}: {v}\n" for k, v in items)
+    doc = parse_yaml(text)
+    assert doc.data == {k: _WORD_VALUES[v] for k, v in items}
+    assert list(doc.data) == [k for k, _ in items]
+    for line, (key, _) in enumerate(items, start=2):
+        assert doc.line_of((key,)) == line
+
+
+def test_word_keys_and_their_quoted_forms_are_the_same_key() -> None:
+    assert parse_yaml("'yes': 1\n\"no\": 2\n? on\n: 3\n").data == {"yes": 1, "no": 2, "on": 3}
+    err = _error("a:\n  'no': 1\n  no: 2\n")
+    assert err.line == 3 and err.key == "a.no"
+    assert "duplicate key 'no' (first at line 2, again at line 3)" in err.message
+
+
+def test_word_keys_keep_the_lines_of_later_errors() -> None:
+    err = _error("yes: 1\nno:\n  off: 2\n  ~: [1, 2\nz: 3\n")
+    assert err.line == 5 and "expected ',' or ']'" in err.message
+
+
+def test_word_keys_reach_pydantic_as_text() -> None:
+    class Switches(Strict):
+        on: Number
+        off: Number = 0.0
+
+    doc = parse_yaml("on: 1\nof: 2\n", "s.yaml")
+    with pytest.raises(ScenarioError) as info:
+        validate_document(doc, Switches)
+    assert str(info.value) == "s.yaml:2: of: unknown key 'of' (did you mean 'off'?)"
+    assert validate_document(parse_yaml("on: 1\noff: 2\n"), Switches).off == 2.0
 
 
 def test_merge_key_refused() -> None:

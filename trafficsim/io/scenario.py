@@ -21,6 +21,14 @@ A scenario places one or more ships in an environment for a fixed duration::
         heading_deg: 0             # required, [0, 360)
         speed_kn: 12               # optional (default: the ship's service speed), [0, 60]
         route: [[5000, 0], [9000, 3000]]   # optional [north_m, east_m] waypoints
+        behaviour: colregs         # optional: colregs (default), keep_course, turn_port,
+                                   #   late_action (see trafficsim.colregs.behaviour)
+    rules: ../rules/colregs.yaml   # optional decision network (relative to this file);
+                                   #   default: the bundled rules/colregs.yaml
+    domain: coldwell               # optional ship domain: coldwell, goodwin, fujii, kijima
+    visibility_nm: 10              # optional, default 10; below the rules' threshold the
+                                   #   restricted-visibility mode (Rule 19) applies
+    decision_period_s: 10          # optional, default 10 s; a whole multiple of dt_s
 
 Values keep the file's units (knots, degrees); conversion to SI happens when the batch is built.
 """
@@ -132,6 +140,7 @@ class ShipEntry(Strict):
     route: tuple[RoutePoint, ...] = ()
     sensors: dict[str, dict[str, Any]] | None = None
     filter: Literal["none", "pv", "ekf"] = "none"
+    behaviour: Literal["colregs", "keep_course", "turn_port", "late_action"] = "colregs"
 
     @field_validator("sensors")
     @classmethod
@@ -165,6 +174,10 @@ class Scenario(Strict):
     record_every_s: Annotated[Number, Field(gt=0.0)] = Field(default=None, validate_default=True)
     seed: Annotated[Integer, Field(ge=0)] = 0
     environment: Environment = Field(default_factory=Environment)
+    rules: Text | None = None
+    domain: Literal["coldwell", "goodwin", "fujii", "kijima"] = "coldwell"
+    visibility_nm: Annotated[Number, Field(gt=0.0, le=100.0)] = 10.0
+    decision_period_s: Annotated[Number, Field(gt=0.0, le=600.0)] = 10.0
     ships: Annotated[tuple[ShipEntry, ...], BeforeValidator(_at_least_one_ship)]
 
     _path: Path | None = PrivateAttr(default=None)
@@ -217,6 +230,16 @@ class Scenario(Strict):
             raise ValueError(f"must be a whole multiple of dt_s ({dt:g} s), got {every:g}; "
                              f"e.g. {nearest:g}")
         return every
+
+    @field_validator("decision_period_s")
+    @classmethod
+    def _decision_whole_steps(cls, period: float, info: ValidationInfo) -> float:
+        dt = info.data.get("dt_s")
+        if dt is not None:
+            ratio = period / dt
+            if round(ratio) < 1 or abs(ratio - round(ratio)) > _MULTIPLE_TOL:
+                raise ValueError(f"must be a whole multiple of dt_s ({dt:g} s), got {period:g}")
+        return period
 
     @field_validator("environment", mode="before")
     @classmethod

@@ -14,8 +14,11 @@ only; no Python objects are ever built) and is stricter where plain PyYAML surpr
 * YAML 1.1 number forms that nobody writes on purpose are kept as *text*, so that a schema
   expecting a number rejects them with a hint instead of taking a silently wrong value:
   base-60 ``1:30`` (PyYAML: 90) and leading-zero octal ``010`` (PyYAML: 8); timestamps stay text;
-* the words ``yes/no/on/off`` still load as booleans (``safe_load`` semantics), and a schema
-  expecting text reports them with a hint to quote them;
+* as *values*, the words ``yes/no/on/off`` still load as booleans (``safe_load`` semantics),
+  and a schema expecting text reports them with a hint to quote them; as mapping *keys*, plain
+  words that YAML 1.1 would read as booleans or null (``yes:``, ``no:``, ``on:``, ``off:``,
+  ``true:``, ``null:``, ``~:`` ...) are text, since keys must be text anyway (an empty key, a
+  number or an explicitly tagged key such as ``!!bool yes:`` is still refused);
 * any exception raised by the YAML library becomes a located error.
 
 Validation (:func:`validate`, :func:`validate_document`) runs a pydantic v2 model over the data
@@ -296,9 +299,17 @@ class _Loader(yaml.SafeLoader):
             if self._depth > MAX_DEPTH:
                 raise _Refused(None, None, f"nesting is deeper than {MAX_DEPTH} levels",
                                event.start_mark)
-            return super().compose_node(parent, index)
+            node = super().compose_node(parent, index)
         finally:
             self._depth -= 1
+        # The composer asks for a mapping key with index None (a value's index is its key).
+        # A plain, untagged key that YAML 1.1 resolves to a boolean or null is meant as text:
+        # ``yes:`` and ``no:`` are words, not true and false.
+        if (isinstance(parent, MappingNode) and index is None
+                and isinstance(event, yaml.ScalarEvent) and event.tag is None
+                and event.style is None and node.tag in (_BOOL, _NULL) and node.value):
+            node.tag = _STR
+        return node
 
 
 def _unsupported(tag: str) -> str:
@@ -356,6 +367,8 @@ def _describe_key_node(node: Node) -> str:
         return "a mapping"
     if isinstance(node, SequenceNode):
         return "a list"
+    if node.tag == _NULL and node.value == "":
+        return "an empty key"
     return f"'{_clip(node.value)}'"
 
 
@@ -378,7 +391,8 @@ def _construct(node: Node, path: str, loc: Loc) -> Any:
             raise ScenarioError("merge keys ('<<') are not supported; write the keys out in full",
                                 path=path, line=line, key=where)
         if not (isinstance(key_node, ScalarNode) and key_node.tag == _STR):
-            hint = " (put it in quotes)" if isinstance(key_node, ScalarNode) else ""
+            hint = (" (put it in quotes)" if isinstance(key_node, ScalarNode) and key_node.value
+                    else "")
             raise ScenarioError(f"keys must be text, got {_describe_key_node(key_node)}{hint}",
                                 path=path, line=line, key=where)
         key = key_node.value

@@ -1,0 +1,292 @@
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from trafficsim.colregs.domains import (
+    DOMAINS,
+    boundary_distance_m,
+    contains,
+    domain_code,
+    time_to_entry_s,
+)
+from trafficsim.errors import InputError
+
+NM = 1852.0
+KN = 1852.0 / 3600.0
+L = 100.0
+
+
+def _deg(*bearings_deg: float) -> np.ndarray:
+    return np.radians(np.array(bearings_deg, dtype=float))
+
+
+def _boundary(kind: str, bearings_deg: list[float], length: float = L, speed: float = 6.0,
+              overtaking: bool = False) -> np.ndarray:
+    n = len(bearings_deg)
+    return boundary_distance_m(kind, _deg(*bearings_deg), np.full(n, length), np.full(n, speed),
+                               np.full(n, overtaking))
+
+
+# ---------------------------------------------------------------------------------------------
+# Hand numbers
+# ---------------------------------------------------------------------------------------------
+
+def test_coldwell_crossing_ellipse_along_the_body_axes():
+    # ellipse ((x - 1.1L)/5L)^2 + ((y - 0.75L)/2.5L)^2 = 1 cut by the axes through own ship
+    ahead = 1.1 + 5.0 * math.sqrt(1.0 - 0.3**2)  # y = 0: ((0 - 0.75)/2.5)^2 = 0.09
+    astern = 5.0 * math.sqrt(1.0 - 0.3**2) - 1.1
+    stbd = 0.75 + 2.5 * math.sqrt(1.0 - 0.22**2)  # x = 0: (1.1/5)^2 = 0.0484
+    port = 2.5 * math.sqrt(1.0 - 0.22**2) - 0.75
+    got = _boundary("coldwell", [0, 90, 180, 270]) / L
+    assert got == pytest.approx([ahead, stbd, astern, port], rel=1e-12)
+    assert got == pytest.approx([5.8697, 3.1887, 3.6697, 1.6887], abs=1e-4)
+
+
+def test_coldwell_extents_are_6_1_3_9_3_25_1_75_lengths():
+    b = np.linspace(0.0, 2 * np.pi, 200_001)
+    r = boundary_distance_m("coldwell", b, np.full(b.size, L), np.zeros(b.size))
+    x, y = r * np.cos(b) / L, r * np.sin(b) / L
+    assert x.max() == pytest.approx(6.1, abs=1e-6)
+    assert x.min() == pytest.approx(-3.9, abs=1e-6)
+    assert y.max() == pytest.approx(3.25, abs=1e-6)
+    assert y.min() == pytest.approx(-1.75, abs=1e-6)
+    # the extreme points themselves, just inside and just outside
+    pts_in = np.array([[6.099, 0.75], [-3.899, 0.75], [1.1, 3.249], [1.1, -1.749]]) * L
+    pts_out = np.array([[6.101, 0.75], [-3.901, 0.75], [1.1, 3.251], [1.1, -1.751]]) * L
+    for pts, want in ((pts_in, True), (pts_out, False)):
+        got = contains("coldwell", pts[:, 0], pts[:, 1], np.full(4, L), np.zeros(4))
+        assert got.tolist() == [want] * 4
+
+
+def test_coldwell_overtaking_is_a_centred_6_by_1_75_ellipse():
+    got = _boundary("coldwell", [0, 90, 180, 270], overtaking=True) / L
+    assert got == pytest.approx([6.0, 1.75, 6.0, 1.75], rel=1e-12)
+    # at 45 deg: r = (cos^2/6^2 + sin^2/1.75^2)^(-1/2)
+    want = (0.5 / 36.0 + 0.5 / 1.75**2) ** -0.5
+    assert _boundary("coldwell", [45], overtaking=True)[0] / L == pytest.approx(want, rel=1e-12)
+
+
+def test_overtaking_flag_per_pair():
+    b = _deg(0.0, 0.0)
+    got = boundary_distance_m("coldwell", b, np.full(2, L), np.zeros(2), np.array([False, True]))
+    assert got / L == pytest.approx([5.8697, 6.0], abs=1e-4)
+
+
+def test_goodwin_sectors_and_radii_do_not_depend_on_length_or_speed():
+    bearings = [0.0, 45.0, 112.4, 112.6, 180.0, 247.4, 247.6, 300.0, 359.9]
+    want = np.array([0.85, 0.85, 0.85, 0.45, 0.45, 0.45, 0.70, 0.70, 0.70]) * NM
+    for length, speed in ((50.0, 0.0), (400.0, 10.0)):
+        assert _boundary("goodwin", bearings, length, speed) == pytest.approx(want, rel=1e-12)
+
+
+def test_fujii_is_a_centred_ellipse_with_semi_axes_4_by_1_6_lengths():
+    got = _boundary("fujii", [0, 90, 180, 270, 45]) / L
+    r45 = 1.0 / math.sqrt(0.5 / 16.0 + 0.5 / 1.6**2)  # 2.1009 L
+    assert got == pytest.approx([4.0, 1.6, 4.0, 1.6, r45], rel=1e-12)
+    assert r45 == pytest.approx(2.1009, abs=1e-4)
+
+
+def test_kijima_radii_at_12_knots():
+    # log10(12) = 1.079181; k_AD = 10^(0.3591 * 1.079181 + 0.0952) = 10^0.482734 = 3.03902;
+    # k_DT = 10^(0.5441 * 1.079181 - 0.0795) = 10^0.507682 = 3.21871;
+    # s = sqrt(3.03902^2 + 1.60936^2) = 3.43885
+    fore, aft = 1 + 1.34 * 3.43885, 1 + 0.67 * 3.43885  # 5.60806, 3.30403
+    stbd, port = 0.2 + 3.21871, 0.2 + 0.75 * 3.21871  # 3.41871, 2.61403
+    got = _boundary("kijima", [0, 90, 180, 270], speed=12.0 * KN) / L
+    assert got == pytest.approx([fore, stbd, aft, port], rel=2e-5)
+    # quarter-ellipse between the bow and the starboard beam
+    r45 = 1.0 / math.sqrt(0.5 / fore**2 + 0.5 / stbd**2)
+    assert _boundary("kijima", [45], speed=12.0 * KN)[0] / L == pytest.approx(r45, rel=2e-5)
+
+
+def test_kijima_at_rest_is_one_length_fore_and_aft_and_a_fifth_abeam():
+    got = _boundary("kijima", [0, 90, 180, 270], speed=0.0) / L
+    assert got == pytest.approx([1.0, 0.2, 1.0, 0.2], rel=1e-12)
+
+
+def test_kijima_grows_with_speed():
+    r = np.array([_boundary("kijima", [0, 90, 180, 270], speed=v * KN) for v in (4, 8, 16)])
+    assert (np.diff(r, axis=0) > 0).all()
+
+
+# ---------------------------------------------------------------------------------------------
+# Registry
+# ---------------------------------------------------------------------------------------------
+
+def test_registry_suggests_the_closest_name_on_a_typo():
+    with pytest.raises(InputError) as err:
+        boundary_distance_m("goodwn", 0.0, L, 0.0)
+    assert err.value.key == "domain"
+    assert "did you mean 'goodwin'" in str(err.value)
+    with pytest.raises(InputError, match="did you mean 'coldwell'"):
+        contains("Coldwell", 0.0, 0.0, L, 0.0)
+    with pytest.raises(InputError, match="known domains"):
+        time_to_entry_s("ellipse", 0.0, 0.0, 0.0, 0.0, L, 0.0, None, 60.0)
+
+
+def test_every_registered_domain_has_a_code_and_contains_own_ship():
+    for kind in DOMAINS:
+        assert DOMAINS[domain_code(kind)] == kind
+        assert bool(contains(kind, 0.0, 0.0, L, 5.0))
+        r = boundary_distance_m(kind, np.linspace(-7, 7, 1001), np.full(1001, L),
+                                np.full(1001, 5.0))
+        assert np.isfinite(r).all() and (r > 0).all()
+
+
+def test_scalars_broadcast():
+    got = boundary_distance_m("fujii", _deg(0.0, 90.0), L, 0.0)
+    assert got == pytest.approx([400.0, 160.0])
+    assert np.shape(contains("fujii", 10.0, 0.0, L, 0.0)) == ()
+
+
+# ---------------------------------------------------------------------------------------------
+# Time to entry: hand cases
+# ---------------------------------------------------------------------------------------------
+
+def _entry(kind, x, y, vx, vy, length=L, speed=6.0, overtaking=False, horizon=3600.0):
+    a = np.atleast_1d
+    return time_to_entry_s(kind, a(float(x)), a(float(y)), a(float(vx)), a(float(vy)),
+                           a(float(length)), a(float(speed)), a(overtaking), horizon)[0]
+
+
+def test_entry_time_dead_ahead_closing():
+    ahead = (1.1 + 5.0 * math.sqrt(0.91)) * L
+    assert _entry("coldwell", 2000.0, 0.0, -10.0, 0.0) == pytest.approx((2000.0 - ahead) / 10.0)
+
+
+def test_entry_time_zero_inside_and_inf_when_missing_or_beyond_the_horizon():
+    assert _entry("coldwell", 100.0, 50.0, 5.0, 5.0) == 0.0
+    assert _entry("coldwell", 2000.0, 1000.0, -10.0, 0.0) == math.inf  # passes wide to starboard
+    assert _entry("coldwell", 2000.0, 0.0, 10.0, 0.0) == math.inf  # opening
+    assert _entry("coldwell", 2000.0, 0.0, -10.0, 0.0, horizon=100.0) == math.inf
+    assert _entry("coldwell", 2000.0, 0.0, 0.0, 0.0) == math.inf  # no relative motion
+    assert _entry("coldwell", 100.0, 0.0, 0.0, 0.0) == 0.0
+    for kind in DOMAINS:  # a negative look-ahead sees nothing ahead, even right next to it
+        assert _entry(kind, 2.0 * NM, 0.0, -20.0, 0.0, horizon=-1.0) == math.inf
+
+
+def test_goodwin_entry_respects_the_sectors():
+    # a target crossing astern from starboard to port 700 m behind own ship: out of the
+    # 0.85 NM starboard sector (it would need y > 700 tan 67.5 = 1690 m, i.e. range > 1829 m),
+    # it enters the 0.45 NM astern circle where y^2 = (0.45 NM)^2 - 700^2
+    y_in = math.sqrt((0.45 * NM) ** 2 - 700.0**2)
+    assert _entry("goodwin", -700.0, 2000.0, 0.0, -5.0) == pytest.approx((2000.0 - y_in) / 5.0)
+    # 1000 m behind: beyond the astern radius, and where the starboard or port sector is
+    # reached the range exceeds its radius, so never inside (a circle of the largest radius
+    # would say otherwise)
+    assert _entry("goodwin", -1000.0, 3000.0, 0.0, -5.0) == math.inf
+    # abeam to starboard, closing: enters at 0.85 NM
+    assert _entry("goodwin", 0.0, 2 * NM, 0.0, -5.0) == pytest.approx(1.15 * NM / 5.0)
+
+
+def test_kijima_entry_on_the_port_quarter():
+    fore, aft, port = _boundary("kijima", [0, 180, 270], speed=12 * KN)
+    # approaching along the port beam (x = 0 line), enters at R_port
+    assert _entry("kijima", 0.0, -3000.0, 0.0, 4.0, speed=12 * KN) == pytest.approx(
+        (3000.0 - port) / 4.0)
+    # approaching from dead astern: enters at R_aft
+    assert _entry("kijima", -3000.0, 0.0, 5.0, 0.0, speed=12 * KN) == pytest.approx(
+        (3000.0 - aft) / 5.0)
+    # running down the port side 200 m off, parallel to the bow line: the larger starboard
+    # quarter-ellipses never apply; enters the fore-port quarter at x^2/R_fore^2 + y^2/R_port^2 = 1
+    x_in = fore * math.sqrt(1.0 - (200.0 / port) ** 2)
+    assert _entry("kijima", 3000.0, -200.0, -6.0, 0.0, speed=12 * KN) == pytest.approx(
+        (3000.0 - x_in) / 6.0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Properties
+# ---------------------------------------------------------------------------------------------
+
+kinds = st.sampled_from(DOMAINS)
+coord = st.floats(-6000.0, 6000.0, allow_nan=False)
+lengths = st.floats(20.0, 400.0)
+speeds = st.floats(0.0, 15.0)
+
+
+@settings(max_examples=400, deadline=None)
+@given(kinds, coord, coord, lengths, speeds, st.booleans())
+def test_contains_agrees_with_boundary_distance(kind, x, y, length, speed, overtaking):
+    r = math.hypot(x, y)
+    b = float(boundary_distance_m(kind, math.atan2(y, x), length, speed, overtaking))
+    inside = bool(contains(kind, x, y, length, speed, overtaking))
+    if abs(r - b) > 1e-9 * max(b, 1.0):
+        assert inside == (r < b)
+
+
+def _track_margin(kind, x, y, vx, vy, length, speed, overtaking, t):
+    """Range minus boundary distance along the line of sight at times ``t`` (< 0 inside)."""
+    px, py = x + vx * t, y + vy * t
+    n = t.size
+    b = boundary_distance_m(kind, np.arctan2(py, px), np.full(n, length), np.full(n, speed),
+                            np.full(n, overtaking))
+    return np.hypot(px, py) - b
+
+
+@settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(kinds, coord, coord, st.floats(-3000.0, 3000.0), st.floats(-3000.0, 3000.0),
+       st.one_of(st.floats(-2400.0, -120.0), st.floats(120.0, 2400.0)), lengths, speeds,
+       st.booleans())
+def test_time_to_entry_agrees_with_brute_force_stepping(kind, x, y, aim_x, aim_y, t_aim,
+                                                        length, speed, overtaking):
+    # aim the straight track at a point near own ship (passed in the past when t_aim < 0), so
+    # that many cases enter the domain
+    vx, vy = (aim_x - x) / t_aim, (aim_y - y) / t_aim
+    horizon = 1800.0
+    dt = 0.05
+    t = np.arange(0.0, horizon + dt / 2, dt)
+    n = t.size
+    hit = contains(kind, x + vx * t, y + vy * t, np.full(n, length), np.full(n, speed),
+                   np.full(n, overtaking))
+    got = float(time_to_entry_s(kind, x, y, vx, vy, length, speed, overtaking, horizon))
+    assert 0.0 <= got <= horizon or got == math.inf
+    if hit.any():
+        first = t[np.argmax(hit)]
+        assert first - dt - 1e-6 <= got <= first + 1e-9
+    elif math.isfinite(got):
+        # only a graze shorter than the step: the track must reach the boundary at `got`
+        near = np.linspace(max(got - dt, 0.0), min(got + dt, horizon), 2001)
+        margin = _track_margin(kind, x, y, vx, vy, length, speed, overtaking, near)
+        assert margin.min() <= 1e-6 * length
+    if got == 0.0:
+        assert hit[0]
+
+
+@pytest.mark.parametrize("kind", DOMAINS)
+def test_time_to_entry_on_many_tracks_across_sectors_and_quadrants(kind):
+    """Tracks from a ring around own ship towards points spread over the domain, many of them
+    crossing a sector edge or a body axis before they enter, against fine time stepping."""
+    rng = np.random.default_rng(11)
+    n, horizon, dt = 1500, 900.0, 0.25
+    length = rng.uniform(60.0, 300.0, n)
+    speed = rng.uniform(0.0, 9.0, n)
+    overtaking = rng.random(n) < 0.3
+    reach = 1.3 * np.max([boundary_distance_m(kind, np.full(n, b), length, speed, overtaking)
+                          for b in np.radians(np.arange(0.0, 360.0, 5.0))], axis=0)
+    ang, aim_ang = rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 2 * np.pi, n)
+    x0 = reach * rng.uniform(1.0, 2.5, n) * np.cos(ang)
+    y0 = reach * rng.uniform(1.0, 2.5, n) * np.sin(ang)
+    ax, ay = reach * 0.9 * np.cos(aim_ang), reach * 0.9 * np.sin(aim_ang)
+    t_aim = rng.uniform(200.0, 1200.0, n)
+    vx, vy = (ax - x0) / t_aim, (ay - y0) / t_aim
+    got = time_to_entry_s(kind, x0, y0, vx, vy, length, speed, overtaking, horizon)
+    t = np.arange(0.0, horizon + dt / 2, dt)
+    rep = lambda a: np.repeat(a, t.size)  # noqa: E731
+    tt = np.tile(t, n)
+    hit = contains(kind, rep(x0) + rep(vx) * tt, rep(y0) + rep(vy) * tt, rep(length),
+                   rep(speed), rep(overtaking)).reshape(n, t.size)
+    any_hit = hit.any(axis=1)
+    first = np.where(any_hit, t[np.argmax(hit, axis=1)], np.inf)
+    assert any_hit.mean() > 0.3  # the test exercises entries
+    ok = np.where(any_hit, (got <= first + 1e-9) & (got >= first - dt - 1e-6), np.isinf(got))
+    for i in np.flatnonzero(~ok):
+        # allowed only for a graze shorter than the step: the track reaches the boundary there
+        assert math.isfinite(got[i]) and not any_hit[i], (i, got[i], first[i])
+        near = np.linspace(max(got[i] - dt, 0.0), min(got[i] + dt, horizon), 2001)
+        margin = _track_margin(kind, x0[i], y0[i], vx[i], vy[i], length[i], speed[i],
+                               overtaking[i], near)
+        assert margin.min() <= 1e-6 * length[i]
+

@@ -1,0 +1,125 @@
+"""Tests of ``trafficsim validate`` (trafficsim.validate): scenario, ship and rules files."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import SCENARIOS
+from trafficsim import cli
+from trafficsim.colregs.rulefile import parse_file
+from trafficsim.colregs.vocabulary import VOCABULARY
+from trafficsim.validate import (
+    EXIT_INVALID,
+    check_file,
+    is_rules_data,
+    validate_file,
+    validate_files,
+)
+
+RULES = Path(__file__).parent / "colregs" / "rules" / "colregs"
+SMALL, PORT, INVALID = (RULES / f"{n}.yaml" for n in ("small", "small_port", "small_invalid"))
+
+
+def _run(paths: list[Path]) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    code = validate_files(paths, out, err)
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.mark.parametrize(("data", "expected"), [
+    ({"nodes": {}}, True), ({"extends": "a.yaml"}, True), ({"ships": []}, False),
+    ({"model": "x"}, False), ([1], False), (None, False)])
+def test_rules_files_are_told_by_their_keys(data: object, expected: bool) -> None:
+    assert is_rules_data(data) is expected
+
+
+def test_small_rules_files_are_valid_against_the_colregs_vocabulary() -> None:
+    small = parse_file(SMALL, VOCABULARY)
+    port = parse_file(PORT, VOCABULARY)
+    assert [n.name for n in small.nodes] == ["watch", "classify", "give_way", "monitor"]
+    assert small.node("give_way").action["direction"].value == VOCABULARY.enums["starboard"]
+    assert port.node("give_way").action["direction"].value == VOCABULARY.enums["port"]
+    assert port.node("give_way").path == str(SMALL)
+
+
+def test_valid_rules_files_print_their_node_count() -> None:
+    assert check_file(SMALL) == ([], "ok (4 nodes)")
+    code, out, err = _run([SMALL, PORT])
+    assert code == 0 and err == ""
+    # a file that extends another counts the nodes it inherits
+    assert out.splitlines() == [f"{SMALL}: ok (4 nodes)", f"{PORT}: ok (4 nodes)"]
+
+
+def test_one_node_is_singular(tmp_path: Path) -> None:
+    path = tmp_path / "one.yaml"
+    path.write_text("schema_version: 1\nname: one\nstart: a\nnodes:\n"
+                    "  a: {test: true, yes: {to: a, next: true}}\n")
+    assert check_file(path) == ([], "ok (1 node)")
+
+
+def test_invalid_rules_file_lists_every_error_located() -> None:
+    code, out, err = _run([INVALID])
+    assert code == EXIT_INVALID and out == ""
+    lines = err.splitlines()
+    assert [line.split(": ", 4)[2:4] for line in lines] == [
+        [f"{INVALID}:7", "parameters.alteration_side"],
+        [f"{INVALID}:12", "nodes.watch.no.to"],
+        [f"{INVALID}:16", "nodes.give_way.action.speed"]]
+    assert all(line.startswith("trafficsim: error: ") for line in lines)
+    assert "unknown enum constant 'starbord' (did you mean 'starboard'?)" in lines[0]
+    assert "unknown node 'wach' (did you mean 'watch'?)" in lines[1]
+    assert "unknown action field 'speed'" in lines[2]
+    assert validate_file(INVALID)[0].line == 7
+
+
+def test_errors_of_an_extended_file_are_located_in_it(tmp_path: Path) -> None:
+    (tmp_path / "small.yaml").write_text(SMALL.read_text().replace("[dcpa_nm,", "[dcpa,"))
+    child = tmp_path / "child.yaml"
+    child.write_text(PORT.read_text().replace("alteration_side: port", "alteration_sid: port"))
+    errors = validate_file(child)
+    assert [(Path(e.path).name, e.line, e.key) for e in errors] == [
+        ("child.yaml", 6, "parameters.alteration_sid"),
+        ("small.yaml", 14, "nodes.watch.test.all[1][0]")]
+    assert "(did you mean 'alteration_side'?)" in errors[0].message
+    assert "unknown feature 'dcpa' (did you mean 'dcpa_nm'?)" in errors[1].message
+
+
+def test_rules_file_with_invalid_yaml_gets_the_operator_hint(tmp_path: Path) -> None:
+    path = tmp_path / "op.yaml"
+    path.write_text(SMALL.read_text().replace('[tcpa_min, ">", 0]', "[tcpa_min, !=, 0]"))
+    (error,) = validate_file(path)
+    assert error.line == 29 and error.message.endswith('write the operator in quotes: "!="')
+
+
+def test_rules_file_missing_its_parent(tmp_path: Path) -> None:
+    path = tmp_path / "orphan.yaml"
+    path.write_text("schema_version: 1\nname: orphan\nextends: nowhere.yaml\n")
+    (error,) = validate_file(path)
+    assert (error.path, error.line, error.key) == (str(path), 3, "extends")
+    assert "does not exist" in error.message
+
+
+def test_scenarios_and_ship_files_are_still_checked(tmp_path: Path) -> None:
+    scenario = SCENARIOS / "head_on.yaml"
+    assert check_file(scenario) == ([], "ok")
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("schema_version: 1\nname: x\nduration_s: -5\nships: []\n")
+    code, out, err = _run([scenario, bad])
+    assert code == EXIT_INVALID
+    assert out == f"{scenario}: ok\n" and f"{bad}:3:" in err
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("name: [x,\n")
+    (error,) = validate_file(broken)
+    assert error.path == str(broken) and "invalid YAML" in error.message
+
+
+def test_cli_validate_checks_rules_files(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["validate", str(SMALL), str(PORT)]) == 0
+    out = capsys.readouterr().out
+    assert str(SMALL) in out and str(PORT) in out and "ok" in out
+    assert cli.main(["validate", str(SMALL), str(INVALID)]) == cli.EXIT_USER_ERROR
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 3 and f"{INVALID}:12: nodes.watch.no.to" in err

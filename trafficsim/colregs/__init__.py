@@ -1,0 +1,1 @@
+"""COLREGS decision layer: encounter geometry, ship domains and the decision network."""

@@ -1,0 +1,116 @@
+"""Why a ship did what it did: the decisions of a run, node by node.
+
+Reads ``decisions.parquet`` of a run folder (written by ``trafficsim run`` for scenarios whose
+ships take decisions) and re-renders each recorded decision with
+:func:`trafficsim.colregs.network.explain`: every visited node with its file and line, the test
+as written with the feature values it saw, the action it set and the child it took.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from trafficsim.colregs import network
+from trafficsim.colregs.vocabulary import FEATURES, VOCABULARY
+from trafficsim.errors import DataError, InputError
+
+_STATE = ("decided_own_role", "decided_encounter", "decided_other_role", "decided_own_manoeuvre")
+
+
+def _read(run_dir: Path) -> dict[str, np.ndarray]:
+    import pyarrow.parquet as pq
+
+    path = run_dir / "decisions.parquet"
+    if not path.is_file():
+        raise InputError(f"{path}: no decisions recorded here (a run folder of a scenario in "
+                         "which some ship takes collision-avoidance decisions was expected)",
+                         path=str(run_dir))
+    try:
+        table = pq.read_table(path)
+    except Exception as err:  # pyarrow raises several types for damaged files
+        raise DataError(f"{path}: unreadable decisions file ({err})", path=str(path)) from None
+    missing = [c for c in ("t_s", "ship", "other", "rules", "path", *_STATE, *FEATURES)
+               if c not in table.column_names]
+    if missing:
+        raise DataError(f"{path}: columns missing: {', '.join(missing)}", path=str(path))
+    return {c: np.asarray(table.column(c).to_pylist()) for c in table.column_names}
+
+
+def timeline(cols: dict[str, np.ndarray], ship: str) -> list[str]:
+    """One line per decision step at which the ship's role, encounter or manoeuvre towards some
+    other ship changed, or its course order changed."""
+    sel = np.flatnonzero(cols["ship"] == ship)
+    lines = []
+    last: dict[str, tuple] = {}
+    for k in sel:
+        other = str(cols["other"][k])
+        state = (*(str(cols[c][k]) for c in _STATE), f"{cols['course_order_deg'][k]:.0f}")
+        if last.get(other) != state:
+            course = ("route" if np.isnan(cols["course_order_deg"][k])
+                      else f"{cols['course_order_deg'][k]:.0f} deg")
+            lines.append(f"t = {cols['t_s'][k]:7.0f} s  {other:>10}: role {state[0]}, "
+                         f"encounter {state[1]}, manoeuvre {state[3]}; course order {course}; "
+                         f"range {cols['range_nm'][k]:.2f} NM, DCPA {cols['dcpa_nm'][k]:.2f} NM, "
+                         f"TCPA {cols['tcpa_min'][k]:.1f} min")
+            last[other] = state
+    return lines
+
+
+def explain_run(run_dir: Path, ship: str, at_s: float | None = None) -> str:
+    """The account of ``ship``'s decisions in a run folder.
+
+    Without ``at_s``: the timeline of its changes of role and manoeuvre, then the node-by-node
+    explanation of the last change. With ``at_s``: the explanation of every pair's decision at
+    the last decision step at or before ``at_s``.
+
+    Raises:
+        InputError: no decisions file, unknown ship, or a time before the first decision.
+    """
+    cols = _read(Path(run_dir))
+    ships = sorted(set(cols["ship"].tolist()))
+    if ship not in ships:
+        raise InputError(f"ship {ship!r} took no decisions in {run_dir}; ships that did: "
+                         f"{', '.join(ships) or 'none'}", key="--ship")
+    sel = np.flatnonzero(cols["ship"] == ship)
+    times = cols["t_s"][sel]
+    out: list[str] = []
+    if at_s is None:
+        out.append(f"{ship}: decisions that changed something")
+        out += ["  " + line for line in timeline(cols, ship)]
+        changes = _change_steps(cols, sel)
+        rows = sel[times == (times[changes[-1]] if changes.size else times[-1])]
+    else:
+        before = times[times <= at_s]
+        if before.size == 0:
+            raise InputError(f"the first decision is at t = {times.min():g} s, after "
+                             f"--at-s {at_s:g}", key="--at-s")
+        rows = sel[times == before.max()]
+    nets: dict[str, network.Network] = {}
+    for k in rows:
+        rules = str(cols["rules"][k])
+        if rules not in nets:
+            nets[rules] = network.load(rules, VOCABULARY)
+        net = nets[rules]
+        names = [n for n in str(cols["path"][k]).split(">") if n]
+        path = [net.node_index(n) for n in names]
+        feats = np.array([float(cols[f][k]) for f in FEATURES])
+        out.append("")
+        out.append(f"t = {cols['t_s'][k]:g} s, {ship} about {cols['other'][k]} "
+                   f"({Path(rules).name}):")
+        out.append(network.explain(net, path, feats))
+    return "\n".join(out)
+
+
+def _change_steps(cols: dict[str, np.ndarray], sel: np.ndarray) -> np.ndarray:
+    """Positions in ``sel`` where some state column changed for the same other ship."""
+    changed = []
+    last: dict[str, tuple] = {}
+    for pos, k in enumerate(sel):
+        state = tuple(str(cols[c][k]) for c in _STATE)
+        other = str(cols["other"][k])
+        if other in last and last[other] != state:
+            changed.append(pos)
+        last[other] = state
+    return np.array(changed, dtype=np.int64)
