@@ -13,7 +13,9 @@ requested reduced speed. Preference: the requested side (starboard first where e
 allowed), the smallest alteration at or above the requested least one (a large, readily apparent
 alteration rather than a succession of small ones, Rule 8(b)), full speed before reduced speed
 (a speed reduction only where it is asked for or the alteration alone does not suffice,
-Rule 8(e)). A ship already manoeuvring keeps its manoeuvre while it still satisfies every pair.
+Rule 8(e)), and anything before running alongside a near ship at little relative speed (which
+leaves the encounter unresolved). A ship already manoeuvring keeps its manoeuvre while it
+still satisfies every pair.
 
 Prediction: straight lines, own velocity = factor x route speed along the candidate course, the
 other ship's estimated velocity held (the DCPA of [colregs.md section 4]), closest approach
@@ -33,6 +35,10 @@ OFFSETS_RAD = np.radians(np.arange(-90.0, 90.0 + 1e-9, 5.0))
 _OFF = np.concatenate([OFFSETS_RAD, OFFSETS_RAD])
 _REDUCED = np.concatenate([np.zeros(OFFSETS_RAD.size, bool), np.ones(OFFSETS_RAD.size, bool)])
 N_CANDIDATES = _OFF.size
+#: a candidate that leaves a ship within this many required distances at a relative speed below
+#: ALONGSIDE_SPEED_MPS runs alongside it: allowed, but only when nothing else is safe
+ALONGSIDE_RANGE_FACTOR = 2.0
+ALONGSIDE_SPEED_MPS = 1.0
 
 
 def candidate_offset_rad(k: np.ndarray) -> np.ndarray:
@@ -53,8 +59,8 @@ def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_facto
     """Choose a candidate for each of ``s`` manoeuvring ships.
 
     Args:
-        base_course_rad: ``(s,)`` course the offsets are taken from (the route course when the
-            manoeuvre began), rad.
+        base_course_rad: ``(s,)`` course the offsets are taken from (the course over ground
+            when the manoeuvre began), rad.
         route_speed_mps: ``(s,)`` speed over ground at full speed, m/s.
         speed_factor: ``(s,)`` fraction of the route speed of the reduced-speed candidates.
         side: ``(s,)`` ``STARBOARD``, ``PORT`` or ``EITHER`` (vocabulary constants; any value
@@ -89,6 +95,11 @@ def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_facto
     worst = np.full((s, N_CANDIDATES), math.inf)
     np.minimum.at(worst, pair_ship, margin)
     ok = worst >= 0.0
+    # running alongside a near ship (little relative speed) keeps the encounter unresolved
+    near = np.hypot(pn, pe) < ALONGSIDE_RANGE_FACTOR * np.maximum(required_m[:, None], 1.0)
+    slow_rel = v2 < ALONGSIDE_SPEED_MPS**2
+    alongside = np.zeros((s, N_CANDIDATES), dtype=bool)
+    np.logical_or.at(alongside, pair_ship, near & slow_rel & (required_m[:, None] > 0))
 
     # preference cost: alteration size, wrong side, alterations below the least one, reduced
     # speed where not asked; every term keeps the ordering of the description above
@@ -98,7 +109,7 @@ def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_facto
     too_small = (np.abs(off_deg) < np.degrees(least_change_rad)[:, None] - 1e-9) & (
         off_deg != 0.0)
     cost = np.abs(off_deg) + 0.5 * (off_deg < 0)  # starboard first among equals (EITHER)
-    cost = cost + 1000.0 * wrong_side + 500.0 * too_small
+    cost = cost + 1000.0 * wrong_side + 500.0 * too_small + 150.0 * alongside
     cost = cost + np.where(_REDUCED[None, :], np.where(reduce_asked[:, None], -0.25, 200.0), 0.0)
     # a bare speed reduction (no alteration) counts only where no alteration is asked
     cost = cost + np.where((off_deg == 0.0) & (least_change_rad[:, None] > 0), 300.0, 0.0)

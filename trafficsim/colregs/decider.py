@@ -20,9 +20,10 @@ Every decision period (default 10 s) :meth:`Decider.decide`
    [seed 002, appendix F, "Analysis of simulation results"].
 
 Behaviours (per ship): ``colregs`` runs the scenario's rules file (default
-``rules/colregs.yaml``); ``keep_course`` takes no decisions; any other name runs
-``rules/<name>.yaml`` (``turn_port``, ``late_action``: the non-compliant ships of the bundled
-rules), so a new behaviour is a new rules file.
+``rules/colregs.yaml``); ``keep_course`` takes no decisions; ``turn_port`` and ``late_action``
+run ``rules/turn_port.yaml`` and ``rules/late_action.yaml``, the non-compliant ships of the
+bundled rules (each extends ``colregs.yaml`` with other parameters). Other behaviour is a rules
+file given as the scenario's ``rules:``.
 """
 
 from __future__ import annotations
@@ -261,6 +262,9 @@ class Decider:
             value = dec.action(field_name)
             row = self._mem(mem_name)
             row[idx] = np.where(np.isnan(value), row[idx], value)
+        # a pair that drops its role forgets what it asked (a later encounter starts afresh)
+        dropped = idx[(role == NO_ROLE)]
+        self.request[:, dropped] = np.nan
         for r, field_name in enumerate(("direction", "course_change_deg", "speed_factor",
                                         "pass_distance_nm")):
             value = dec.action(field_name)

@@ -34,6 +34,8 @@ velocity; CPA formulas from the project's reference notes, shared/reference/colr
     [0, 180] deg. ``|aspect_deg|``.
 ``course_diff_deg``
     (-180, 180] deg. Other's course over ground minus own course over ground (180 = reciprocal).
+``course_diff_abs_deg``
+    [0, 180] deg. ``|course_diff_deg|`` (Rule 14: reciprocal or nearly reciprocal courses).
 ``dcpa_nm``
     [0, inf) NM. Distance at the closest point of approach, straight tracks: ``|p x v| / |v|``;
     equals ``range_nm`` with no relative motion.
@@ -99,6 +101,7 @@ NAMES: tuple[str, ...] = (
     "aspect_deg",
     "aspect_abs_deg",
     "course_diff_deg",
+    "course_diff_abs_deg",
     "dcpa_nm",
     "tcpa_min",
     "bcr_nm",
@@ -116,7 +119,8 @@ NAMES: tuple[str, ...] = (
 #: feature name -> row
 INDEX: dict[str, int] = {name: i for i, name in enumerate(NAMES)}
 
-(RANGE, BEARING, BEARING_ABS, ASPECT, ASPECT_ABS, COURSE_DIFF, DCPA, TCPA, BCR, BCT, SPEED_RATIO,
+(RANGE, BEARING, BEARING_ABS, ASPECT, ASPECT_ABS, COURSE_DIFF, COURSE_DIFF_ABS, DCPA, TCPA, BCR,
+ BCT, SPEED_RATIO,
  OWN_SPEED, OTHER_SPEED, DOMAIN, RANGE_TO_DOMAIN, TIME_TO_DOMAIN, DOMAIN_ENTRY,
  VISIBILITY) = range(len(NAMES))
 
@@ -265,6 +269,7 @@ def _features_loop(kind: int, own_n: np.ndarray, own_e: np.ndarray, own_vn: np.n
         out[ASPECT_ABS, i] = abs(aspect)
         out[COURSE_DIFF, i] = _deg(fast_atan2(own_cn * oth_ce - own_ce * oth_cn,
                                               own_cn * oth_cn + own_ce * oth_ce))
+        out[COURSE_DIFF_ABS, i] = abs(out[COURSE_DIFF, i])
 
         # CPA [colregs.md section 4]; DCPA from the cross product (no cancellation near CPA)
         v2 = vn * vn + ve * ve

@@ -22,7 +22,7 @@ A scenario places one or more ships in an environment for a fixed duration::
         speed_kn: 12               # optional (default: the ship's service speed), [0, 60]
         route: [[5000, 0], [9000, 3000]]   # optional [north_m, east_m] waypoints
         behaviour: colregs         # optional: colregs (default), keep_course, turn_port,
-                                   #   late_action (see trafficsim.colregs.behaviour)
+                                   #   late_action (see trafficsim.colregs.decider)
     rules: ../rules/colregs.yaml   # optional decision network (relative to this file);
                                    #   default: the bundled rules/colregs.yaml
     domain: coldwell               # optional ship domain: coldwell, goodwin, fujii, kijima
