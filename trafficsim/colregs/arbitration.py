@@ -115,7 +115,10 @@ def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_facto
     cost = cost + np.where((off_deg == 0.0) & (least_change_rad[:, None] > 0), 300.0, 0.0)
     rows = np.arange(s)
     keep = (current >= 0) & ok[rows, np.maximum(current, 0)]
+    # nothing safe: the largest worst-case margin, ties broken by the preference cost
+    fallback = np.where(wrong_side, -math.inf, worst)
+    best = fallback >= fallback.max(axis=1, keepdims=True) - 1e-6
     chosen = np.where(ok.any(axis=1), np.argmin(np.where(ok, cost, math.inf), axis=1),
-                      np.argmax(np.where(wrong_side, -math.inf, worst), axis=1))
+                      np.argmin(np.where(best, cost, math.inf), axis=1))
     chosen = np.where(keep, current, chosen)
     return chosen, ok[rows, chosen]
