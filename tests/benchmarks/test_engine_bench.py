@@ -71,3 +71,20 @@ def test_engine_with_instruments_and_filter_10000_ships(benchmark, filter_name, 
         benchmark.extra_info["ship_steps_per_s"] = rate
         extra = " and tracking" if tracking else ""
         print(f"\nwith instruments, {filter_name} filter{extra}: {rate:,.0f} ship-steps/s")
+
+
+def test_engine_with_decisions_10000_ships(benchmark):
+    """Engine plus the COLREGS decision network (rules/colregs.yaml) every 10 s for every pair of
+    5,000 two-ship encounters; 100 steps so that the decision step is amortised as in a run."""
+    from trafficsim.colregs.decider import Decider
+
+    batch = _batch("container", 5000)
+    decider = Decider.build(["colregs"] * batch.n_ships, batch.pair_i, batch.pair_j)
+    sim = Simulation.start(batch, 1.0, decider=decider, decision_period_s=10.0)
+    steps = 100
+    benchmark.pedantic(sim.run, args=(steps,), rounds=3, warmup_rounds=1)
+    assert np.isfinite(sim.batch.x).all()
+    if benchmark.stats is not None:
+        rate = sim.batch.n_ships * steps / benchmark.stats.stats.mean
+        benchmark.extra_info["ship_steps_per_s"] = rate
+        print(f"\nwith decisions every 10 s: {rate:,.0f} ship-steps/s")
