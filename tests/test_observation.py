@@ -57,3 +57,14 @@ def test_pair_noise_does_not_depend_on_other_encounters():
     sim, mixed = _errors(_ships(RADAR, RADAR, extra=other), steps=60)
     first = (sim.obs.obs < 2) & (sim.obs.tgt < 2)
     np.testing.assert_array_equal(alone, mixed[:, first])
+
+
+def test_predicted_tracks_move_each_track_along_its_velocity():
+    sim, _ = _errors(_ships(RADAR, RADAR), steps=30)
+    tracks = sim.obs.tracks
+    t = sim.t_s + 4.0
+    xp, active = sim.obs.predicted_tracks(t)
+    assert active.all()
+    np.testing.assert_allclose(xp[:, :2], tracks.x[:, :2]
+                               + (t - tracks.t_s)[:, None] * tracks.x[:, 2:], rtol=1e-15)
+    np.testing.assert_array_equal(xp[:, 2:], tracks.x[:, 2:])

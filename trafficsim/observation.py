@@ -50,6 +50,7 @@ class Observation:
     banks: dict[str, NoiseBank]
     has_radar: bool
     has_ais: bool
+    settings: np.ndarray  # (tracker.N_SETTINGS, m) observers' tracker settings per pair
 
     @classmethod
     def build(cls, configs: Sequence[Mapping[str, Any]], pair_i: np.ndarray,
@@ -75,17 +76,19 @@ class Observation:
             "ais_rx": pair_bank("ais_rx", ais.AIS_RX_NORMAL_DIMS),
             "ais": NoiseBank(seed, enc, slot, ais.AIS_PURPOSE, ais.AIS_TX_NORMAL_DIMS),
         }
+        tracker_p = tracker.build([dict(c.get("tracker") or {}) for c in configs])
         return cls(obs=obs, tgt=tgt,
                    radar_p=radar_p, radar_s=radar.init(radar_p), ais_p=ais_p,
                    ais_s=ais.init(ais_p, obs.shape[0]),
-                   tracker_p=tracker.build([dict(c.get("tracker") or {}) for c in configs]),
-                   tracks=tracker.init(obs.shape[0]), banks=banks,
+                   tracker_p=tracker_p, tracks=tracker.init(obs.shape[0]), banks=banks,
                    has_radar=any(c.get("radar") is not None for c in configs),
-                   has_ais=any(c.get("ais") is not None for c in configs))
+                   has_ais=any(c.get("ais") is not None for c in configs),
+                   settings=tracker.pair_settings(tracker_p, obs))
 
     def update(self, x: np.ndarray, est: np.ndarray, vel_ne: np.ndarray, t_s: float) -> None:
         """Observe at time ``t_s``: ``x`` true ``(8, n)``, ``est`` own estimates ``(6, n)``,
-        ``vel_ne`` true ground velocity ``(2, n)``."""
+        ``vel_ne`` true ground velocity ``(2, n)``. Compiled loops over ships and pairs (radar
+        scan and plots, AIS transmission and reception, tracker) update the state in place."""
         plots = reports = None
         if self.has_radar:
             self.radar_s, plots = radar.step(
@@ -94,12 +97,11 @@ class Observation:
         if self.has_ais:
             self.ais_s, reports = ais.step(
                 self.ais_p, self.ais_s, t_s, self.obs, self.tgt, x, vel_ne,
-                self.banks["ais"].next(), self.banks["ais_rx"].next())
+                self.banks["ais"].next(), self.banks["ais_rx"].next(), inplace=True)
         self.tracks = tracker.step(self.tracker_p, self.tracks, self.obs, t_s, plots, reports,
-                                   inplace=True)
+                                   inplace=True, settings=self.settings)
 
     def predicted_tracks(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Tracks predicted to ``t_s``: state ``(m, 4)`` north, east, v_north, v_east and
         ``active`` ``(m,)``."""
-        xp, _ = tracker.predict(self.tracker_p, self.tracks, self.obs, t_s)
-        return xp, self.tracks.active
+        return tracker.predict_state(self.tracks, t_s), self.tracks.active

@@ -414,3 +414,114 @@ def test_three_ships_both_directions_per_observer_settings() -> None:
     err = xt[:5, :2] - truth.pos[:, tgt[:5]].T
     assert np.all(np.hypot(err[:, 0], err[:, 1]) < 30.0)
     np.testing.assert_allclose(xt[:5, 2:], truth.vel[:, tgt[:5]].T, atol=0.3)
+
+
+# ---------------------------------------------------------------- against a textbook filter
+
+
+def _ais_z_r(north, east, sog, cog, sp, sv):
+    """AIS measurement of the module docstring, one report, plain numpy."""
+    c, s = math.cos(cog), math.sin(cog)
+    along, across = ais.SOG_STEP_MPS**2 / 12.0, (sog * ais.COG_STEP_RAD) ** 2 / 12.0
+    rot = np.array([[c, -s], [s, c]])
+    R = np.zeros((4, 4))
+    R[:2, :2] = np.eye(2) * (sp**2 + ais.POSITION_STEP_M**2 / 12.0)
+    R[2:, 2:] = sv**2 * np.eye(2) + rot @ np.diag([along, across]) @ rot.T
+    return np.array([north, east, sog * c, sog * s]), R
+
+
+def test_ais_measurement_matches_formulas() -> None:
+    rng = np.random.default_rng(30)
+    m = 50
+    rep = ais.AisReports(valid=rng.random(m) < 0.8, stamp_s=np.zeros(m),
+                         north_m=rng.uniform(-1e4, 1e4, m), east_m=rng.uniform(-1e4, 1e4, m),
+                         sog_mps=rng.uniform(0, 15, m), cog_rad=rng.uniform(0, 2 * math.pi, m),
+                         heading_rad=np.zeros(m))
+    sp, sv = rng.uniform(1, 10, m), rng.uniform(0.05, 0.5, m)
+    z, R = tracker.ais_measurement(rep, sp, sv)
+    for k in range(m):
+        if rep.valid[k]:
+            zk, Rk = _ais_z_r(rep.north_m[k], rep.east_m[k], rep.sog_mps[k], rep.cog_rad[k],
+                              sp[k], sv[k])
+            np.testing.assert_allclose(z[k], zk, rtol=1e-14)
+            np.testing.assert_allclose(R[k], Rk, rtol=1e-12, atol=1e-18)
+        else:
+            assert np.isnan(z[k]).all() and np.isnan(R[k]).all()
+
+
+def _textbook(meas: list, q: float, sv0: float) -> tuple[np.ndarray, np.ndarray]:
+    """Kalman filter of the module docstring on ``(t, z, R)`` in time order, matrices as
+    written: F, Q, K = P H^T S^-1, P = P - K S K^T."""
+    x = P = t = None
+    for tm, z, R in meas:
+        dim = z.size
+        H = np.eye(4)[:dim]
+        if x is None:
+            x, P = H.T @ z, H.T @ R @ H
+            if dim == 2:
+                P[2, 2] = P[3, 3] = sv0**2
+        else:
+            d = tm - t
+            F = np.eye(4) + d * np.eye(4, k=2)
+            Q = q * np.kron([[d**3 / 3, d**2 / 2], [d**2 / 2, d]], np.eye(2))
+            x, P = F @ x, F @ P @ F.T + Q
+            S = H @ P @ H.T + R
+            K = P @ H.T @ np.linalg.inv(S)
+            x, P = x + K @ (z - H @ x), P - K @ S @ K.T
+        t = tm
+    return x, P
+
+
+def test_late_reports_over_many_wraps_of_the_history_equal_time_order() -> None:
+    """Twenty pairs, 300 s: radar plots every 3 s and AIS reports every 4 s arriving 2.2 s
+    after their stamp (so after newer plots) go through the ring-buffer history many times
+    over; every track equals the textbook filter run on all measurements in time order."""
+    rng = np.random.default_rng(31)
+    m = 20
+    t_par = tracker.build([{"gate_probability": 1.0 - 1e-12}])
+    q, sv0 = t_par.q_m2ps3[0], t_par.init_speed_sigma_mps[0]
+    sp, sv = t_par.ais_sigma_position_m[0], t_par.ais_sigma_velocity_mps[0]
+    obs = np.zeros(m, dtype=np.int64)
+    p0 = rng.uniform(-5000, 5000, (m, 2))
+    v = rng.uniform(-8, 8, (m, 2))
+    radar_phase = rng.integers(0, 3, m)
+    ais_offset = rng.uniform(0.1, 3.9, m)
+    latency = 2.2
+    cov = np.zeros((m, 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1] = rng.uniform(200, 900, (2, m))
+    cov[:, 0, 1] = cov[:, 1, 0] = 100.0
+    chol = np.linalg.cholesky(cov)
+    in_order: list[list] = [[] for _ in range(m)]
+    pending: list[tuple] = []  # AIS reports in flight: (arrival, pair, stamp, fields)
+    state = tracker.init(m)
+    for step in range(301):
+        t = float(step)
+        for k in range(m):  # reports stamped in (t - 1, t]
+            for stamp in np.arange(ais_offset[k], t + 1e-9, 4.0):
+                if stamp > t - 1.0:
+                    pos = p0[k] + v[k] * stamp + rng.normal(0, 3, 2)
+                    sog, cog = float(np.hypot(*v[k])), float(np.arctan2(v[k, 1], v[k, 0]))
+                    pending.append((stamp + latency, k, stamp, (*pos, sog, cog)))
+        valid = (step + radar_phase) % 3 == 0
+        plots_z = p0 + v * t + np.einsum("kij,kj->ki", chol, rng.standard_normal((m, 2)))
+        plots = RadarPlots(valid=valid, t_s=t, north_m=plots_z[:, 0], east_m=plots_z[:, 1],
+                           cov=cov, range_m=np.full(m, np.nan), bearing_rad=np.full(m, np.nan))
+        for k in np.flatnonzero(valid):
+            in_order[k].append((t, plots_z[k], cov[k]))
+        arrived = [p for p in pending if p[0] <= t + 1e-9]
+        pending = [p for p in pending if p[0] > t + 1e-9]
+        rep = ais.AisReports(np.zeros(m, dtype=bool), *(np.full(m, np.nan) for _ in range(6)))
+        for _, k, stamp, (north, east, sog, cog) in arrived:
+            rep.valid[k], rep.stamp_s[k] = True, stamp
+            rep.north_m[k], rep.east_m[k], rep.sog_mps[k], rep.cog_rad[k] = north, east, sog, cog
+            z, R = _ais_z_r(north, east, sog, cog, sp, sv)
+            in_order[k].append((stamp, z, R))
+        state = tracker.step(t_par, state, obs, t, plots, rep)
+    assert state.active.all() and (state.gate_failures == 0).all()
+    for k in range(m):
+        meas = sorted(in_order[k], key=lambda e: e[0])
+        assert state.n_updates[k] == len(meas) > 150
+        x, P = _textbook(meas, q, sv0)
+        assert state.t_s[k] == max(e[0] for e in meas)
+        np.testing.assert_allclose(state.x[k], x, rtol=1e-9, atol=1e-8)
+        np.testing.assert_allclose(state.P[k], P, rtol=1e-7, atol=1e-10)

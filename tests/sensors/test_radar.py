@@ -198,3 +198,77 @@ def test_bad_config_and_draws_rejected() -> None:
     x = np.zeros((N_STATE, 2))
     with pytest.raises(ValueError):
         _measure(params, x, np.array([0]), np.array([1]), np.zeros((1, 2)))
+
+
+def _reference_plots(params, due, obs, tgt, x, est_n, est_e, est_psi, draws, var_psi=None,
+                     pos_cov=None):
+    """The measurement model of the module docstring written with whole-array numpy
+    operations, one formula per line (the compiled loop must give the same numbers)."""
+    def rotate(psi, bx, by):
+        return bx * np.cos(psi) - by * np.sin(psi), bx * np.sin(psi) + by * np.cos(psi)
+
+    ax, ay = params.antenna_x_m[obs], params.antenna_y_m[obs]
+    psi = x[PSI, obs]
+    dn_a, de_a = rotate(psi, ax, ay)
+    rel_n = x[NORTH, tgt] - (x[NORTH, obs] + dn_a)
+    rel_e = x[EAST, tgt] - (x[EAST, obs] + de_a)
+    true_range = np.hypot(rel_n, rel_e)
+    rng = true_range + params.sigma_range_m[obs] * draws[:, 0]
+    brg = np.mod(np.arctan2(rel_e, rel_n) - psi + params.sigma_bearing_rad[obs] * draws[:, 1]
+                 + math.pi, 2 * math.pi) - math.pi
+    valid = (due[obs] & (true_range <= params.max_range_m[obs])
+             & (true_range >= params.min_range_m[obs]) & (draws[:, 2] < params.z_detect[obs])
+             & (rng > 0.0))
+    en_a, ee_a = rotate(est_psi[obs], ax, ay)
+    theta = est_psi[obs] + brg
+    c, s = np.cos(theta), np.sin(theta)
+    north = est_n[obs] + en_a + rng * c
+    east = est_e[obs] + ee_a + rng * s
+    var_r = params.sigma_range_m[obs] ** 2
+    var_b = params.sigma_bearing_rad[obs] ** 2 + (0.0 if var_psi is None else var_psi[obs])
+    cross = rng * rng * var_b
+    cov = np.empty((obs.shape[0], 2, 2))
+    cov[:, 0, 0] = c * c * var_r + s * s * cross
+    cov[:, 1, 1] = s * s * var_r + c * c * cross
+    cov[:, 0, 1] = cov[:, 1, 0] = c * s * (var_r - cross)
+    if pos_cov is not None:
+        cov = cov + pos_cov[obs]
+    return valid, north, east, cov, rng, brg
+
+
+@pytest.mark.parametrize("own_uncertainty", [False, True])
+def test_compiled_plots_match_array_formulas(own_uncertainty: bool) -> None:
+    """Every observer sees every other ship of a 12-ship group: random antennas (half at the
+    reference point), detection, scan phases, own estimates; NaN exactly where no plot."""
+    rng = np.random.default_rng(21)
+    n = 12
+    i, j = np.triu_indices(n, 1)
+    obs, tgt = radar.directed_pairs(i, j)
+    x = np.zeros((N_STATE, n))
+    x[NORTH], x[EAST] = rng.uniform(-2e4, 2e4, (2, n))
+    x[PSI] = rng.uniform(-4.0, 10.0, n)
+    cfg = [{"antenna_x_m": float(rng.uniform(-60, 60)) if k % 2 else 0.0,
+            "antenna_y_m": float(rng.uniform(-8, 8)) if k % 2 else 0.0,
+            "sigma_bearing_deg": float(rng.choice([0.087, 1.0])),
+            "max_range_nm": float(rng.choice([6.0, 12.0])), "min_range_m": 40.0,
+            "p_detect": float(rng.choice([0.0, 0.8, 1.0]))} for k in range(n)]
+    params = radar.build(cfg)
+    due = rng.random(n) < 0.8
+    est = (x[NORTH] + rng.normal(0, 5, n), x[EAST] + rng.normal(0, 5, n),
+           x[PSI] + rng.normal(0, 0.01, n))
+    draws = rng.standard_normal((obs.shape[0], radar.RADAR_NORMAL_DIMS))
+    extra = {}
+    if own_uncertainty:
+        a = rng.normal(0, 3, (n, 2, 2))
+        extra = {"var_psi": rng.uniform(0, 1e-4, n), "pos_cov": a @ a.transpose(0, 2, 1)}
+    plots = radar.measure(params, due, obs, tgt, x, *est, draws, 5.0,
+                          own_heading_var_rad2=extra.get("var_psi"),
+                          own_pos_cov_m2=extra.get("pos_cov"))
+    valid, *values = _reference_plots(params, due, obs, tgt, x, *est, draws, **extra)
+    assert 0 < valid.sum() < valid.size
+    np.testing.assert_array_equal(plots.valid, valid)
+    for got, want in zip((plots.north_m, plots.east_m, plots.cov, plots.range_m,
+                          plots.bearing_rad), values, strict=True):
+        want = np.where(valid.reshape((-1,) + (1,) * (want.ndim - 1)), want, np.nan)
+        np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-9)
+    assert plots.t_s == 5.0

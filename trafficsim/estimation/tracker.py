@@ -86,7 +86,11 @@ Config keys (per observer ship; defaults in brackets): ``accel_psd_m2ps3`` [0.00
 ``ais_sigma_velocity_mps`` [0.1], ``use_radar`` [true], ``use_ais`` [true].
 
 All pairs run in one compiled loop (``@kernel``) with closed-form predictions and a Cholesky
-solve of the 2x2 or 4x4 innovation covariance; no per-pair Python loop.
+solve of the 2x2 or 4x4 innovation covariance; no per-pair Python loop. The loop reads the radar
+plots and AIS reports as they come (the AIS measurement is formed inside it) and the observers'
+settings from a per-pair table gathered once (:func:`pair_settings`). The history is a ring
+buffer of fixed-size records, so accepting a measurement writes one record instead of moving
+the whole history.
 """
 
 from __future__ import annotations
@@ -153,13 +157,14 @@ class TrackState:
         gate_failures: ``(m,)`` int consecutive gate rejections.
         n_updates: ``(m,)`` int accepted measurements since initiation.
         hist_n: ``(m,)`` int, measurements in the history (at most ``HISTORY``).
-        hist_t, hist_dim, hist_z, hist_R: ``(m, HISTORY)``, ``(m, HISTORY)`` int,
-            ``(m, HISTORY, 4)``, ``(m, HISTORY, 4, 4)``: the newest accepted measurements, oldest
-            first: time stamp, dimension (2 position, 4 full state), value and covariance
-            (zero-padded to 4).
-        pre_x, pre_P, pre_t: ``(m, HISTORY, 4)``, ``(m, HISTORY, 4, 4)``, ``(m, HISTORY)``: the
-            estimate just before each of them and its time (NaN time: that measurement
-            started the track). Used to reprocess late measurements exactly.
+        hist_start: ``(m,)`` int, row of ``hist`` holding the oldest of them.
+        hist: ``(m, HISTORY, H_SIZE)`` ring buffer of the newest accepted measurements: the
+            ``s``-th oldest is row ``(hist_start + s) % HISTORY``. A row holds (offsets
+            ``H_*``) the time stamp, the dimension (2 position, 4 full state), the value (4)
+            and the lower triangle of the covariance (packed row by row; the leading ``dim``
+            block is used), then the time of the estimate just before it (NaN: it started the
+            track) and that estimate (4 and 4x4 row-major). Used to reprocess late measurements
+            exactly.
     """
 
     x: np.ndarray
@@ -169,13 +174,8 @@ class TrackState:
     gate_failures: np.ndarray
     n_updates: np.ndarray
     hist_n: np.ndarray
-    hist_t: np.ndarray
-    hist_dim: np.ndarray
-    hist_z: np.ndarray
-    hist_R: np.ndarray
-    pre_x: np.ndarray
-    pre_P: np.ndarray
-    pre_t: np.ndarray
+    hist_start: np.ndarray
+    hist: np.ndarray
 
     def copy(self) -> TrackState:
         return TrackState(*(getattr(self, f.name).copy() for f in fields(self)))
@@ -235,15 +235,38 @@ def build(configs: Sequence[Mapping]) -> TrackerParams:
 
 def init(n_pairs: int) -> TrackState:
     """No target tracked yet, for ``n_pairs`` directed pairs."""
-    m, h = int(n_pairs), HISTORY
+    m = int(n_pairs)
     return TrackState(
         x=np.full((m, N_STATE), np.nan), P=np.full((m, N_STATE, N_STATE), np.nan),
         t_s=np.full(m, np.nan), active=np.zeros(m, dtype=bool),
         gate_failures=np.zeros(m, dtype=np.int64), n_updates=np.zeros(m, dtype=np.int64),
-        hist_n=np.zeros(m, dtype=np.int64), hist_t=np.full((m, h), np.nan),
-        hist_dim=np.zeros((m, h), dtype=np.int64), hist_z=np.zeros((m, h, N_STATE)),
-        hist_R=np.zeros((m, h, N_STATE, N_STATE)), pre_x=np.full((m, h, N_STATE), np.nan),
-        pre_P=np.full((m, h, N_STATE, N_STATE), np.nan), pre_t=np.full((m, h), np.nan))
+        hist_n=np.zeros(m, dtype=np.int64), hist_start=np.zeros(m, dtype=np.int64),
+        hist=np.full((m, HISTORY, H_SIZE), np.nan))
+
+
+#: rows of the per-pair settings table (:func:`pair_settings`)
+(S_Q, S_COAST, S_SV0, S_GATE2, S_GATE4, S_MAX_FAIL, S_LATENCY, S_USE_RADAR, S_USE_AIS,
+ S_AIS_SP, S_AIS_SV) = range(11)
+N_SETTINGS = 11
+
+
+def pair_settings(params: TrackerParams, obs: np.ndarray) -> np.ndarray:
+    """The observers' settings gathered per directed pair, ``(N_SETTINGS, m)`` float (rows
+    ``S_*``; switches as 0/1, ``max_gate_failures`` as a whole number; one row per setting, so
+    that the loop over pairs reads only the settings it uses). Build it once for a fixed set of
+    pairs and pass it to :func:`step`."""
+    p = params
+    cols = (p.q_m2ps3, p.coast_s, p.init_speed_sigma_mps, p.gate2, p.gate4, p.max_gate_failures,
+            p.latency_compensation, p.use_radar, p.use_ais, p.ais_sigma_position_m,
+            p.ais_sigma_velocity_mps)
+    return np.ascontiguousarray(np.stack([np.asarray(c, dtype=float) for c in cols])[
+        :, np.asarray(obs, dtype=np.int64)])
+
+
+#: variance of the rounding error of the AIS position (uniform over one step: step^2 / 12)
+VAR_POSITION_QUANT_M2 = POSITION_STEP_M**2 / 12.0
+#: variance of the rounding error of the AIS SOG (along course), (m/s)^2
+VAR_SOG_QUANT_M2PS2 = SOG_STEP_MPS**2 / 12.0
 
 
 def ais_measurement(reports: AisReports, sigma_position_m: np.ndarray,
@@ -256,28 +279,29 @@ def ais_measurement(reports: AisReports, sigma_position_m: np.ndarray,
             of the ground velocity behind SOG/COG (per axis).
 
     Returns: ``z`` ``(m, 4)`` (north, east, v_north, v_east) and ``R`` ``(m, 4, 4)`` (module
-    docstring), NaN rows where no report was received.
+    docstring; the same numbers :func:`step` forms inside its loop), NaN rows where no report
+    was received.
     """
-    sog, cog = reports.sog_mps, reports.cog_rad
-    c, s = np.cos(cog), np.sin(cog)
-    z = np.stack([reports.north_m, reports.east_m, sog * c, sog * s], axis=1)
-    m = z.shape[0]
-    R = np.zeros((m, N_STATE, N_STATE))
-    var_p = sigma_position_m**2 + POSITION_STEP_M**2 / 12.0
-    R[:, 0, 0] = R[:, 1, 1] = var_p
-    var_v = sigma_velocity_mps**2
-    along = SOG_STEP_MPS**2 / 12.0
-    across = (sog * COG_STEP_RAD) ** 2 / 12.0
-    R[:, 2, 2] = var_v + c * c * along + s * s * across
-    R[:, 3, 3] = var_v + s * s * along + c * c * across
-    R[:, 2, 3] = R[:, 3, 2] = c * s * (along - across)
-    R[~reports.valid] = np.nan
-    return z, R
+    m = reports.valid.shape[0]
+    out = np.empty((m, 4 + 16))
+    _ais_measurements(_c(reports.valid, bool), _c(reports.north_m), _c(reports.east_m),
+                      _c(reports.sog_mps), _c(reports.cog_rad),
+                      _c(np.broadcast_to(np.asarray(sigma_position_m, dtype=float), (m,))),
+                      _c(np.broadcast_to(np.asarray(sigma_velocity_mps, dtype=float), (m,))), out)
+    return out[:, :4].copy(), out[:, 4:].reshape(m, N_STATE, N_STATE).copy()
+
+
+def _c(a: np.ndarray | float, dtype: type = float) -> np.ndarray:
+    """``a`` as a C-contiguous array (one compiled specialisation for every caller)."""
+    return np.ascontiguousarray(a, dtype=dtype)
+
+
+_NONE_B, _NONE_F, _NONE_F3 = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 2, 2))
 
 
 def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
          radar: RadarPlots | None = None, ais: AisReports | None = None,
-         inplace: bool = False) -> TrackState:
+         inplace: bool = False, settings: np.ndarray | None = None) -> TrackState:
     """Use this step's radar plots and AIS reports, start and delete tracks.
 
     Args:
@@ -288,42 +312,26 @@ def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
         radar: this step's plots, or None.
         ais: this step's received reports, or None.
         inplace: update ``state`` itself instead of a copy (the engine's step path).
+        settings: ``pair_settings(params, obs)``, if already gathered (the engine's step path).
 
     Returns: the new tracks (each held at the time of its newest measurement; use
     :func:`predict` for the state at another time).
     """
-    m = obs.shape[0]
-    t_s = float(t_s)
-    if radar is not None:
-        r_valid = radar.valid & params.use_radar[obs]
-        r_t = np.full(m, radar.t_s)
-        r_z = np.stack([radar.north_m, radar.east_m], axis=1)
-        r_R = radar.cov
-    else:
-        r_valid, r_t = np.zeros(m, dtype=bool), np.full(m, t_s)
-        r_z, r_R = np.zeros((m, 2)), np.zeros((m, 2, 2))
-    if ais is not None:
-        a_valid = ais.valid & params.use_ais[obs]
-        a_t = np.where(params.latency_compensation[obs], ais.stamp_s, t_s)
-        a_z, a_R = ais_measurement(ais, params.ais_sigma_position_m[obs],
-                                   params.ais_sigma_velocity_mps[obs])
-    else:
-        a_valid, a_t = np.zeros(m, dtype=bool), np.full(m, t_s)
-        a_z, a_R = np.zeros((m, 4)), np.zeros((m, 4, 4))
-
+    if settings is None:
+        settings = pair_settings(params, obs)
     new = state if inplace else state.copy()
-
-    def c(a: np.ndarray, dtype: type = float) -> np.ndarray:
-        return np.ascontiguousarray(a, dtype=dtype)
-
+    if radar is not None:
+        r = (True, _c(radar.valid, bool), float(radar.t_s), _c(radar.north_m), _c(radar.east_m),
+             _c(radar.cov))
+    else:
+        r = (False, _NONE_B, 0.0, _NONE_F, _NONE_F, _NONE_F3)
+    if ais is not None:
+        a = (True, _c(ais.valid, bool), _c(ais.stamp_s), _c(ais.north_m), _c(ais.east_m),
+             _c(ais.sog_mps), _c(ais.cog_rad))
+    else:
+        a = (False, _NONE_B, _NONE_F, _NONE_F, _NONE_F, _NONE_F, _NONE_F)
     _step_kernel(new.x, new.P, new.t_s, new.active, new.gate_failures, new.n_updates,
-                 new.hist_n, new.hist_t, new.hist_dim, new.hist_z, new.hist_R, new.pre_x,
-                 new.pre_P, new.pre_t,
-                 c(params.q_m2ps3[obs]), c(params.coast_s[obs]),
-                 c(params.init_speed_sigma_mps[obs]), c(params.gate2[obs]), c(params.gate4[obs]),
-                 c(params.max_gate_failures[obs], np.int64), t_s,
-                 c(r_valid, bool), c(r_t), c(r_z), c(r_R), c(a_valid, bool), c(a_t), c(a_z),
-                 c(a_R))
+                 new.hist_n, new.hist_start, new.hist, settings, float(t_s), *r, *a)
     return new
 
 
@@ -338,8 +346,7 @@ def predict(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: floa
     """
     d = float(t_s) - state.t_s
     q = params.q_m2ps3[obs]
-    x = state.x.copy()
-    x[:, :2] += d[:, None] * state.x[:, 2:]
+    x = predict_state(state, t_s)
     P = state.P.copy()
     P[:, :2, :] += d[:, None, None] * P[:, 2:, :]
     P[:, :, :2] += d[:, None, None] * P[:, :, 2:]
@@ -349,9 +356,18 @@ def predict(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: floa
         P[:, a, a + 2] += q2
         P[:, a + 2, a] += q2
         P[:, a + 2, a + 2] += q1
-    x[~state.active] = np.nan
     P[~state.active] = np.nan
     return x, P
+
+
+def predict_state(state: TrackState, t_s: float) -> np.ndarray:
+    """The states of :func:`predict` alone (no covariance): ``(m, 4)``, NaN for untracked
+    pairs."""
+    d = float(t_s) - state.t_s
+    x = state.x.copy()
+    x[:, :2] += d[:, None] * state.x[:, 2:]
+    x[~state.active] = np.nan
+    return x
 
 
 def cpa_from_tracks(x_track: np.ndarray, own_north_m: np.ndarray, own_east_m: np.ndarray,
@@ -369,304 +385,383 @@ def cpa_from_tracks(x_track: np.ndarray, own_north_m: np.ndarray, own_east_m: np
 
 
 # ---------------------------------------------------------------- compiled per-pair filter
+# Helpers take one to three arrays: a compiled call that passes more arrays costs tens of ns
+# (and is not inlined), so the working estimate, the measurement in use and the update's
+# intermediates all live in one scratch vector at fixed offsets.
 
-#: how a measurement is used (see :func:`_use`)
+#: how a measurement is used (see :func:`_step_kernel`)
 IN_SEQUENCE, REPROCESS, RESTART, FORWARD = range(4)
 
+#: offsets in a history record (a row of ``TrackState.hist``): the measurement (time stamp,
+#: dimension, value, lower triangle of the covariance packed row by row; ``H_MEAS`` entries),
+#: then the estimate before it (its time, state, covariance 4x4 row-major)
+H_T, H_DIM, H_Z, H_R, H_MEAS = 0, 1, 2, 6, 16
+H_PRE_T, H_PRE_X, H_PRE_P = 16, 17, 21
+H_SIZE = 37
+
+#: offsets in the scratch vector: working estimate x (4) and P (4x4), the measurement in use z
+#: (4) and R (4x4); the update's H' x, then nu and the rows of P H'^T (the five right-hand sides
+#: of the solves, one after the other), then their solutions S^-1 nu and the rows of K, then S
+#: and its Cholesky factor L (4x4 row-major each)
+W_X, W_P, W_Z, W_R, W_HX, W_NU, W_PHT = 0, 4, 20, 24, 40, 44, 48
+W_V, W_K, W_S, W_L = 64, 68, 84, 100
+W_SIZE = 116
+
 
 @kernel
-def _predict_inplace(x: np.ndarray, P: np.ndarray, d: float, q: float) -> None:
-    """x = F(d) x, P = F P F^T + Q(d) for the 4-state constant-velocity model."""
-    x[0] += d * x[2]
-    x[1] += d * x[3]
+def _ais_zr(north: float, east: float, sog: float, cog: float, sp: float, sv: float,
+            out: np.ndarray, o: int) -> None:
+    """AIS report as a full-state measurement (module docstring): ``z`` (4) at ``out[o:]``,
+    ``R`` (4x4 row-major) at ``out[o + 4:]``."""
+    c, s = math.cos(cog), math.sin(cog)
+    out[o], out[o + 1], out[o + 2], out[o + 3] = north, east, sog * c, sog * s
+    for i in range(16):
+        out[o + 4 + i] = 0.0
+    var_p = sp * sp + VAR_POSITION_QUANT_M2
+    out[o + 4] = out[o + 4 + 5] = var_p
+    var_v = sv * sv
+    along = VAR_SOG_QUANT_M2PS2
+    a = sog * COG_STEP_RAD
+    across = a * a / 12.0
+    out[o + 4 + 10] = var_v + c * c * along + s * s * across
+    out[o + 4 + 15] = var_v + s * s * along + c * c * across
+    out[o + 4 + 11] = out[o + 4 + 14] = c * s * (along - across)
+
+
+@kernel
+def _ais_measurements(valid: np.ndarray, north: np.ndarray, east: np.ndarray, sog: np.ndarray,
+                      cog: np.ndarray, sp: np.ndarray, sv: np.ndarray, out: np.ndarray) -> None:
+    """:func:`_ais_zr` for every report into the rows of ``out`` ``(m, 20)`` (NaN if not
+    valid)."""
+    w = np.empty(20)
+    for k in range(out.shape[0]):
+        if valid[k]:
+            _ais_zr(north[k], east[k], sog[k], cog[k], sp[k], sv[k], w, 0)
+            for i in range(20):
+                out[k, i] = w[i]
+        else:
+            for i in range(20):
+                out[k, i] = math.nan
+
+
+@kernel
+def _predict(w: np.ndarray, d: float, q: float) -> None:
+    """x = F(d) x, P = F P F^T + Q(d) on the working estimate of ``w``."""
+    w[W_X] += d * w[W_X + 2]
+    w[W_X + 1] += d * w[W_X + 3]
     for j in range(4):
-        P[0, j] += d * P[2, j]
-        P[1, j] += d * P[3, j]
+        w[W_P + j] += d * w[W_P + 8 + j]
+        w[W_P + 4 + j] += d * w[W_P + 12 + j]
     for i in range(4):
-        P[i, 0] += d * P[i, 2]
-        P[i, 1] += d * P[i, 3]
+        w[W_P + 4 * i] += d * w[W_P + 4 * i + 2]
+        w[W_P + 4 * i + 1] += d * w[W_P + 4 * i + 3]
     q3, q2, q1 = q * d * d * d / 3.0, q * d * d / 2.0, q * d
     for a in range(2):
-        P[a, a] += q3
-        P[a, a + 2] += q2
-        P[a + 2, a] += q2
-        P[a + 2, a + 2] += q1
+        w[W_P + 5 * a] += q3
+        w[W_P + 5 * a + 2] += q2
+        w[W_P + 5 * a + 8] += q2
+        w[W_P + 5 * a + 10] += q1
 
 
 @kernel
-def _cholesky(S: np.ndarray, dim: int, L: np.ndarray) -> bool:
-    """Lower Cholesky factor of the leading ``dim x dim`` block; False if not positive."""
-    for i in range(dim):
-        for j in range(i + 1):
-            acc = S[i, j]
-            for k in range(j):
-                acc -= L[i, k] * L[j, k]
-            if i == j:
-                if acc <= 0.0:
-                    return False
-                L[i, i] = math.sqrt(acc)
-            else:
-                L[i, j] = acc / L[j, j]
-    return True
-
-
-@kernel
-def _solve(L: np.ndarray, dim: int, b: np.ndarray, out: np.ndarray) -> None:
-    """Solve ``L L^T out = b`` (leading ``dim`` entries)."""
-    for i in range(dim):
-        acc = b[i]
-        for k in range(i):
-            acc -= L[i, k] * out[k]
-        out[i] = acc / L[i, i]
-    for i in range(dim - 1, -1, -1):
-        acc = out[i]
-        for k in range(i + 1, dim):
-            acc -= L[k, i] * out[k]
-        out[i] = acc / L[i, i]
-
-
-@kernel
-def _start(x: np.ndarray, P: np.ndarray, dim: int, z: np.ndarray, Rm: np.ndarray,
-           sv0: float) -> None:
-    """Track initiation from one measurement (position or full state)."""
+def _start(w: np.ndarray, dim: int, sv0: float) -> None:
+    """Track initiation from the measurement in use (position or full state)."""
     for i in range(4):
-        x[i] = 0.0
+        w[W_X + i] = 0.0
         for j in range(4):
-            P[i, j] = 0.0
+            w[W_P + 4 * i + j] = 0.0
     for i in range(dim):
-        x[i] = z[i]
+        w[W_X + i] = w[W_Z + i]
         for j in range(dim):
-            P[i, j] = Rm[i, j]
+            w[W_P + 4 * i + j] = w[W_R + 4 * i + j]
     if dim == 2:
-        P[2, 2] = sv0 * sv0
-        P[3, 3] = sv0 * sv0
+        w[W_P + 10] = sv0 * sv0
+        w[W_P + 15] = sv0 * sv0
 
 
 @kernel
-def _update(x: np.ndarray, P: np.ndarray, dim: int, lag: float, q: float, z: np.ndarray,
-            Rm: np.ndarray, gate: float) -> bool:
-    """Kalman update of ``x, P`` (in place, only if accepted) with the first ``dim`` states
-    measured; ``lag > 0`` uses the measurement as stamped ``lag`` s before the state's time
-    (``H' = H F(-lag)``, ``R' = R + H' Q(lag) H'^T``). Returns False when the normalised
-    innovation squared exceeds ``gate`` (or ``S`` is not positive definite).
+def _update(w: np.ndarray, dim: int, lag: float, q: float, gate: float) -> bool:
+    """Kalman update of the working estimate (only if accepted) with the measurement in use,
+    the first ``dim`` states measured; ``lag > 0`` uses the measurement as stamped ``lag`` s
+    before the state's time (``H' = H F(-lag)``, ``R' = R + H' Q(lag) H'^T``). Returns False
+    when the normalised innovation squared exceeds ``gate`` (or ``S`` is not positive
+    definite).
 
     ``H' Q(lag) H'^T`` is ``Q(lag)`` with its position-velocity terms negated
     (``q lag^3/3``, ``-q lag^2/2``, ``q lag`` per axis), written out rather than multiplied.
+    ``S^-1 nu`` and the gain rows ``K = P H'^T S^-1`` come from one Cholesky factor, the five
+    triangular solves interleaved (independent divisions overlap). Called with a constant
+    ``dim``, so that each size compiles to straight-line code.
     """
     # H' x and P H'^T: row i of H' is e_i, minus lag e_(i+2) for the positions
-    hx = np.empty(4)
-    pht = np.empty((4, 4))
     for i in range(dim):
-        hx[i] = x[i] - lag * x[i + 2] if i < 2 else x[i]
+        w[W_HX + i] = w[W_X + i] - lag * w[W_X + i + 2] if i < 2 else w[W_X + i]
         for r in range(4):
-            pht[r, i] = P[r, i] - lag * P[r, i + 2] if i < 2 else P[r, i]
-    S = np.empty((4, 4))
+            w[W_PHT + 4 * r + i] = (w[W_P + 4 * r + i] - lag * w[W_P + 4 * r + i + 2] if i < 2
+                                    else w[W_P + 4 * r + i])
     for i in range(dim):
         for j in range(dim):
-            hph = pht[i, j] - lag * pht[i + 2, j] if i < 2 else pht[i, j]
-            S[i, j] = hph + Rm[i, j]
+            hph = (w[W_PHT + 4 * i + j] - lag * w[W_PHT + 4 * (i + 2) + j] if i < 2
+                   else w[W_PHT + 4 * i + j])
+            w[W_S + 4 * i + j] = hph + w[W_R + 4 * i + j]
     if lag > 0.0:
         for a in range(2):
-            S[a, a] += q * lag**3 / 3.0
+            w[W_S + 5 * a] += q * lag**3 / 3.0
             if dim == 4:
-                S[a, a + 2] -= 0.5 * q * lag**2
-                S[a + 2, a] -= 0.5 * q * lag**2
-                S[a + 2, a + 2] += q * lag
-    L = np.zeros((4, 4))
-    if not _cholesky(S, dim, L):
-        return False
-    nu = np.empty(4)
+                w[W_S + 5 * a + 2] -= 0.5 * q * lag**2
+                w[W_S + 5 * a + 8] -= 0.5 * q * lag**2
+                w[W_S + 5 * a + 10] += q * lag
+    # S = L L^T
     for i in range(dim):
-        nu[i] = z[i] - hx[i]
-    w = np.empty(4)
-    _solve(L, dim, nu, w)
+        for j in range(i + 1):
+            acc = w[W_S + 4 * i + j]
+            for k in range(j):
+                acc -= w[W_L + 4 * i + k] * w[W_L + 4 * j + k]
+            if i == j:
+                if acc <= 0.0:
+                    return False
+                w[W_L + 5 * i] = math.sqrt(acc)
+            else:
+                w[W_L + 4 * i + j] = acc / w[W_L + 5 * j]
+    for i in range(dim):
+        w[W_NU + i] = w[W_Z + i] - w[W_HX + i]
+    # L L^T y = b for b = nu and the four rows of P H'^T (rows 0..4 from W_NU into W_V)
+    for i in range(dim):
+        for r in range(5):
+            acc = w[W_NU + 4 * r + i]
+            for k in range(i):
+                acc -= w[W_L + 4 * i + k] * w[W_V + 4 * r + k]
+            w[W_V + 4 * r + i] = acc / w[W_L + 5 * i]
+    for i in range(dim - 1, -1, -1):
+        for r in range(5):
+            acc = w[W_V + 4 * r + i]
+            for k in range(i + 1, dim):
+                acc -= w[W_L + 4 * k + i] * w[W_V + 4 * r + k]
+            w[W_V + 4 * r + i] = acc / w[W_L + 5 * i]
     nis = 0.0
     for i in range(dim):
-        nis += nu[i] * w[i]
+        nis += w[W_NU + i] * w[W_V + i]
     if nis > gate:
         return False
-    # x += P H'^T S^-1 nu;  P -= (P H'^T) S^-1 (P H'^T)^T, row by row
-    K = np.empty((4, 4))
-    row = np.empty(4)
-    sol = np.empty(4)
-    for r in range(4):
-        for j in range(dim):
-            row[j] = pht[r, j]
-        _solve(L, dim, row, sol)
-        for j in range(dim):
-            K[r, j] = sol[j]
+    # x += P H'^T S^-1 nu;  P -= K (P H'^T)^T, upper triangle then mirrored (exactly symmetric)
     for r in range(4):
         acc = 0.0
         for j in range(dim):
-            acc += pht[r, j] * w[j]
-        x[r] += acc
+            acc += w[W_PHT + 4 * r + j] * w[W_V + j]
+        w[W_X + r] += acc
     for r in range(4):
         for c in range(r, 4):
-            acc = P[r, c]
+            acc = w[W_P + 4 * r + c]
             for j in range(dim):
-                acc -= K[r, j] * pht[c, j]
-            P[r, c] = acc
-    for r in range(4):  # keep P exactly symmetric
+                acc -= w[W_K + 4 * r + j] * w[W_PHT + 4 * c + j]
+            w[W_P + 4 * r + c] = acc
+    for r in range(4):
         for c in range(r):
-            P[r, c] = P[c, r]
+            w[W_P + 4 * r + c] = w[W_P + 4 * c + r]
     return True
 
 
 @kernel
-def _copy(src_x: np.ndarray, src_P: np.ndarray, dst_x: np.ndarray, dst_P: np.ndarray) -> None:
-    """dst = src for a state and its covariance (explicit loops compile much faster than
-    slice assignment)."""
+def _load_track(x: np.ndarray, P: np.ndarray, k: int, w: np.ndarray) -> None:
+    """Working estimate = track ``k``."""
     for i in range(4):
-        dst_x[i] = src_x[i]
+        w[W_X + i] = x[k, i]
         for j in range(4):
-            dst_P[i, j] = src_P[i, j]
+            w[W_P + 4 * i + j] = P[k, i, j]
 
 
 @kernel
-def _make_room(k: int, j: int, hist_n: np.ndarray, hist_t: np.ndarray, hist_dim: np.ndarray,
-               hist_z: np.ndarray, hist_R: np.ndarray, pre_x: np.ndarray, pre_P: np.ndarray,
-               pre_t: np.ndarray) -> int:
-    """Open slot ``j`` of pair ``k``'s history (slots ``j..`` move up one; a full history first
-    drops its oldest entry). Returns the slot to write, or -1 when the history is full and the
-    new entry would be the oldest (it is then not kept: the estimates after it contain it).
-    The new slot still holds the old slot ``j``'s pre-estimate."""
-    n = hist_n[k]
-    if n == hist_t.shape[1]:
+def _store_track(w: np.ndarray, x: np.ndarray, P: np.ndarray, k: int) -> None:
+    """Track ``k`` = working estimate."""
+    for i in range(4):
+        x[k, i] = w[W_X + i]
+        for j in range(4):
+            P[k, i, j] = w[W_P + 4 * i + j]
+
+
+@kernel
+def _load_pre(hist: np.ndarray, k: int, row: int, w: np.ndarray) -> None:
+    """Working estimate = the estimate before record ``row`` of pair ``k``."""
+    for i in range(20):
+        w[W_X + i] = hist[k, row, H_PRE_X + i]
+
+
+@kernel
+def _store_pre(w: np.ndarray, hist: np.ndarray, k: int, row: int, t_pre: float) -> None:
+    """The estimate before record ``row`` of pair ``k`` = working estimate, at ``t_pre``."""
+    hist[k, row, H_PRE_T] = t_pre
+    for i in range(20):
+        hist[k, row, H_PRE_X + i] = w[W_X + i]
+
+
+@kernel
+def _store_pre_track(x: np.ndarray, P: np.ndarray, k: int, hist: np.ndarray, row: int,
+                     t_pre: float) -> None:
+    """The estimate before record ``row`` of pair ``k`` = track ``k``, at ``t_pre``."""
+    hist[k, row, H_PRE_T] = t_pre
+    for i in range(4):
+        hist[k, row, H_PRE_X + i] = x[k, i]
+        for j in range(4):
+            hist[k, row, H_PRE_P + 4 * i + j] = P[k, i, j]
+
+
+@kernel
+def _write_measurement(w: np.ndarray, hist: np.ndarray, k: int, row: int, tm: float,
+                       dim: int) -> None:
+    """Record ``row`` of pair ``k`` = the measurement in use (its leading ``dim`` block; of the
+    covariance only the lower triangle, all that :func:`_update` reads)."""
+    hist[k, row, H_T], hist[k, row, H_DIM] = tm, dim
+    for i in range(dim):
+        hist[k, row, H_Z + i] = w[W_Z + i]
+        for j in range(i + 1):
+            hist[k, row, H_R + i * (i + 1) // 2 + j] = w[W_R + 4 * i + j]
+
+
+@kernel
+def _read_measurement(hist: np.ndarray, k: int, row: int, w: np.ndarray) -> int:
+    """Measurement in use = record ``row`` of pair ``k``; returns its dimension."""
+    dim = int(hist[k, row, H_DIM])
+    for i in range(dim):
+        w[W_Z + i] = hist[k, row, H_Z + i]
+        for j in range(i + 1):
+            w[W_R + 4 * i + j] = w[W_R + 4 * j + i] = hist[k, row, H_R + i * (i + 1) // 2 + j]
+    return dim
+
+
+@kernel
+def _make_room(hist: np.ndarray, k: int, j: int, n: int, start: int) -> tuple[int, int, int]:
+    """Open place ``j`` (0 = oldest) of pair ``k``'s history of ``n`` records starting at ring
+    row ``start``: places ``j..`` move up one; a full history first drops its oldest entry (the
+    ring start advances). Returns the place to write (or -1 when the history is full and the
+    new entry would be the oldest: it is then not kept, the estimates after it contain it), the
+    new count and the new start. The opened record still holds the old place ``j``'s
+    pre-estimate. Only the measurements move: the caller rewrites the pre-estimates of all the
+    places after ``j`` when it uses their measurements again."""
+    if n == HISTORY:
         if j == 0:
-            return -1
-        for s in range(n - 1):  # drop the oldest
-            hist_t[k, s], hist_dim[k, s], pre_t[k, s] = (hist_t[k, s + 1], hist_dim[k, s + 1],
-                                                         pre_t[k, s + 1])
-            _copy(hist_z[k, s + 1], hist_R[k, s + 1], hist_z[k, s], hist_R[k, s])
-            _copy(pre_x[k, s + 1], pre_P[k, s + 1], pre_x[k, s], pre_P[k, s])
+            return -1, n, start
+        start = (start + 1) % HISTORY
         n -= 1
         j -= 1
     for s in range(n, j, -1):
-        hist_t[k, s], hist_dim[k, s], pre_t[k, s] = (hist_t[k, s - 1], hist_dim[k, s - 1],
-                                                     pre_t[k, s - 1])
-        _copy(hist_z[k, s - 1], hist_R[k, s - 1], hist_z[k, s], hist_R[k, s])
-        _copy(pre_x[k, s - 1], pre_P[k, s - 1], pre_x[k, s], pre_P[k, s])
-    hist_n[k] = n + 1
-    return j
-
-
-@kernel
-def _write(k: int, j: int, tm: float, dim: int, z: np.ndarray, Rm: np.ndarray,
-           hist_t: np.ndarray, hist_dim: np.ndarray, hist_z: np.ndarray,
-           hist_R: np.ndarray) -> None:
-    """Store a measurement (zero-padded to 4) in slot ``j`` of pair ``k``'s history."""
-    hist_t[k, j], hist_dim[k, j] = tm, dim
-    for a in range(4):
-        hist_z[k, j, a] = z[a] if a < dim else 0.0
-        for b in range(4):
-            hist_R[k, j, a, b] = Rm[a, b] if (a < dim and b < dim) else 0.0
-
-
-@kernel
-def _use(k: int, dim: int, tm: float, z: np.ndarray, Rm: np.ndarray, x: np.ndarray,
-         P: np.ndarray, t_state: np.ndarray, active: np.ndarray, fails: np.ndarray,
-         n_upd: np.ndarray, hist_n: np.ndarray, hist_t: np.ndarray, hist_dim: np.ndarray,
-         hist_z: np.ndarray, hist_R: np.ndarray, pre_x: np.ndarray, pre_P: np.ndarray,
-         pre_t: np.ndarray, q: float, sv0: float, gate: float, max_fail: int) -> None:
-    """Use one measurement (``dim`` 2: position, 4: full state) stamped ``tm`` on pair ``k``.
-
-    Cases: in sequence (predict, update); late, with the estimate before the newer
-    measurements in the history (restart from it, update, use the newer ones again: exact);
-    late, older than the track itself (start from it, use the newer ones again: exact); late
-    beyond the history (forward propagation, approximate). One update call site for the new
-    measurement (compile time grows with every inlined copy).
-    """
-    xk, Pk = x[k], P[k]
-    xw, Pw = np.empty(4), np.empty((4, 4))
-    n = hist_n[k]
-    lag = 0.0
-    j = n
-    t_w = tm
-    if not active[k]:
-        case = RESTART
-    elif tm >= t_state[k]:
-        case = IN_SEQUENCE
-        _copy(xk, Pk, xw, Pw)
-        _predict_inplace(xw, Pw, tm - t_state[k], q)
-    else:
-        j = 0
-        while j < n and hist_t[k, j] <= tm:
-            j += 1
-        if j < n and math.isnan(pre_t[k, j]):
-            case = RESTART
-        elif j < n and pre_t[k, j] <= tm:
-            case = REPROCESS
-            _copy(pre_x[k, j], pre_P[k, j], xw, Pw)
-            _predict_inplace(xw, Pw, tm - pre_t[k, j], q)
-        else:
-            case = FORWARD
-            _copy(xk, Pk, xw, Pw)
-            lag = t_state[k] - tm
-    if case == RESTART:
-        _start(xw, Pw, dim, z, Rm, sv0)
-        accepted = True
-    else:  # the window opens after each failure [seed 002, sec 6.6]
-        accepted = _update(xw, Pw, dim, lag, q, z, Rm, gate * (1.0 + fails[k]))
-    if not accepted:
-        fails[k] += 1
-        if fails[k] < max_fail:
-            return
-        active[k] = False  # restart the track from the measurement [seed 002, sec 6.6]
-        _start(xw, Pw, dim, z, Rm, sv0)
-        case = RESTART
-    if not active[k]:  # a new track
-        hist_n[k] = 0
-        j = 0
-        t_state[k] = tm
-        active[k], n_upd[k] = True, 0
-    if case == FORWARD:
-        hist_n[k] = 0  # the stored estimates lack this measurement: start the history anew
-    else:
-        slot = _make_room(k, j, hist_n, hist_t, hist_dim, hist_z, hist_R, pre_x, pre_P, pre_t)
-        if slot >= 0:
-            _write(k, slot, tm, dim, z, Rm, hist_t, hist_dim, hist_z, hist_R)
-            if case == IN_SEQUENCE:
-                _copy(xk, Pk, pre_x[k, slot], pre_P[k, slot])
-                pre_t[k, slot] = t_state[k]
-                t_state[k] = tm
-            elif case == RESTART and slot == 0:
-                pre_t[k, 0] = math.nan
-        # use the newer measurements again, in order, from the new estimate
-        for s in range(slot + 1, hist_n[k]):
-            _copy(xw, Pw, pre_x[k, s], pre_P[k, s])
-            pre_t[k, s] = t_w
-            _predict_inplace(xw, Pw, hist_t[k, s] - t_w, q)
-            _update(xw, Pw, hist_dim[k, s], 0.0, q, hist_z[k, s], hist_R[k, s], math.inf)
-            t_w = hist_t[k, s]
-    _copy(xw, Pw, xk, Pk)
-    fails[k] = 0
-    n_upd[k] += 1
+        dst, src = (start + s) % HISTORY, (start + s - 1) % HISTORY
+        for i in range(H_MEAS):
+            hist[k, dst, i] = hist[k, src, i]
+    return j, n + 1, start
 
 
 @kernel
 def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, active: np.ndarray,
-                 fails: np.ndarray, n_upd: np.ndarray, hist_n: np.ndarray, hist_t: np.ndarray,
-                 hist_dim: np.ndarray, hist_z: np.ndarray, hist_R: np.ndarray,
-                 pre_x: np.ndarray, pre_P: np.ndarray, pre_t: np.ndarray, q: np.ndarray,
-                 coast: np.ndarray, sv0: np.ndarray, gate2: np.ndarray, gate4: np.ndarray,
-                 max_fail: np.ndarray, t_now: float, r_valid: np.ndarray, r_t: np.ndarray,
-                 r_z: np.ndarray, r_R: np.ndarray, a_valid: np.ndarray, a_t: np.ndarray,
-                 a_z: np.ndarray, a_R: np.ndarray) -> None:
+                 fails: np.ndarray, n_upd: np.ndarray, hist_n: np.ndarray,
+                 hist_start: np.ndarray, hist: np.ndarray, settings: np.ndarray, t_now: float,
+                 has_radar: bool, r_valid: np.ndarray, r_t: float, r_north: np.ndarray,
+                 r_east: np.ndarray, r_cov: np.ndarray, has_ais: bool, a_valid: np.ndarray,
+                 a_stamp: np.ndarray, a_north: np.ndarray, a_east: np.ndarray,
+                 a_sog: np.ndarray, a_cog: np.ndarray) -> None:
+    """Use each pair's radar plot and AIS report (the older stamp first), then delete tracks
+    that coasted too long. ``settings``: :func:`pair_settings`.
+
+    Using one measurement (``dim`` 2: position, 4: full state) stamped ``tm`` on pair ``k``
+    has four cases: in sequence (predict, update); late, with the estimate before the newer
+    measurements in the history (restart from it, update, use the newer ones again: exact);
+    late, older than the track itself (start from it, use the newer ones again: exact); late
+    beyond the history (forward propagation, approximate). Written once, inside the loop over
+    pairs (compile time grows with every inlined copy; a call passing the state arrays costs
+    more than the update).
+    """
+    w = np.zeros(W_SIZE)
     for k in range(x.shape[0]):
+        use_r = has_radar and r_valid[k] and settings[S_USE_RADAR, k] != 0.0
+        use_a = has_ais and a_valid[k] and settings[S_USE_AIS, k] != 0.0
+        a_t = (a_stamp[k] if settings[S_LATENCY, k] != 0.0 else t_now) if use_a else t_now
         # older stamp first, so that in-sequence use is the rule
-        ais_first = a_valid[k] and (not r_valid[k] or a_t[k] <= r_t[k])
+        ais_first = use_a and (not use_r or a_t <= r_t)
         for which in range(2):
-            use_ais = a_valid[k] and ((which == 0) == ais_first)
-            use_radar = r_valid[k] and ((which == 1) == ais_first)
-            if use_ais:
-                dim, tm, z, Rm, gate = 4, a_t[k], a_z[k], a_R[k], gate4[k]
-            elif use_radar:
-                dim, tm, z, Rm, gate = 2, r_t[k], r_z[k], r_R[k], gate2[k]
+            if use_a and ((which == 0) == ais_first):
+                dim, tm, gate = 4, a_t, settings[S_GATE4, k]
+                _ais_zr(a_north[k], a_east[k], a_sog[k], a_cog[k], settings[S_AIS_SP, k],
+                        settings[S_AIS_SV, k], w, W_Z)
+            elif use_r and ((which == 1) == ais_first):
+                dim, tm, gate = 2, r_t, settings[S_GATE2, k]
+                w[W_Z], w[W_Z + 1] = r_north[k], r_east[k]
+                for i in range(2):
+                    for j in range(2):
+                        w[W_R + 4 * i + j] = r_cov[k, i, j]
             else:
                 continue
-            _use(k, dim, tm, z, Rm, x, P, t_state, active, fails, n_upd, hist_n, hist_t,
-                 hist_dim, hist_z, hist_R, pre_x, pre_P, pre_t, q[k], sv0[k], gate, max_fail[k])
-        if active[k] and t_now - t_state[k] > coast[k]:
+            q, sv0 = settings[S_Q, k], settings[S_SV0, k]
+            n, start = hist_n[k], hist_start[k]
+            lag = 0.0
+            j = n
+            t_w = tm
+            if not active[k]:
+                case = RESTART
+            elif tm >= t_state[k]:
+                case = IN_SEQUENCE
+                _load_track(x, P, k, w)
+                _predict(w, tm - t_state[k], q)
+            else:
+                j = 0
+                while j < n and hist[k, (start + j) % HISTORY, H_T] <= tm:
+                    j += 1
+                pre_t = hist[k, (start + j) % HISTORY, H_PRE_T] if j < n else math.nan
+                if j < n and math.isnan(pre_t):
+                    case = RESTART
+                elif j < n and pre_t <= tm:
+                    case = REPROCESS
+                    _load_pre(hist, k, (start + j) % HISTORY, w)
+                    _predict(w, tm - pre_t, q)
+                else:
+                    case = FORWARD
+                    _load_track(x, P, k, w)
+                    lag = t_state[k] - tm
+            if case == RESTART:
+                _start(w, dim, sv0)
+                accepted = True
+            else:  # the window opens after each failure [seed 002, sec 6.6]
+                gate *= 1.0 + fails[k]
+                accepted = (_update(w, 4, lag, q, gate) if dim == 4
+                            else _update(w, 2, lag, q, gate))
+            if not accepted:
+                fails[k] += 1
+                if fails[k] < settings[S_MAX_FAIL, k]:
+                    continue
+                active[k] = False  # restart the track from the measurement [seed 002, sec 6.6]
+                _start(w, dim, sv0)
+                case = RESTART
+            if not active[k]:  # a new track
+                hist_n[k] = 0
+                j = 0
+                t_state[k] = tm
+                active[k], n_upd[k] = True, 0
+            if case == FORWARD:
+                hist_n[k] = 0  # the stored estimates lack this measurement: start anew
+            else:
+                slot, hist_n[k], start = _make_room(hist, k, j, hist_n[k], hist_start[k])
+                hist_start[k] = start
+                if slot >= 0:
+                    row = (start + slot) % HISTORY
+                    _write_measurement(w, hist, k, row, tm, dim)
+                    if case == IN_SEQUENCE:
+                        _store_pre_track(x, P, k, hist, row, t_state[k])
+                        t_state[k] = tm
+                    elif case == RESTART and slot == 0:
+                        hist[k, row, H_PRE_T] = math.nan
+                # use the newer measurements again, in order, from the new estimate
+                for s in range(slot + 1, hist_n[k]):
+                    row = (start + s) % HISTORY
+                    _store_pre(w, hist, k, row, t_w)
+                    t_h = hist[k, row, H_T]
+                    _predict(w, t_h - t_w, q)
+                    if _read_measurement(hist, k, row, w) == 4:
+                        _update(w, 4, 0.0, q, math.inf)
+                    else:
+                        _update(w, 2, 0.0, q, math.inf)
+                    t_w = t_h
+            _store_track(w, x, P, k)
+            fails[k] = 0
+            n_upd[k] += 1
+        if active[k] and t_now - t_state[k] > settings[S_COAST, k]:
             active[k] = False
             fails[k] = 0
             n_upd[k] = 0

@@ -60,8 +60,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from trafficsim.errors import InputError
+from trafficsim.jit import kernel
 from trafficsim.sensors import KNOT_MPS, check_keys, column, flags, wrap_2pi
-from trafficsim.sensors.radar import probit
+from trafficsim.sensors.radar import probit, wrap_2pi_scalar
 from trafficsim.ships.base import EAST, NORTH, PSI, R
 
 #: standard normals per transmitting ship per step: position N, E; velocity N, E; heading
@@ -252,8 +253,12 @@ def quantise_angle(angle_rad: np.ndarray, step_rad: float) -> np.ndarray:
 
 def transmit(params: AisParams, state: AisState, t_s: float, x_true: np.ndarray,
              vel_ne_mps: np.ndarray, draws: np.ndarray,
-             anchored: np.ndarray | None = None) -> tuple[AisState, np.ndarray]:
+             anchored: np.ndarray | None = None,
+             inplace: bool = False) -> tuple[AisState, np.ndarray]:
     """Ships whose report is due at ``t_s`` broadcast it; schedules advance.
+
+    One compiled loop over ships with the scalar forms of :func:`reporting_interval_s`,
+    :func:`quantise_position`, :func:`quantise_sog` and :func:`quantise_angle`.
 
     Args:
         params: ``(n,)`` AIS parameters.
@@ -264,6 +269,7 @@ def transmit(params: AisParams, state: AisState, t_s: float, x_true: np.ndarray,
         vel_ne_mps: ``(2, n)`` ground velocity north, east (``trafficsim.engine.earth_velocity``).
         draws: ``(n, AIS_TX_NORMAL_DIMS)`` standard normals.
         anchored: optional ``(n,)`` bool navigational status "at anchor / moored".
+        inplace: update ``state``'s arrays instead of copies (the engine's step path).
 
     Returns: the new state and ``sent`` (n,) bool.
     """
@@ -271,81 +277,198 @@ def transmit(params: AisParams, state: AisState, t_s: float, x_true: np.ndarray,
     draws = np.asarray(draws, dtype=float)
     if draws.shape != (n, AIS_TX_NORMAL_DIMS):
         raise ValueError(f"draws must have shape ({n}, {AIS_TX_NORMAL_DIMS}), got {draws.shape}")
-    sv = params.sigma_velocity_mps
-    vn = vel_ne_mps[0] + sv * draws[:, 2]
-    ve = vel_ne_mps[1] + sv * draws[:, 3]
-    sog = np.hypot(vn, ve)
-    turning = np.abs(x_true[R]) > params.turn_rate_radps
-    interval = reporting_interval_s(sog, turning, False if anchored is None else anchored)
-
-    # a shorter required interval pulls the pending report forward
-    pending = np.where(np.isfinite(state.last_tx_s),
-                       np.minimum(state.next_tx_s, state.last_tx_s + interval), state.next_tx_s)
-    sent = params.enabled & (t_s >= pending - 1e-9)
-    nxt = pending + interval
-    nxt = np.where(nxt <= t_s + 1e-9, t_s + interval, nxt)
-
-    sp = params.sigma_position_m
-    north, east = quantise_position(x_true[NORTH] + sp * draws[:, 0],
-                                    x_true[EAST] + sp * draws[:, 1], params.east_step_m)
-    fields = np.stack([north, east, quantise_sog(sog),
-                       quantise_angle(np.arctan2(ve, vn), COG_STEP_RAD),
-                       quantise_angle(x_true[PSI] + params.sigma_heading_rad * draws[:, 4],
-                                      HEADING_STEP_RAD)], axis=1)
-
-    head = np.where(sent, (state.head + 1) % AIS_BUFFER, state.head)
-    rows = np.flatnonzero(sent)
-    buf_t, buf = state.buf_t_s.copy(), state.buf.copy()
-    buf_t[rows, head[rows]] = t_s
-    buf[rows, head[rows]] = fields[rows]
-    new = AisState(next_tx_s=np.where(sent, nxt, pending),
-                   last_tx_s=np.where(sent, pending, state.last_tx_s),
-                   head=head, buf_t_s=buf_t, buf=buf, last_rx_s=state.last_rx_s)
+    new = state if inplace else AisState(
+        next_tx_s=state.next_tx_s.copy(), last_tx_s=state.last_tx_s.copy(),
+        head=state.head.copy(), buf_t_s=state.buf_t_s.copy(), buf=state.buf.copy(),
+        last_rx_s=state.last_rx_s)
+    anchor = (np.zeros(n, dtype=bool) if anchored is None
+              else _c(np.broadcast_to(anchored, (n,)), bool))
+    sent = np.empty(n, dtype=bool)
+    p = params
+    _transmit((_c(p.enabled, bool), _c(p.sigma_position_m), _c(p.sigma_velocity_mps),
+               _c(p.sigma_heading_rad), _c(p.turn_rate_radps), _c(p.east_step_m)),
+              (new.next_tx_s, new.last_tx_s, new.head, new.buf_t_s, new.buf), float(t_s),
+              _c(x_true), _c(vel_ne_mps), _c(draws), anchor, sent)
     return new, sent
 
 
 def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
-            x_true: np.ndarray, draws: np.ndarray) -> tuple[AisState, AisReports]:
-    """Reports of each target that reach each observer at ``t_s``.
+            x_true: np.ndarray, draws: np.ndarray,
+            inplace: bool = False) -> tuple[AisState, AisReports]:
+    """Reports of each target that reach each observer at ``t_s`` (one compiled loop over
+    pairs).
 
     Args:
         obs, tgt: ``(m,)`` int receiving and transmitting ship indices.
         x_true: ``(8, n)`` true states (for the reception range).
         draws: ``(m, AIS_RX_NORMAL_DIMS)`` standard normals.
+        inplace: update ``state.last_rx_s`` itself instead of a copy (the engine's step path).
     """
     m = obs.shape[0]
     draws = np.asarray(draws, dtype=float)
     if draws.shape != (m, AIS_RX_NORMAL_DIMS):
         raise ValueError(f"draws must have shape ({m}, {AIS_RX_NORMAL_DIMS}), got {draws.shape}")
-    stamps = state.buf_t_s[tgt]  # (m, K)
-    arrived = (stamps > state.last_rx_s[:, None]) & (
-        stamps + params.latency_s[tgt][:, None] <= t_s + 1e-9)
-    masked = np.where(arrived, stamps, -np.inf)
-    slot = np.argmax(masked, axis=1)
-    rows = np.arange(m)
-    newest = masked[rows, slot]
-    has = np.isfinite(newest)
-    rng = np.hypot(x_true[NORTH, tgt] - x_true[NORTH, obs], x_true[EAST, tgt] - x_true[EAST, obs])
-    valid = (has & params.enabled[obs] & (rng <= params.max_range_m[obs])
-             & (draws[:, 0] < params.z_receive[obs]))
-    fields = state.buf[tgt, slot]  # (m, 5)
-    nan = np.where(valid, 1.0, np.nan)
-    reports = AisReports(valid=valid, stamp_s=newest * nan, north_m=fields[:, 0] * nan,
-                         east_m=fields[:, 1] * nan, sog_mps=fields[:, 2] * nan,
-                         cog_rad=fields[:, 3] * nan, heading_rad=fields[:, 4] * nan)
-    last_rx = np.where(has, newest, state.last_rx_s)
-    new = AisState(next_tx_s=state.next_tx_s, last_tx_s=state.last_tx_s, head=state.head,
-                   buf_t_s=state.buf_t_s, buf=state.buf, last_rx_s=last_rx)
+    last_rx = state.last_rx_s if inplace else state.last_rx_s.copy()
+    reports = AisReports(valid=np.empty(m, dtype=bool), stamp_s=np.empty(m),
+                         north_m=np.empty(m), east_m=np.empty(m), sog_mps=np.empty(m),
+                         cog_rad=np.empty(m), heading_rad=np.empty(m))
+    p = params
+    _receive((_c(p.enabled, bool), _c(p.latency_s), _c(p.max_range_m), _c(p.z_receive)),
+             _c(state.buf_t_s), _c(state.buf), last_rx, float(t_s), _c(obs, np.int64),
+             _c(tgt, np.int64), _c(x_true), _c(draws),
+             (reports.valid, reports.stamp_s, reports.north_m, reports.east_m, reports.sog_mps,
+              reports.cog_rad, reports.heading_rad))
+    new = state if inplace else AisState(
+        next_tx_s=state.next_tx_s, last_tx_s=state.last_tx_s, head=state.head,
+        buf_t_s=state.buf_t_s, buf=state.buf, last_rx_s=last_rx)
     return new, reports
 
 
 def step(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
          x_true: np.ndarray, vel_ne_mps: np.ndarray, tx_draws: np.ndarray, rx_draws: np.ndarray,
-         anchored: np.ndarray | None = None) -> tuple[AisState, AisReports]:
+         anchored: np.ndarray | None = None,
+         inplace: bool = False) -> tuple[AisState, AisReports]:
     """One step: broadcast the reports that are due, then deliver those that have arrived.
 
     Arguments as in :func:`transmit` (``tx_draws``) and :func:`receive` (``rx_draws``). A report
     with zero latency is received in the step it is sent.
     """
-    state, _ = transmit(params, state, t_s, x_true, vel_ne_mps, tx_draws, anchored)
-    return receive(params, state, t_s, obs, tgt, x_true, rx_draws)
+    state, _ = transmit(params, state, t_s, x_true, vel_ne_mps, tx_draws, anchored, inplace)
+    return receive(params, state, t_s, obs, tgt, x_true, rx_draws, inplace)
+
+
+def _c(a: np.ndarray, dtype: type = float) -> np.ndarray:
+    """``a`` as a C-contiguous array (one compiled specialisation for every caller)."""
+    return np.ascontiguousarray(a, dtype=dtype)
+
+
+_MIN_INTERVAL_S = min(INTERVAL_ANCHORED_S, INTERVAL_SLOW_S, INTERVAL_SLOW_TURNING_S,
+                      INTERVAL_MEDIUM_S, INTERVAL_FAST_S)
+_COG_STEPS = float(round(2.0 * math.pi / COG_STEP_RAD))
+_HEADING_STEPS = float(round(2.0 * math.pi / HEADING_STEP_RAD))
+
+
+#: relative margin about a threshold outside which the squared norm decides a comparison of
+#: ``hypot`` (whose error is below 1e-15) on its own
+_MARGIN = 1e-9
+
+
+@kernel
+def _norm_side(a: float, b: float, limit: float, scale: float) -> int:
+    """+1 if ``hypot(a, b) / scale`` is surely above ``limit``, -1 if surely below, 0 within
+    ``_MARGIN`` of it (or NaN): the caller then evaluates the comparison itself (libm's
+    ``hypot`` costs about 40 ns, the squares 5)."""
+    s2 = a * a + b * b
+    hi = limit * scale * (1.0 + _MARGIN)
+    if s2 > hi * hi:
+        return 1
+    lo = limit * scale * (1.0 - _MARGIN)
+    if s2 < lo * lo:
+        return -1
+    return 0
+
+
+@kernel
+def _faster_than(vn: float, ve: float, kn: float) -> bool:
+    """``hypot(vn, ve) / KNOT_MPS > kn``, as that expression evaluates."""
+    side = _norm_side(vn, ve, kn, KNOT_MPS)
+    return side > 0 if side != 0 else math.hypot(vn, ve) / KNOT_MPS > kn
+
+
+@kernel
+def _interval(vn: float, ve: float, turning: bool, anchored: bool) -> float:
+    """:func:`reporting_interval_s` of one ship with ground velocity ``(vn, ve)``, s."""
+    if anchored:
+        return INTERVAL_SLOW_S if _faster_than(vn, ve, ANCHOR_SPEED_KN) else INTERVAL_ANCHORED_S
+    if _faster_than(vn, ve, MEDIUM_KN):
+        return INTERVAL_FAST_S
+    if _faster_than(vn, ve, SLOW_KN):
+        return INTERVAL_FAST_S if turning else INTERVAL_MEDIUM_S
+    return INTERVAL_SLOW_TURNING_S if turning else INTERVAL_SLOW_S
+
+
+@kernel
+def _quantise_angle(angle_rad: float, step_rad: float, n_steps: float) -> float:
+    """:func:`quantise_angle` of one angle (``n_steps`` = 2 pi / step, a whole number)."""
+    return (np.rint(wrap_2pi_scalar(angle_rad) / step_rad) % n_steps) * step_rad
+
+
+@kernel
+def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, vel: np.ndarray,
+              draws: np.ndarray, anchored: np.ndarray, sent: np.ndarray) -> None:
+    """Schedule, content and buffer of every ship's report (module docstring), in place.
+
+    ``params``: ``(enabled, sigma_position_m, sigma_velocity_mps, sigma_heading_rad,
+    turn_rate_radps, east_step_m)``; ``state``: ``(next_tx_s, last_tx_s, head, buf_t_s, buf)``
+    of :class:`AisState`.
+    """
+    enabled, sp, sv, sh, turn_rate, east_step = params
+    next_tx, last_tx, head, buf_t, buf = state
+    for i in range(x_true.shape[1]):
+        # no interval can pull the pending report before next_tx, and it is not due: nothing
+        # changes (most steps of fast ships; always without a transponder)
+        settled = not math.isfinite(last_tx[i]) or last_tx[i] + _MIN_INTERVAL_S >= next_tx[i]
+        if settled and not (enabled[i] and t_s >= next_tx[i] - 1e-9):
+            sent[i] = False
+            continue
+        vn = vel[0, i] + sv[i] * draws[i, 2]
+        ve = vel[1, i] + sv[i] * draws[i, 3]
+        interval = _interval(vn, ve, abs(x_true[R, i]) > turn_rate[i], anchored[i])
+        # a shorter required interval pulls the pending report forward
+        pending = next_tx[i]
+        if math.isfinite(last_tx[i]) and last_tx[i] + interval < pending:
+            pending = last_tx[i] + interval
+        sent[i] = enabled[i] and t_s >= pending - 1e-9
+        if not sent[i]:
+            next_tx[i] = pending
+            continue
+        nxt = pending + interval
+        next_tx[i] = t_s + interval if nxt <= t_s + 1e-9 else nxt
+        last_tx[i] = pending
+        sog = math.hypot(vn, ve)
+        h = (head[i] + 1) % AIS_BUFFER
+        head[i] = h
+        buf_t[i, h] = t_s
+        n_q = np.rint((x_true[NORTH, i] + sp[i] * draws[i, 0]) / POSITION_STEP_M)
+        e_q = np.rint((x_true[EAST, i] + sp[i] * draws[i, 1]) / east_step[i])
+        buf[i, h, 0] = n_q * POSITION_STEP_M
+        buf[i, h, 1] = e_q * east_step[i]
+        sog_q = np.rint(sog / SOG_STEP_MPS)
+        buf[i, h, 2] = (1022.0 if sog_q > 1022.0 else sog_q) * SOG_STEP_MPS
+        buf[i, h, 3] = _quantise_angle(math.atan2(ve, vn), COG_STEP_RAD, _COG_STEPS)
+        buf[i, h, 4] = _quantise_angle(x_true[PSI, i] + sh[i] * draws[i, 4], HEADING_STEP_RAD,
+                                       _HEADING_STEPS)
+
+
+@kernel
+def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, last_rx: np.ndarray,
+             t_s: float, obs: np.ndarray, tgt: np.ndarray, x_true: np.ndarray,
+             draws: np.ndarray, out: tuple) -> None:
+    """Newest arrived report per pair, reception range and probability (module docstring);
+    ``last_rx`` advances in place. ``params``: ``(enabled, latency_s, max_range_m,
+    z_receive)``; ``out``: the arrays of :class:`AisReports`, NaN where nothing is received."""
+    enabled, latency, max_range, z_receive = params
+    valid, stamp, north, east, sog, cog, heading = out
+    for k in range(obs.shape[0]):
+        i, j = obs[k], tgt[k]
+        # newest report stamped after the last one consumed that has arrived by now (the
+        # first of equal stamps, as argmax)
+        slot, newest = 0, -math.inf
+        for s in range(AIS_BUFFER):
+            st = buf_t[j, s]
+            if st > last_rx[k] and st + latency[j] <= t_s + 1e-9 and st > newest:
+                slot, newest = s, st
+        ok = False
+        if math.isfinite(newest):
+            last_rx[k] = newest  # consumed whether heard or not
+            if enabled[i] and draws[k, 0] < z_receive[i]:
+                dn, de = x_true[NORTH, j] - x_true[NORTH, i], x_true[EAST, j] - x_true[EAST, i]
+                side = _norm_side(dn, de, max_range[i], 1.0)
+                ok = side < 0 if side != 0 else math.hypot(dn, de) <= max_range[i]
+        valid[k] = ok
+        if ok:
+            stamp[k] = newest
+            north[k], east[k], sog[k] = buf[j, slot, 0], buf[j, slot, 1], buf[j, slot, 2]
+            cog[k], heading[k] = buf[j, slot, 3], buf[j, slot, 4]
+        else:
+            stamp[k] = north[k] = east[k] = sog[k] = cog[k] = heading[k] = math.nan

@@ -62,7 +62,8 @@ from statistics import NormalDist
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.sensors import check_keys, column, flags, rotate_body_to_earth, wrap_pi
+from trafficsim.jit import kernel
+from trafficsim.sensors import TWO_PI, check_keys, column, flags
 from trafficsim.ships.base import EAST, NORTH, PSI
 
 #: standard normals per directed pair per step: range noise, bearing noise, detection draw
@@ -193,10 +194,23 @@ def scan_due(params: RadarParams, state: RadarState, t_s: float
 
     Returns: the new state and ``due`` (n,) bool.
     """
-    due = params.enabled & (t_s >= state.next_scan_s - 1e-9)
-    nxt = state.next_scan_s + params.scan_period_s
-    nxt = np.where(nxt <= t_s + 1e-9, t_s + params.scan_period_s, nxt)
-    return RadarState(next_scan_s=np.where(due, nxt, state.next_scan_s)), due
+    due = np.empty(state.next_scan_s.shape[0], dtype=bool)
+    nxt = np.empty(state.next_scan_s.shape[0])
+    _scan(_c(params.enabled, bool), _c(params.scan_period_s), _c(state.next_scan_s), float(t_s),
+          due, nxt)
+    return RadarState(next_scan_s=nxt), due
+
+
+@kernel
+def _scan(enabled: np.ndarray, period: np.ndarray, next_scan: np.ndarray, t_s: float,
+          due: np.ndarray, out: np.ndarray) -> None:
+    """:func:`scan_due` for every observer: ``due`` and the new schedule ``out``."""
+    for i in range(next_scan.shape[0]):
+        due[i] = enabled[i] and t_s >= next_scan[i] - 1e-9
+        out[i] = next_scan[i]
+        if due[i]:
+            nxt = next_scan[i] + period[i]
+            out[i] = t_s + period[i] if nxt <= t_s + 1e-9 else nxt
 
 
 def measure(params: RadarParams, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
@@ -204,7 +218,7 @@ def measure(params: RadarParams, due: np.ndarray, obs: np.ndarray, tgt: np.ndarr
             est_psi_rad: np.ndarray, draws: np.ndarray, t_s: float,
             own_heading_var_rad2: np.ndarray | None = None,
             own_pos_cov_m2: np.ndarray | None = None) -> RadarPlots:
-    """Radar plots of every directed pair at time ``t_s``.
+    """Radar plots of every directed pair at time ``t_s`` (one compiled loop over pairs).
 
     Args:
         params: observer radar parameters, ``(n,)``.
@@ -218,46 +232,106 @@ def measure(params: RadarParams, due: np.ndarray, obs: np.ndarray, tgt: np.ndarr
         own_heading_var_rad2: optional ``(n,)`` variance of the own heading estimate, rad^2.
         own_pos_cov_m2: optional ``(n, 2, 2)`` covariance of the own position estimate, m^2.
     """
+    m = obs.shape[0]
     draws = np.asarray(draws, dtype=float)
-    if draws.shape != (obs.shape[0], RADAR_NORMAL_DIMS):
-        raise ValueError(f"draws must have shape ({obs.shape[0]}, {RADAR_NORMAL_DIMS}), "
+    if draws.shape != (m, RADAR_NORMAL_DIMS):
+        raise ValueError(f"draws must have shape ({m}, {RADAR_NORMAL_DIMS}), "
                          f"got {draws.shape}")
-    ax, ay = params.antenna_x_m[obs], params.antenna_y_m[obs]
-    psi = x_true[PSI, obs]
-    dn_a, de_a = rotate_body_to_earth(psi, ax, ay)
-    rel_n = x_true[NORTH, tgt] - (x_true[NORTH, obs] + dn_a)
-    rel_e = x_true[EAST, tgt] - (x_true[EAST, obs] + de_a)
-    true_range = np.hypot(rel_n, rel_e)
-    true_brg = np.arctan2(rel_e, rel_n) - psi
+    p = params
+    var_psi = (_NONE if own_heading_var_rad2 is None
+               else _c(np.broadcast_to(own_heading_var_rad2, due.shape)))
+    pos_cov = (_NONE3 if own_pos_cov_m2 is None
+               else _c(np.broadcast_to(own_pos_cov_m2, (due.shape[0], 2, 2))))
+    plots = RadarPlots(valid=np.empty(m, dtype=bool), t_s=float(t_s), north_m=np.empty(m),
+                       east_m=np.empty(m), cov=np.empty((m, 2, 2)), range_m=np.empty(m),
+                       bearing_rad=np.empty(m))
+    _plots((_c(p.sigma_range_m), _c(p.sigma_bearing_rad), _c(p.max_range_m),
+            _c(p.min_range_m), _c(p.z_detect), _c(p.antenna_x_m), _c(p.antenna_y_m)),
+           _c(due, bool), _c(obs, np.int64), _c(tgt, np.int64), _c(x_true), _c(est_north_m),
+           _c(est_east_m), _c(est_psi_rad), _c(draws), var_psi, pos_cov,
+           (plots.valid, plots.north_m, plots.east_m, plots.cov, plots.range_m,
+            plots.bearing_rad))
+    return plots
 
-    rng = true_range + params.sigma_range_m[obs] * draws[:, 0]
-    brg = wrap_pi(true_brg + params.sigma_bearing_rad[obs] * draws[:, 1])
-    valid = (due[obs] & (true_range <= params.max_range_m[obs])
-             & (true_range >= params.min_range_m[obs]) & (draws[:, 2] < params.z_detect[obs])
-             & (rng > 0.0))
 
-    psi_est = est_psi_rad[obs]
-    en_a, ee_a = rotate_body_to_earth(psi_est, ax, ay)
-    theta = psi_est + brg
-    c, s = np.cos(theta), np.sin(theta)
-    north = est_north_m[obs] + en_a + rng * c
-    east = est_east_m[obs] + ee_a + rng * s
+def _c(a: np.ndarray, dtype: type = float) -> np.ndarray:
+    """``a`` as a C-contiguous array (one compiled specialisation for every caller)."""
+    return np.ascontiguousarray(a, dtype=dtype)
 
-    var_r = params.sigma_range_m[obs] ** 2
-    var_b = params.sigma_bearing_rad[obs] ** 2
-    if own_heading_var_rad2 is not None:
-        var_b = var_b + np.asarray(own_heading_var_rad2, dtype=float)[obs]
-    cross = rng * rng * var_b
-    cov = np.empty((obs.shape[0], 2, 2))
-    cov[:, 0, 0] = c * c * var_r + s * s * cross
-    cov[:, 1, 1] = s * s * var_r + c * c * cross
-    cov[:, 0, 1] = cov[:, 1, 0] = c * s * (var_r - cross)
-    if own_pos_cov_m2 is not None:
-        cov = cov + np.asarray(own_pos_cov_m2, dtype=float)[obs]
 
-    nan = np.where(valid, 1.0, np.nan)
-    return RadarPlots(valid=valid, t_s=float(t_s), north_m=north * nan, east_m=east * nan,
-                      cov=cov * nan[:, None, None], range_m=rng * nan, bearing_rad=brg * nan)
+_NONE, _NONE3 = np.zeros(0), np.zeros((0, 2, 2))
+
+
+@kernel
+def wrap_2pi_scalar(angle: float) -> float:
+    """:func:`trafficsim.sensors.wrap_2pi` of one angle, rad (the same float modulo)."""
+    out = angle % TWO_PI
+    return 0.0 if out >= TWO_PI else out
+
+
+@kernel
+def _plots(params: tuple, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
+           x_true: np.ndarray, est_n: np.ndarray, est_e: np.ndarray, est_psi: np.ndarray,
+           draws: np.ndarray, var_psi: np.ndarray, pos_cov: np.ndarray, out: tuple) -> None:
+    """The measurement model of the module docstring for every pair; NaN where no plot.
+
+    ``params``: per-observer ``(sigma_range_m, sigma_bearing_rad, max_range_m, min_range_m,
+    z_detect, antenna_x_m, antenna_y_m)``; ``out``: ``(valid, north_m, east_m, cov, range_m,
+    bearing_rad)`` of :class:`RadarPlots`. ``var_psi`` / ``pos_cov`` empty when not given. The
+    antenna offset is turned to the earth frame as in
+    :func:`trafficsim.sensors.rotate_body_to_earth` [seed 003, eq 5].
+    """
+    sr, sb, rmax, rmin, zdet, ant_x, ant_y = params
+    valid, north, east, cov, rng_out, brg_out = out
+    has_var, has_cov = var_psi.shape[0] > 0, pos_cov.shape[0] > 0
+    for k in range(obs.shape[0]):
+        i, j = obs[k], tgt[k]
+        ok = False
+        if due[i] and draws[k, 2] < zdet[i]:
+            psi = x_true[PSI, i]
+            ax, ay = ant_x[i], ant_y[i]
+            offset = ax != 0.0 or ay != 0.0  # (no rotation of a zero offset: saves two sincos)
+            off_n = off_e = 0.0
+            if offset:
+                c, s = math.cos(psi), math.sin(psi)
+                off_n, off_e = ax * c - ay * s, ax * s + ay * c
+            rel_n = x_true[NORTH, j] - (x_true[NORTH, i] + off_n)
+            rel_e = x_true[EAST, j] - (x_true[EAST, i] + off_e)
+            true_range = math.hypot(rel_n, rel_e)
+            rng = true_range + sr[i] * draws[k, 0]
+            ok = true_range <= rmax[i] and true_range >= rmin[i] and rng > 0.0
+        valid[k] = ok
+        if not ok:
+            north[k] = east[k] = rng_out[k] = brg_out[k] = math.nan
+            cov[k, 0, 0] = cov[k, 0, 1] = cov[k, 1, 0] = cov[k, 1, 1] = math.nan
+            continue
+        true_brg = math.atan2(rel_e, rel_n) - psi
+        brg = wrap_2pi_scalar(true_brg + sb[i] * draws[k, 1] + math.pi) - math.pi
+        psi_est = est_psi[i]
+        if offset:
+            ce, se = math.cos(psi_est), math.sin(psi_est)
+            off_n, off_e = ax * ce - ay * se, ax * se + ay * ce
+        theta = psi_est + brg
+        c, s = math.cos(theta), math.sin(theta)
+        north[k] = est_n[i] + off_n + rng * c
+        east[k] = est_e[i] + off_e + rng * s
+        rng_out[k], brg_out[k] = rng, brg
+        var_r = sr[i] * sr[i]
+        var_b = sb[i] * sb[i]
+        if has_var:
+            var_b = var_b + var_psi[i]
+        cross = rng * rng * var_b
+        c00 = c * c * var_r + s * s * cross
+        c11 = s * s * var_r + c * c * cross
+        c01 = c * s * (var_r - cross)
+        if has_cov:
+            c00 += pos_cov[i, 0, 0]
+            c11 += pos_cov[i, 1, 1]
+            cov[k, 0, 1] = c01 + pos_cov[i, 0, 1]
+            cov[k, 1, 0] = c01 + pos_cov[i, 1, 0]
+        else:
+            cov[k, 0, 1] = cov[k, 1, 0] = c01
+        cov[k, 0, 0], cov[k, 1, 1] = c00, c11
 
 
 def step(params: RadarParams, state: RadarState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
