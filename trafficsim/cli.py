@@ -93,7 +93,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
           f"simulated in {summary['wall_time_s']:.2f} s "
           f"({summary['ship_steps_per_s']:,.0f} ship-steps/s)")
     for pair in summary["pairs"]:
-        flag = "  COLLISION" if pair["collision"] else ""
+        flag = ("  COLLISION" if pair["collision"] else
+                "  domain entered" if pair.get("domain_violation") else "")
         print(f"  {pair['ship_a']} - {pair['ship_b']}: min range {pair['min_range_m']:.0f} m "
               f"at t = {pair['t_min_range_s']:.0f} s{flag}")
     for spot in summary.get("blind_spots", []):

@@ -53,9 +53,10 @@ class Simulation:
 
     @classmethod
     def start(cls, batch: Batch, dt: float, seed: int = 0, decider: Decider | None = None,
-              decision_period_s: float = 10.0) -> Simulation:
+              decision_period_s: float = 10.0, domain: str = "coldwell") -> Simulation:
         """Start at t = 0; ``seed`` keys every random stream (instruments); ``decider`` takes
-        the collision-avoidance decisions every ``decision_period_s`` (a multiple of ``dt``)."""
+        the collision-avoidance decisions every ``decision_period_s`` (a multiple of ``dt``);
+        ``domain`` is the ship-domain model of the domain-violation metric."""
         x = batch.x
         n = batch.n_ships
         speed = x[base.U].copy()
@@ -65,7 +66,7 @@ class Simulation:
             speed_order_mps=speed,
             route=guidance.RouteState.start(x[NORTH], x[EAST], x[PSI]),
             metrics=PairMetrics.start(x[[NORTH, EAST]], earth_velocity(x, batch.env),
-                                      batch.pair_i, batch.pair_j),
+                                      batch.pair_i, batch.pair_j, domain),
             integral=np.zeros(n),
             course_order_rad=x[PSI].copy(),
             rudder_cmd_rad=np.zeros(n),

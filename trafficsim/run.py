@@ -190,7 +190,8 @@ def run_scenario(path: Path, out_dir: Path) -> dict[str, Any]:
     ships, env = scenario_setups(scn)
     batch = build_batch(ships, [env])
     decider = scenario_decider(scn, batch)
-    sim = Simulation.start(batch, scn.dt_s, scn.seed, decider, scn.decision_period_s)
+    sim = Simulation.start(batch, scn.dt_s, scn.seed, decider, scn.decision_period_s,
+                           scn.domain)
     n_steps = round(scn.duration_s / scn.dt_s)
     every = max(1, round(scn.record_every_s / scn.dt_s))
     rec = Recorder.allocate(n_steps // every + 1, batch.n_ships, batch.x.shape[0])
@@ -223,7 +224,9 @@ def _summary(scn: Scenario, sim: Simulation, n_steps: int, wall_s: float, timed_
         {"ship_a": b.names[i], "ship_b": b.names[j],
          "min_range_m": float(m.min_range_m[k]), "t_min_range_s": float(m.t_min_range_s[k]),
          "dcpa_m": float(m.dcpa0_m[k]), "tcpa_s": float(m.tcpa0_s[k]),
-         "collision": bool(m.collision[k]), "t_collision_s": float(m.t_collision_s[k])}
+         "collision": bool(m.collision[k]), "t_collision_s": float(m.t_collision_s[k]),
+         "domain_violation": bool(m.domain_violation[k]),
+         "t_domain_violation_s": float(m.t_domain_violation_s[k])}
         for k, (i, j) in enumerate(zip(b.pair_i, b.pair_j, strict=True))
     ]
     x = b.x
@@ -242,6 +245,8 @@ def _summary(scn: Scenario, sim: Simulation, n_steps: int, wall_s: float, timed_
         "n_ships": b.n_ships,
         "n_steps": n_steps,
         "collisions": int(m.collision.sum()),
+        "domain": scn.domain,
+        "domain_violations": int(m.domain_violation.sum()),
         "blind_spots": [] if sim.decider is None else sim.decider.blind_spot_report(b.names),
         "pairs": pairs,
         "ships": ships,
