@@ -283,9 +283,6 @@ def test_no_solution_tie_prefers_starboard():
     assert choose_one(threats, side=EITHER) == (cand(90.0), False)
 
 
-@pytest.mark.xfail(strict=True, reason="open: a candidate with no relative motion counts as "
-                   "past CPA; counting the present range instead sends Imazu case 18 (all "
-                   "ships deciding) to port first")
 def test_no_relative_motion_keeps_the_present_range():
     """A ship 300 m on the starboard beam steering 030 at 12 kn: the 30 deg turn at full speed
     puts the own ship alongside her at 300 m for the whole look-ahead, which does not keep the

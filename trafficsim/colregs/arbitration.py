@@ -91,7 +91,9 @@ def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_facto
     # course counts by where it will be at the end of the look-ahead, not at its late CPA)
     t_close = np.clip(tcpa, 0.0, horizon_s)
     closest = np.hypot(pn + dvn * t_close, pe + dve * t_close)
-    margin = np.where(tcpa > 0.0, closest - required_m[:, None], math.inf)  # (q, K)
+    # no relative motion keeps the present range: it counts, it is not "past"
+    margin = np.where((tcpa > 0.0) | (v2 <= 1e-12), closest - required_m[:, None],
+                      math.inf)  # (q, K)
     worst = np.full((s, N_CANDIDATES), math.inf)
     np.minimum.at(worst, pair_ship, margin)
     ok = worst >= 0.0
