@@ -56,14 +56,16 @@ before the keys existed.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.estimation import adaptive, ekf, fusion, gating, pv
+from trafficsim.jit import kernel
 from trafficsim.noise import NoiseBank
 from trafficsim.sensors import (
     actuators,
@@ -72,7 +74,6 @@ from trafficsim.sensors import (
     rotate_body_to_earth,
     speed_log,
     waves,
-    wrap_pi,
 )
 from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Env, R, U, V
 
@@ -192,6 +193,7 @@ class Navigation:
     adapt_p: adaptive.AdaptiveParams | None = None
     adapt_s: adaptive.AdaptiveState | None = None
     ekf_innovation: ekf.Innovation | None = None  # last ekf update's innovations (diagnostic)
+    _tables: Any = field(default=None, repr=False, compare=False)  # _StepTables, at first step
 
     @classmethod
     def build(cls, configs: Sequence[Mapping[str, Any]], filters: Sequence[str], x: np.ndarray,
@@ -310,64 +312,74 @@ class Navigation:
             adapt_rows=adapt_rows, adapt_p=adapt_p, adapt_s=adapt_s)
 
     def update(self, x: np.ndarray, env: Env) -> np.ndarray:
-        """Measure the true state ``x`` ``(8, n)``, update the filters; returns ``est`` (6, n)."""
-        wave_psi = wave_ne = None
+        """Measure the true state ``x`` ``(8, n)``, update the filters; returns ``est`` (6, n).
+
+        The per-ship arithmetic of waves, GNSS, compass, the heading filter and the pv filter
+        with its gate runs in two compiled loops over ships (:func:`_sense`, :func:`_pv_filter`)
+        on per-ship constants gathered once; the instruments' and filters' memories (``waves_s``,
+        ``gnss_s``, ``compass_s``, ``heading_est``, ``pv_s``, ``gate_rejections``) are advanced
+        in place, the readings (``fix``, ``heading_meas``) and ``est`` are new arrays every
+        step. The optional log and actuator sensors, further receivers, their fusion and the
+        ekf keep their vectorised modules.
+        """
+        t = self._step_tables()
+        n = x.shape[1]
+        wave_draws, wave_psi, wave_ne = _NO_DRAWS, _NO_ROW, _NO_ROWS
         if self.has_waves:
-            self.waves_s = waves.step(self.waves_p, self.waves_s, self.banks["waves"].next())
-            wave_psi = waves.heading_offset(self.waves_p, self.waves_s)
-            wave_ne = waves.position_offset(self.waves_p, self.waves_s, x[PSI])
-        self.gnss_s, self.fix = gnss.step(self.gnss_p, self.gnss_s, x, self.banks["gnss"].next(),
-                                          self.banks["gnss_gross"].next(), wave_ne, wave_psi)
+            wave_draws, wave_psi, wave_ne = self.banks["waves"].next(), t.wave_psi, t.wave_ne
+        gs, ws, heading = self.gnss_s, self.waves_s, self.heading_est
+        valid, gross = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        fix_n, fix_e, heading_meas = np.empty(n), np.empty(n), np.empty(n)
+        drift = self.compass_s.drift_rad
+        _sense(x, self.dt, self.has_waves, self.gnss_p.has_lever_arm,
+               self.compass_p.has_deviation, t.wave, t.gnss, t.arm, t.compass, t.deviation,
+               t.every, t.bandpass, ws.z1, ws.z2, wave_draws, gs.counter, gs.up, gs.gm_m,
+               gs.last_m, self.banks["gnss"].next(), self.banks["gnss_gross"].next(), drift,
+               self.banks["compass"].next(), heading,
+               ws.z1, ws.z2, wave_psi, wave_ne, gs.counter, gs.up, gs.gm_m, gs.last_m, fix_n,
+               fix_e, valid, gross, drift, heading_meas, heading)
+        self.fix = gnss.GnssFix(north_m=fix_n, east_m=fix_e, valid=valid, gross=gross)
+        self.heading_meas = heading_meas
         if self.extra:
-            self._measure_extra_receivers(x, wave_ne, wave_psi)
-        self.compass_s, self.heading_meas = compass.step(
-            self.compass_p, self.compass_s, x[PSI], self.banks["compass"].next(), wave_psi)
+            self._measure_extra_receivers(x, wave_ne if self.has_waves else None,
+                                          wave_psi if self.has_waves else None)
         if self.has_log:  # recorded only: the filters here do not use the log or rudder/rpm
             self.log_meas = speed_log.measure(self.log_p, x, env, self.banks["log"].next())
         if self.has_actuator_sensors:
             self.act_meas = actuators.measure(self.act_p, x, self.banks["actuators"].next())
 
-        # heading: steady-state alpha-beta on the compass
-        psi, r = self.heading_est
-        psi_pred = psi + r * self.dt
-        innov = wrap_pi(self.heading_meas - psi_pred)
-        psi_new = np.mod(psi_pred + self.heading_gain[:, 0] * innov, 2 * np.pi)
-        r_new = r + self.heading_gain[:, 1] * innov
-        self.heading_est = np.stack([psi_new, r_new])
-
-        # position: the receiver's PV filter on the fix moved to the reference point
-        ref_n, ref_e = gnss.to_reference_point(self.gnss_p, self.fix.north_m, self.fix.east_m,
-                                               psi_new)
-        fix_valid, pv_p = self.fix.valid, self.pv_p
-        if self.multi_idx.size:  # several receivers: the fused fix and its variance
-            mi = self.multi_idx
-            self.fused = self._fuse(np.arange(mi.size), psi_new[mi])
-            ref_n, ref_e, fix_valid = ref_n.copy(), ref_e.copy(), fix_valid.copy()
-            ref_n[mi], ref_e[mi] = self.fused.position[:, 0], self.fused.position[:, 1]
-            fix_valid[mi] = self.fused.valid
-            sigma = pv_p.sigma_m.copy()
-            sigma[mi] = np.sqrt(self._fused_variance(self.fused, np.arange(mi.size)))
-            pv_p = replace(pv_p, sigma_m=sigma)
-        pred = pv.predict(pv_p, self.pv_s)
-        innov = np.stack([ref_n - pred.x[:, 0], ref_e - pred.x[:, 1]], axis=1)
-        s_innov = pred.P[:, :, 0, 0] + (pv_p.sigma_m ** 2)[:, None]
-        d = np.where(fix_valid, gating.normalised_distance(innov, s_innov), np.nan)
-        g = gating.gate(self.gate_p, d, self.gate_rejections)
-        self.gate_rejections = g.rejections
-        self.pv_s = pv.update(pv_p, pred, np.nan_to_num(ref_n), np.nan_to_num(ref_e),
-                              g.accept)
-        if g.restart.any():  # genuine jump: restart on the fix, keep the velocity
-            x_pv = self.pv_s.x.copy()
-            x_pv[g.restart, 0], x_pv[g.restart, 1] = ref_n[g.restart], ref_e[g.restart]
-            self.pv_s = pv.PVState(x_pv, self.pv_s.P)
-        vn, ve = self.pv_s.x[:, 2], self.pv_s.x[:, 3]
-        c, s = np.cos(psi_new), np.sin(psi_new)
-        filtered = np.stack([self.pv_s.x[:, 0], self.pv_s.x[:, 1], psi_new,
-                             vn * c + ve * s, -vn * s + ve * c, r_new])
-        self.est = np.where(self.filter_pv[None, :], filtered, x[:N_EST])
+        # position: the receiver's PV filter on the fix moved to the reference point, or the
+        # fused fix (at the reference point already) of the ships with several receivers
+        fused_n = fused_e = fused_sigma = _NO_ROW
+        fused_valid = _NO_FLAGS
+        if self.multi_idx.size:
+            rows = np.arange(self.multi_idx.size)
+            self.fused = self._fuse(rows, heading[0, self.multi_idx])
+            fused_n = np.ascontiguousarray(self.fused.position[:, 0])
+            fused_e = np.ascontiguousarray(self.fused.position[:, 1])
+            fused_valid = np.ascontiguousarray(self.fused.valid)
+            fused_sigma = np.sqrt(self._fused_variance(self.fused, rows))
+        est = np.empty((N_EST, n))
+        ps = self.pv_s
+        _pv_filter(x, self.gnss_p.has_lever_arm, t.arm, t.filt, t.max_rejections,
+                   self.filter_pv, t.multi_row, fix_n, fix_e, valid, heading, fused_n, fused_e,
+                   fused_valid, fused_sigma, ps.x, ps.P, self.gate_rejections, ps.x, ps.P,
+                   self.gate_rejections, est)
+        self.est = est
         if self.ekf_idx is not None and self.ekf_idx.size:
             self.est[:, self.ekf_idx] = self._ekf_update(x, env)
         return self.est
+
+    def _step_tables(self) -> _StepTables:
+        """Per-ship constants of the compiled step, gathered once (again only if a parameter
+        set is replaced)."""
+        key = (self.gnss_p, self.compass_p, self.waves_p, self.pv_p, self.gate_p,
+               self.heading_gain, self.multi_idx)
+        tables = self._tables
+        if tables is None or len(tables.key) != len(key) or any(
+                a is not b for a, b in zip(tables.key, key, strict=True)):
+            tables = self._tables = _StepTables.gather(self, key)
+        return tables
 
     def _ekf_update(self, x: np.ndarray, env: Env) -> np.ndarray:
         """Predict with the measured rudder and rpm, gate the fix, update; estimate (6, k)."""
@@ -536,6 +548,260 @@ class _Receivers:
         full = fusion.fuse(np.zeros((m, k, 2)), joint, present)
         var = 0.5 * (full.cov[:, 0, 0] + full.cov[:, 1, 1])
         return cls(extra, idx, params, joint, var)
+
+
+
+# columns of the per-ship tables of _StepTables (one short row per ship and instrument, so a
+# ship's constants of one instrument share a cache line and absent parts are never read)
+_W11, _W12, _W21, _W22, _WL11, _WL21, _WL22, _WG_YAW, _WG_SURGE, _WG_SWAY = range(10)
+_G_SIGMA, _G_GM_A, _G_GM_Q, _G_GROSS_P, _G_GROSS_M, _G_P_START, _G_P_END = range(7)
+_C_SIGMA, _C_BIAS, _C_DRIFT_A, _C_DRIFT_Q, _H_ALPHA, _H_BETA = range(6)
+_F_SIGMA, _F_SP, _F_DT, _F_THRESHOLD, _F_REOPEN = range(5)
+# stand-ins for the arrays of an absent part (never indexed)
+_NO_DRAWS = np.zeros((0, waves.WAVE_NORMAL_DIMS))
+_NO_ROW = np.zeros(0)
+_NO_ROWS = np.zeros((2, 0))
+_NO_FLAGS = np.zeros(0, dtype=bool)
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass
+class _StepTables:
+    """Per-ship constants of :func:`_sense` and :func:`_pv_filter`, one row per ship."""
+
+    key: tuple[Any, ...]  # the parameter objects they were gathered from
+    wave: np.ndarray  # (n, 10) transition, noise factor and gains (_W*)
+    gnss: np.ndarray  # (n, 7) receiver 1 (_G_*)
+    arm: np.ndarray  # (n, 2) antenna lever arm x, y, m
+    compass: np.ndarray  # (n, 6) compass and heading filter (_C_*, _H_*)
+    deviation: np.ndarray  # (n, 5) deviation coefficients A..E, rad
+    filt: np.ndarray  # (n, 5) pv filter and gate (_F_*)
+    every: np.ndarray  # (n,) int64 GNSS fix interval, steps
+    bandpass: np.ndarray  # (n,) bool wave output z2 (else z1)
+    max_rejections: np.ndarray  # (n,) int64
+    multi_row: np.ndarray  # (n,) int64 row in multi_idx, -1 for one receiver
+    wave_psi: np.ndarray  # (n,) scratch: wave-induced yaw of this step, rad
+    wave_ne: np.ndarray  # (2, n) scratch: wave-induced displacement north, east, m
+
+    @classmethod
+    def gather(cls, nav: Navigation, key: tuple[Any, ...]) -> _StepTables:
+        g, c, w, p, gate = nav.gnss_p, nav.compass_p, nav.waves_p, nav.pv_p, nav.gate_p
+        n = g.sigma_m.shape[0]
+
+        def table(*columns: np.ndarray) -> np.ndarray:
+            return np.ascontiguousarray(np.stack([np.reshape(v, n) for v in columns], axis=1),
+                                        dtype=float)
+
+        multi_row = np.full(n, -1, dtype=np.int64)
+        multi_row[nav.multi_idx] = np.arange(nav.multi_idx.size)
+        return cls(
+            key=key,
+            wave=table(w.phi11, w.phi12, w.phi21, w.phi22, w.l11, w.l21, w.l22,
+                       w.gain[:, waves.YAW], w.gain[:, waves.SURGE], w.gain[:, waves.SWAY]),
+            gnss=table(g.sigma_m, g.gm_a, g.gm_q, g.gross_prob, g.gross_size_m, g.p_start,
+                       g.p_end),
+            arm=table(g.antenna_x_m, g.antenna_y_m),
+            compass=table(c.sigma_rad, c.bias_rad, c.drift_a, c.drift_q, nav.heading_gain[:, 0],
+                          nav.heading_gain[:, 1]),
+            deviation=table(c.dev_a, c.dev_b, c.dev_c, c.dev_d, c.dev_e),
+            filt=table(p.sigma_m, p.sp, p.dt_s, gate.threshold, gate.reopen_factor),
+            every=np.ascontiguousarray(g.every, dtype=np.int64),
+            bandpass=np.ascontiguousarray(np.reshape(w.bandpass, n), dtype=bool),
+            max_rejections=np.ascontiguousarray(gate.max_rejections, dtype=np.int64),
+            multi_row=multi_row, wave_psi=np.empty(n), wave_ne=np.empty((2, n)))
+
+
+@kernel
+def _mod_2pi(angle: float) -> float:
+    """``np.mod(angle, 2 pi)`` of one angle, bit for bit; the division only outside
+    ``(-2 pi, 2 pi)`` (within it ``fmod`` is exact and the result is ``angle`` or
+    ``angle + 2 pi``)."""
+    if 0.0 <= angle < _TWO_PI:
+        return angle
+    if -_TWO_PI < angle < 0.0:
+        return angle + _TWO_PI
+    return angle % _TWO_PI
+
+
+@kernel
+def _wrap_2pi(angle: float) -> float:
+    """:func:`trafficsim.sensors.wrap_2pi` of one angle."""
+    out = _mod_2pi(angle)
+    return 0.0 if out >= _TWO_PI else out
+
+
+@kernel
+def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bool,
+           wtab: np.ndarray, gtab: np.ndarray, arm: np.ndarray, ctab: np.ndarray,
+           dev: np.ndarray, every: np.ndarray, bandpass: np.ndarray, z1: np.ndarray,
+           z2: np.ndarray, wave_draws: np.ndarray, counter0: np.ndarray, up0: np.ndarray,
+           gm0: np.ndarray, last0: np.ndarray, gnss_draws: np.ndarray, gross_draws: np.ndarray,
+           drift0: np.ndarray, compass_draws: np.ndarray, heading0: np.ndarray,
+           z1_out: np.ndarray, z2_out: np.ndarray, wave_psi: np.ndarray, wave_ne: np.ndarray,
+           counter: np.ndarray, up: np.ndarray, gm: np.ndarray, last: np.ndarray,
+           fix_n: np.ndarray, fix_e: np.ndarray, valid: np.ndarray, gross: np.ndarray,
+           drift: np.ndarray, heading_meas: np.ndarray, heading: np.ndarray) -> None:
+    """One step of waves, GNSS receiver 1, compass and the compass heading filter, per ship.
+
+    The arithmetic, in the same order, of :func:`trafficsim.sensors.waves.step`,
+    :func:`~trafficsim.sensors.waves.heading_offset`,
+    :func:`~trafficsim.sensors.waves.position_offset`, :func:`trafficsim.sensors.gnss.step`,
+    :func:`trafficsim.sensors.compass.step` and the alpha-beta heading filter of
+    :class:`Navigation` (steady-state gain of :func:`trafficsim.estimation.pv.steady_state_gain`
+    [seed 000, eq 5]). ``x`` ``(8, n)`` truth; ``wtab`` ... ``dev`` the constants of
+    :class:`_StepTables`; state
+    arrays ``*0`` in, the new ones and the readings out (shapes of the modules' states);
+    ``heading0``/``heading`` ``(2, n)`` heading (rad) and yaw rate (rad/s) estimates.
+    """
+    for i in range(x.shape[1]):
+        psi = x[PSI, i]
+        wpsi = wn = we = 0.0
+        if has_waves:  # z <- Phi z + L e per channel, then the outputs [seed 004, eqs 16-17]
+            for j in range(waves.N_CHANNELS):
+                e1, e2 = wave_draws[i, 2 * j], wave_draws[i, 2 * j + 1]
+                a1, a2 = z1[i, j], z2[i, j]
+                z1_out[i, j] = wtab[i, _W11] * a1 + wtab[i, _W12] * a2 + wtab[i, _WL11] * e1
+                z2_out[i, j] = (wtab[i, _W21] * a1 + wtab[i, _W22] * a2 + wtab[i, _WL21] * e1
+                                + wtab[i, _WL22] * e2)
+            zz = z2_out if bandpass[i] else z1_out
+            wpsi = wtab[i, _WG_YAW] * zz[i, waves.YAW]
+            surge = wtab[i, _WG_SURGE] * zz[i, waves.SURGE]
+            sway = wtab[i, _WG_SWAY] * zz[i, waves.SWAY]
+            c, s = math.cos(psi), math.sin(psi)
+            wn, we = surge * c - sway * s, surge * s + sway * c
+            wave_psi[i], wave_ne[0, i], wave_ne[1, i] = wpsi, wn, we
+        hull = psi + wpsi if has_waves else psi
+        c_hull = s_hull = 0.0
+        if lever or deviation:  # one cos and sin of the hull heading for both
+            c_hull, s_hull = math.cos(hull), math.sin(hull)
+
+        # GNSS: outage chain, Gauss-Markov error, gross error, antenna with its lever arm
+        u_out = gross_draws[i, 2]
+        up_i = u_out >= gtab[i, _G_P_START] if up0[i] else u_out < gtab[i, _G_P_END]
+        valid_i = counter0[i] == 0 and up_i
+        gm_n = gtab[i, _G_GM_A] * gm0[i, 0] + gtab[i, _G_GM_Q] * gnss_draws[i, 2]
+        gm_e = gtab[i, _G_GM_A] * gm0[i, 1] + gtab[i, _G_GM_Q] * gnss_draws[i, 3]
+        gross_i = valid_i and gross_draws[i, 0] < gtab[i, _G_GROSS_P]
+        jump = gtab[i, _G_GROSS_M] if gross_i else 0.0
+        north, east = x[NORTH, i], x[EAST, i]
+        if lever:  # p + R(psi) r_a [seed 003, eq 5]
+            ax, ay = arm[i, 0], arm[i, 1]
+            north = north + (ax * c_hull - ay * s_hull)
+            east = east + (ax * s_hull + ay * c_hull)
+        if has_waves:
+            north, east = north + wn, east + we
+        sigma = gtab[i, _G_SIGMA]
+        north = north + sigma * gnss_draws[i, 0] + gm_n
+        east = east + sigma * gnss_draws[i, 1] + gm_e
+        if jump != 0.0:  # (adding the zero jump of a clean fix changes nothing)
+            direction = _TWO_PI * gross_draws[i, 1]
+            north, east = north + jump * math.cos(direction), east + jump * math.sin(direction)
+        if valid_i:
+            last[i, 0], last[i, 1] = north, east
+        else:
+            last[i, 0], last[i, 1] = last0[i, 0], last0[i, 1]
+        fix_n[i], fix_e[i] = last[i, 0], last[i, 1]
+        counter[i] = (counter0[i] + 1) % every[i]
+        up[i], valid[i], gross[i] = up_i, valid_i, gross_i
+        gm[i, 0], gm[i, 1] = gm_n, gm_e
+
+        # compass: bias, Gauss-Markov drift, white noise, deviation curve
+        d = ctab[i, _C_DRIFT_A] * drift0[i] + ctab[i, _C_DRIFT_Q] * compass_draws[i, 1]
+        reading = hull + ctab[i, _C_BIAS] + d + ctab[i, _C_SIGMA] * compass_draws[i, 0]
+        if deviation:
+            s, c = s_hull, c_hull
+            s2, c2 = 2.0 * s * c, c * c - s * s
+            reading = reading + (dev[i, 0] + dev[i, 1] * s + dev[i, 2] * c
+                                 + dev[i, 3] * s2 + dev[i, 4] * c2)
+        reading = _wrap_2pi(reading)
+        drift[i], heading_meas[i] = d, reading
+
+        # heading: steady-state alpha-beta filter on the compass
+        psi_pred = heading0[0, i] + heading0[1, i] * dt
+        innov = _wrap_2pi(reading - psi_pred + math.pi) - math.pi
+        heading[0, i] = _mod_2pi(psi_pred + ctab[i, _H_ALPHA] * innov)
+        heading[1, i] = heading0[1, i] + ctab[i, _H_BETA] * innov
+
+
+@kernel
+def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
+               max_rejections: np.ndarray,
+               filter_pv: np.ndarray, multi_row: np.ndarray, fix_n: np.ndarray,
+               fix_e: np.ndarray, valid: np.ndarray, heading: np.ndarray, fused_n: np.ndarray,
+               fused_e: np.ndarray, fused_valid: np.ndarray, fused_sigma: np.ndarray,
+               x0: np.ndarray, P0: np.ndarray, rejections0: np.ndarray, x_out: np.ndarray,
+               P_out: np.ndarray, rejections: np.ndarray, est: np.ndarray) -> None:
+    """Per ship: the fix moved to the reference point [seed 003, eq 5] (or the fused fix of
+    ``multi_row``), pv predict [seed 000, eqs 3-4], the gate [seed 002, 6.6], pv update
+    [seed 000, recursion steps 2-3], restart on a genuine jump and the estimate.
+
+    The arithmetic, in the same order, of :func:`trafficsim.sensors.gnss.to_reference_point`,
+    :func:`trafficsim.estimation.pv.predict`, :func:`trafficsim.estimation.gating.gate` on
+    :func:`~trafficsim.estimation.gating.normalised_distance` and
+    :func:`trafficsim.estimation.pv.update`. ``heading`` ``(2, n)`` the heading filter's
+    output; ``fused_*`` ``(m,)`` rows of the ships with several receivers (m; m2 as sigma);
+    ``est`` ``(6, n)`` out: the pv estimate of the ``filter_pv`` ships, truth for the others.
+    """
+    for i in range(x.shape[1]):
+        psi = heading[0, i]
+        ref_n, ref_e, ok, sigma = fix_n[i], fix_e[i], valid[i], tab[i, _F_SIGMA]
+        c, s = math.cos(psi), math.sin(psi)  # for the lever arm and the body-frame velocity
+        if lever:
+            ax, ay = arm[i, 0], arm[i, 1]
+            ref_n, ref_e = ref_n - (ax * c - ay * s), ref_e - (ax * s + ay * c)
+        k = multi_row[i]
+        if k >= 0:
+            ref_n, ref_e, ok, sigma = fused_n[k], fused_e[k], fused_valid[k], fused_sigma[k]
+        dt, q = tab[i, _F_DT], tab[i, _F_SP]
+        x_out[i, pv.POS_N] = x0[i, pv.POS_N] + dt * x0[i, pv.VEL_N]
+        x_out[i, pv.POS_E] = x0[i, pv.POS_E] + dt * x0[i, pv.VEL_E]
+        x_out[i, pv.VEL_N] = x0[i, pv.VEL_N]
+        x_out[i, pv.VEL_E] = x0[i, pv.VEL_E]
+        for a in range(2):
+            pp, pv_, vv = P0[i, a, pv.POS, pv.POS], P0[i, a, pv.POS, pv.VEL], P0[i, a, pv.VEL,
+                                                                                  pv.VEL]
+            P_out[i, a, pv.POS, pv.POS] = pp + 2.0 * dt * pv_ + dt * dt * vv + q * dt**3 / 3.0
+            P_out[i, a, pv.POS, pv.VEL] = pv_ + dt * vv + 0.5 * q * dt * dt
+            P_out[i, a, pv.VEL, pv.POS] = P_out[i, a, pv.POS, pv.VEL]
+            P_out[i, a, pv.VEL, pv.VEL] = vv + q * dt
+        r = sigma * sigma
+        # gate on the normalised innovation
+        d = math.nan
+        if ok:
+            nu_n, nu_e = ref_n - x_out[i, pv.POS_N], ref_e - x_out[i, pv.POS_E]
+            d = math.sqrt(nu_n * nu_n / (P_out[i, pv.AXIS_NORTH, pv.POS, pv.POS] + r)
+                          + nu_e * nu_e / (P_out[i, pv.AXIS_EAST, pv.POS, pv.POS] + r))
+        window = tab[i, _F_THRESHOLD]  # reopen_factor ** 0 = 1, also for an infinite factor
+        if rejections0[i]:
+            window = window * tab[i, _F_REOPEN] ** float(rejections0[i])
+        have = math.isfinite(d)
+        accept = have and d <= window
+        reject = have and not accept
+        count = 0 if accept else rejections0[i] + (1 if reject else 0)
+        restart = reject and count >= max_rejections[i]
+        rejections[i] = 0 if restart else count
+        if accept:
+            for a in range(2):
+                pos, vel = (pv.POS_N, pv.VEL_N) if a == 0 else (pv.POS_E, pv.VEL_E)
+                z = ref_n if a == 0 else ref_e
+                pp, pv_, vv = (P_out[i, a, pv.POS, pv.POS], P_out[i, a, pv.POS, pv.VEL],
+                               P_out[i, a, pv.VEL, pv.VEL])
+                s_ = pp + r
+                nu = z - x_out[i, pos]
+                x_out[i, pos] += pp / s_ * nu
+                x_out[i, vel] += pv_ / s_ * nu
+                P_out[i, a, pv.POS, pv.POS] = pp * r / s_
+                P_out[i, a, pv.POS, pv.VEL] = P_out[i, a, pv.VEL, pv.POS] = pv_ * r / s_
+                P_out[i, a, pv.VEL, pv.VEL] = vv - pv_ * pv_ / s_
+        if restart:  # genuine jump: restart on the fix, keep the velocity
+            x_out[i, pv.POS_N], x_out[i, pv.POS_E] = ref_n, ref_e
+        if filter_pv[i]:
+            vn, ve = x_out[i, pv.VEL_N], x_out[i, pv.VEL_E]
+            est[0, i], est[1, i], est[2, i] = x_out[i, pv.POS_N], x_out[i, pv.POS_E], psi
+            est[3, i], est[4, i], est[5, i] = vn * c + ve * s, -vn * s + ve * c, heading[1, i]
+        else:
+            for row in range(N_EST):
+                est[row, i] = x[row, i]
 
 
 def _adaptive_configs(nav_cfg: Sequence[Mapping[str, Any]]) -> list[dict[str, Any] | None]:
