@@ -115,8 +115,9 @@ class Simulation:
         """Collision-avoidance decisions on what each ship knows: its own estimate and, per
         directed pair, its track of the other ship (the truth where it has no radar or AIS)."""
         b, x, d = self.batch, self.batch.x, self.decider
+        true_vel = earth_velocity(x, b.env) if self.nav is None or self.obs is None else None
         if self.nav is None:
-            own_vel = earth_velocity(x, b.env)
+            own_vel = true_vel
         else:  # the filter's ground velocity, rotated back from the body frame
             c, s = np.cos(est[PSI]), np.sin(est[PSI])
             own_vel = np.stack([est[base.U] * c - est[base.V] * s,
@@ -125,8 +126,7 @@ class Simulation:
             xp, active = self.obs.predicted_tracks(self.t_s)
             other = np.where(active[None, :], xp.T, np.nan)
         else:
-            vel = earth_velocity(x, b.env)
-            other = np.concatenate([x[[NORTH, EAST]][:, d.tgt], vel[:, d.tgt]])
+            other = np.concatenate([x[[NORTH, EAST]][:, d.tgt], true_vel[:, d.tgt]])
         factor_before = d.speed_factor.copy()
         d.decide(self.t_s, est[[NORTH, EAST, PSI]], own_vel, b.length_m, other,
                  self.course_order_rad, self.route_speed_mps)

@@ -38,23 +38,35 @@ def _read(run_dir: Path) -> dict[str, np.ndarray]:
     return {c: np.asarray(table.column(c).to_pylist()) for c in table.column_names}
 
 
-def timeline(cols: dict[str, np.ndarray], ship: str) -> list[str]:
-    """One line per decision step at which the ship's role, encounter or manoeuvre towards some
-    other ship changed, or its course order changed."""
-    sel = np.flatnonzero(cols["ship"] == ship)
-    lines = []
+def _changes(cols: dict[str, np.ndarray], sel: np.ndarray) -> list[tuple[int, bool]]:
+    """Rows of ``sel`` (one ship's decisions) at which, towards the same other ship, the role,
+    encounter, expected role, manoeuvre or course order changed (the first row of each other
+    ship included), each with whether a state other than the course order changed there."""
+    out = []
     last: dict[str, tuple] = {}
     for k in sel:
         other = str(cols["other"][k])
-        state = (*(str(cols[c][k]) for c in _STATE), f"{cols['course_order_deg'][k]:.0f}")
-        if last.get(other) != state:
-            course = ("route" if np.isnan(cols["course_order_deg"][k])
-                      else f"{cols['course_order_deg'][k]:.0f} deg")
-            lines.append(f"t = {cols['t_s'][k]:7.0f} s  {other:>10}: role {state[0]}, "
-                         f"encounter {state[1]}, manoeuvre {state[3]}; course order {course}; "
-                         f"range {cols['range_nm'][k]:.2f} NM, DCPA {cols['dcpa_nm'][k]:.2f} NM, "
-                         f"TCPA {cols['tcpa_min'][k]:.1f} min")
-            last[other] = state
+        state = tuple(str(cols[c][k]) for c in _STATE)
+        course = f"{cols['course_order_deg'][k]:.0f}"
+        before = last.get(other)
+        if before != (state, course):
+            out.append((int(k), before is not None and before[0] != state))
+            last[other] = (state, course)
+    return out
+
+
+def timeline(cols: dict[str, np.ndarray], ship: str) -> list[str]:
+    """One line per decision step at which the ship's role, encounter or manoeuvre towards some
+    other ship changed, or its course order changed."""
+    lines = []
+    for k, _ in _changes(cols, np.flatnonzero(cols["ship"] == ship)):
+        course = ("route" if np.isnan(cols["course_order_deg"][k])
+                  else f"{cols['course_order_deg'][k]:.0f} deg")
+        lines.append(f"t = {cols['t_s'][k]:7.0f} s  {cols['other'][k]:>10}: role "
+                     f"{cols[_STATE[0]][k]}, encounter {cols[_STATE[1]][k]}, manoeuvre "
+                     f"{cols[_STATE[3]][k]}; course order {course}; "
+                     f"range {cols['range_nm'][k]:.2f} NM, DCPA {cols['dcpa_nm'][k]:.2f} NM, "
+                     f"TCPA {cols['tcpa_min'][k]:.1f} min")
     return lines
 
 
@@ -79,8 +91,8 @@ def explain_run(run_dir: Path, ship: str, at_s: float | None = None) -> str:
     if at_s is None:
         out.append(f"{ship}: decisions that changed something")
         out += ["  " + line for line in timeline(cols, ship)]
-        changes = _change_steps(cols, sel)
-        rows = sel[times == (times[changes[-1]] if changes.size else times[-1])]
+        changed = [k for k, state_changed in _changes(cols, sel) if state_changed]
+        rows = sel[times == (cols["t_s"][changed[-1]] if changed else times[-1])]
     else:
         before = times[times <= at_s]
         if before.size == 0:
@@ -101,16 +113,3 @@ def explain_run(run_dir: Path, ship: str, at_s: float | None = None) -> str:
                    f"({Path(rules).name}):")
         out.append(network.explain(net, path, feats))
     return "\n".join(out)
-
-
-def _change_steps(cols: dict[str, np.ndarray], sel: np.ndarray) -> np.ndarray:
-    """Positions in ``sel`` where some state column changed for the same other ship."""
-    changed = []
-    last: dict[str, tuple] = {}
-    for pos, k in enumerate(sel):
-        state = tuple(str(cols[c][k]) for c in _STATE)
-        other = str(cols["other"][k])
-        if other in last and last[other] != state:
-            changed.append(pos)
-        last[other] = state
-    return np.array(changed, dtype=np.int64)

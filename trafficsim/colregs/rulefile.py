@@ -27,7 +27,13 @@ from dataclasses import dataclass, field
 from typing import Any, NoReturn
 
 from trafficsim.errors import ScenarioError
-from trafficsim.io.yamlio import MAX_BYTES, Document, format_loc, parse_yaml
+from trafficsim.io.yamlio import (
+    Document,
+    format_loc,
+    parse_yaml,
+    read_bytes,
+    read_file,
+)
 
 __all__ = [
     "OPERATORS",
@@ -303,30 +309,12 @@ def read_rules(source: str | bytes, path: str = "<string>") -> Document:
                             key=exc.key) from None
 
 
-def _read_bytes(name: str) -> bytes:
-    """At most the YAML size cap (plus one byte, so that the reader refuses a larger file)."""
-    with open(name, "rb") as handle:
-        return handle.read(MAX_BYTES + 1)
-
-
-def _file_bytes(path: str | os.PathLike[str]) -> bytes:
-    name = os.fspath(path)
-    try:
-        return _read_bytes(name)
-    except FileNotFoundError:
-        raise ScenarioError("file not found", path=name) from None
-    except IsADirectoryError:
-        raise ScenarioError("is a directory, expected a rules YAML file", path=name) from None
-    except OSError as exc:
-        raise ScenarioError(f"cannot read file ({exc.strerror or exc})", path=name) from None
-
-
 def _read_parent(child: Document, parent: str) -> Document | ScenarioError:
     """The file ``child`` extends, or the error (located at ``child``'s ``extends``, or a YAML
     error located in the parent)."""
     where = ("extends",)
     try:
-        data = _read_bytes(parent)
+        data = read_bytes(parent)
     except FileNotFoundError:
         folder = os.path.dirname(parent) or "."
         try:
@@ -1099,4 +1087,4 @@ def parse(source: str | bytes, vocabulary: Vocabulary, path: str = "<string>") -
 
 def parse_file(path: str | os.PathLike[str], vocabulary: Vocabulary) -> RuleSet:
     """:func:`parse` on the content of ``path`` (at most the YAML size cap is read)."""
-    return parse(_file_bytes(path), vocabulary, os.fspath(path))
+    return parse(read_file(path, kind="a rules YAML file"), vocabulary, os.fspath(path))

@@ -507,16 +507,29 @@ def load_yaml(path: str | os.PathLike[str], *, max_bytes: int = MAX_BYTES) -> Do
         ScenarioError: unreadable, oversize, non-UTF-8, empty or invalid file.
     """
     name = os.fspath(path)
+    return parse_yaml(read_file(name, max_bytes), name, max_bytes=max_bytes)
+
+
+def read_bytes(name: str, max_bytes: int = MAX_BYTES) -> bytes:
+    """At most ``max_bytes`` + 1 bytes of a file (one more, so that the reader refuses a larger
+    file); OS errors propagate."""
+    with open(name, "rb") as handle:
+        return handle.read(max_bytes + 1)
+
+
+def read_file(path: str | os.PathLike[str], max_bytes: int = MAX_BYTES,
+              kind: str = "a YAML file") -> bytes:
+    """:func:`read_bytes` with OS errors as located :class:`ScenarioError` (``kind`` names
+    what a directory should have been)."""
+    name = os.fspath(path)
     try:
-        with open(name, "rb") as handle:
-            data = handle.read(max_bytes + 1)
+        return read_bytes(name, max_bytes)
     except FileNotFoundError:
         raise ScenarioError("file not found", path=name) from None
     except IsADirectoryError:
-        raise ScenarioError("is a directory, expected a YAML file", path=name) from None
+        raise ScenarioError(f"is a directory, expected {kind}", path=name) from None
     except OSError as exc:
         raise ScenarioError(f"cannot read file ({exc.strerror or exc})", path=name) from None
-    return parse_yaml(data, name, max_bytes=max_bytes)
 
 
 # --------------------------------------------------------------------------------------------
