@@ -53,3 +53,39 @@ def test_coldwell_domain_is_asymmetric_so_direction_matters() -> None:
     assert not _metrics(x).domain_violation[0]
     x = _state([0.0, 0.0], [0.0, 2.5 * L], [0.0, 180.0])  # reciprocal, starboard to starboard
     assert _metrics(x).domain_violation[0]
+
+
+@pytest.mark.parametrize("domain", domains.DOMAINS)
+def test_compiled_metrics_match_array_formulas(domain: str) -> None:
+    """Random pairs over 25 steps: minimum range, its time and the first domain violation as
+    whole-array numpy formulas with the domain model's own ``contains``."""
+    rng = np.random.default_rng(8)
+    n = 600
+    pi, pj = np.arange(0, n, 2), np.arange(1, n, 2)
+    x = np.zeros((8, n))
+    x[NORTH], x[EAST] = rng.uniform(-2500, 2500, (2, n))
+    x[PSI], x[U] = rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 9, n)
+    length = rng.uniform(60, 300, n)
+    m = PairMetrics.start(x[[NORTH, EAST]], np.zeros((2, n)), pi, pj, domain)
+    min_range = np.hypot(x[NORTH, pj] - x[NORTH, pi], x[EAST, pj] - x[EAST, pi])
+    t_min, first = np.zeros(n // 2), np.full(n // 2, np.nan)
+    for t in range(1, 26):
+        x[NORTH] += rng.normal(0, 150, n)
+        x[EAST] += rng.normal(0, 150, n)
+        x[PSI] += 0.05
+        m.accumulate(x, length, length / 6, pi, pj, float(t))
+        dn, de = x[NORTH, pj] - x[NORTH, pi], x[EAST, pj] - x[EAST, pi]
+        rng_now = np.hypot(dn, de)
+        t_min = np.where(rng_now < min_range, t, t_min)
+        min_range = np.minimum(min_range, rng_now)
+        inside = np.zeros(n // 2, dtype=bool)
+        for own, sign in ((pi, 1.0), (pj, -1.0)):
+            c, s = np.cos(x[PSI, own]), np.sin(x[PSI, own])
+            inside |= domains.contains(domain, sign * (dn * c + de * s),
+                                       sign * (-dn * s + de * c), length[own], x[U, own])
+        first = np.where(inside & np.isnan(first), t, first)
+    np.testing.assert_array_equal(m.min_range_m, min_range)
+    np.testing.assert_array_equal(m.t_min_range_s, t_min)
+    np.testing.assert_array_equal(m.t_domain_violation_s, first)
+    np.testing.assert_array_equal(m.domain_violation, ~np.isnan(first))
+    assert 0 < m.domain_violation.sum() < n // 2

@@ -74,3 +74,22 @@ def test_normals_follow_the_normal_distribution_into_the_tail():
     expected = n * p_tail
     assert abs(np.sum(np.abs(x) > 3.6541528853610088) - expected) < 4.0 * math.sqrt(expected)
     assert x.min() < -4.0 and x.max() > 4.0
+
+
+def test_draws_at_need_follow_the_stream_and_peek_does_not_draw():
+    """``normal_from`` continues the stream the bank's blocks would give; ``peek_normals``
+    shows the next numbers without advancing; ``independent_streams`` is keyed, not ordered."""
+    from trafficsim.noise import check_streams, independent_streams, peek_normals
+
+    states = NoiseBank(4, [0, 1], [2, 0], "radar", 3).state
+    before = states.copy()
+    seen = peek_normals(states, 6)
+    np.testing.assert_array_equal(states, before)
+    block = _draws(NoiseBank(4, [0, 1], [2, 0], "radar", 3, block_steps=2), 2)  # (2, 2, 3)
+    np.testing.assert_array_equal(seen, block.transpose(1, 0, 2).reshape(2, 6))
+    np.testing.assert_array_equal(independent_streams(3, 9)[1:], independent_streams(5, 9)[1:3])
+    check_streams(states, 2)
+    for bad, rows in ((states, 3), (states.astype(np.int64), 2), (states[:, :3], 2),
+                      (np.asfortranarray(np.tile(states, (1, 2)))[:, ::2], 2)):
+        with pytest.raises(ValueError, match="streams"):
+            check_streams(bad, rows)

@@ -99,7 +99,7 @@ class Simulation:
         b, x = self.batch, self.batch.x
         est = x if self.nav is None else self.nav.update(x, b.env)
         if self.obs is not None:
-            self.obs.update(x, est, earth_velocity(x, b.env), self.t_s)
+            self.obs.update(x, est, b.env_rows[:2], self.t_s)
         self.course_order_rad = guidance.desired_course(
             self.route, b.waypoints, b.n_waypoints, est[NORTH], est[EAST], b.length_m)
         if self.decider is not None:

@@ -11,12 +11,14 @@ head-on and crossing shape).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from trafficsim.colregs import domains
 from trafficsim.geometry import cpa, hull_outlines, hulls_overlap
+from trafficsim.jit import kernel
 from trafficsim.ships.base import EAST, NORTH, PSI, U
 
 
@@ -49,16 +51,15 @@ class PairMetrics:
 
     def accumulate(self, x: np.ndarray, length_m: np.ndarray, beam_m: np.ndarray,
                    pi: np.ndarray, pj: np.ndarray, t_s: float) -> None:
-        """Update with the true state ``x`` ``(N_STATE, n)`` at time ``t_s``."""
-        dn = x[NORTH, pj] - x[NORTH, pi]
-        de = x[EAST, pj] - x[EAST, pi]
-        rng = np.hypot(dn, de)
-        closer = rng < self.min_range_m
-        self.min_range_m = np.where(closer, rng, self.min_range_m)
-        self.t_min_range_s = np.where(closer, t_s, self.t_min_range_s)
-        self._domains(x, dn, de, length_m, pi, pj, t_s)
-        near = np.flatnonzero((rng < 0.5 * (length_m[pi] + length_m[pj])) & ~self.collision)
-        if near.size:
+        """Update with the true state ``x`` ``(N_STATE, n)`` at time ``t_s``: ranges and
+        domains in one compiled loop over pairs, hull outlines only for pairs close enough to
+        touch."""
+        near = np.empty(pi.shape[0], dtype=np.int64)
+        count = _accumulate(x, length_m, pi, pj, float(t_s), domains.domain_code(self.domain),
+                            self.min_range_m, self.t_min_range_s, self.domain_violation,
+                            self.t_domain_violation_s, self.collision, near)
+        if count:
+            near = near[:count]
             a, b = pi[near], pj[near]
             hit = hulls_overlap(
                 hull_outlines(x[NORTH, a], x[EAST, a], x[PSI, a], length_m[a], beam_m[a]),
@@ -66,14 +67,37 @@ class PairMetrics:
             self.collision[near[hit]] = True
             self.t_collision_s[near[hit]] = t_s
 
-    def _domains(self, x: np.ndarray, dn: np.ndarray, de: np.ndarray, length_m: np.ndarray,
-                 pi: np.ndarray, pj: np.ndarray, t_s: float) -> None:
-        """Mark pairs where either ship is inside the other's domain."""
-        inside = np.zeros(pi.shape[0], dtype=bool)
-        for own, sign in ((pi, 1.0), (pj, -1.0)):  # both directions of every pair at once
-            c, s = np.cos(x[PSI, own]), np.sin(x[PSI, own])
-            fwd, stbd = sign * (dn * c + de * s), sign * (-dn * s + de * c)
-            inside |= domains.contains(self.domain, fwd, stbd, length_m[own], x[U, own])
-        new = inside & ~self.domain_violation
-        self.domain_violation |= inside
-        self.t_domain_violation_s[new] = t_s
+
+@kernel
+def _inside_domain(kind: int, x: np.ndarray, own: int, sign: float, dn: float, de: float,
+                   length_m: np.ndarray) -> bool:
+    """Whether the other ship of a pair (``sign`` x (dn, de) from ship ``own``) is inside the
+    domain of ``own``, sized by its length and speed through the water."""
+    c, s = math.cos(x[PSI, own]), math.sin(x[PSI, own])
+    fwd, stbd = sign * (dn * c + de * s), sign * (-dn * s + de * c)
+    prm = domains.ship_params(kind, length_m[own], x[U, own], False)
+    return domains.inside(kind, prm, fwd, stbd)
+
+
+@kernel
+def _accumulate(x: np.ndarray, length_m: np.ndarray, pi: np.ndarray, pj: np.ndarray,
+                t_s: float, kind: int, min_range: np.ndarray, t_min: np.ndarray,
+                violation: np.ndarray, t_violation: np.ndarray, collision: np.ndarray,
+                near: np.ndarray) -> int:
+    """Minimum range and first domain violation of every pair, in place; the pairs not yet
+    collided whose centres are closer than half the sum of their lengths go to ``near``
+    (their count is returned)."""
+    count = 0
+    for p in range(pi.shape[0]):
+        a, b = pi[p], pj[p]
+        dn, de = x[NORTH, b] - x[NORTH, a], x[EAST, b] - x[EAST, a]
+        rng = math.hypot(dn, de)
+        if rng < min_range[p]:
+            min_range[p], t_min[p] = rng, t_s
+        if not violation[p] and (_inside_domain(kind, x, a, 1.0, dn, de, length_m)
+                                 or _inside_domain(kind, x, b, -1.0, dn, de, length_m)):
+            violation[p], t_violation[p] = True, t_s
+        if rng < 0.5 * (length_m[a] + length_m[b]) and not collision[p]:
+            near[count] = p
+            count += 1
+    return count

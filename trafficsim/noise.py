@@ -14,6 +14,11 @@ one array, and one compiled loop advances every stream as numpy's ``SFC64`` does
 doubles of those words (bit-identical to ``Generator.random``); normals come from the 256-layer
 ziggurat of Marsaglia & Tsang (J. Stat. Softw. 5(8), 2000) on the same words. The values a
 ship sees depend only on its own stream, never on the batch or the block size.
+
+Instruments that measure only now and then (a radar scan, an AIS report) draw instead at need:
+their compiled loops call :func:`normal_from` on the streams' states (:attr:`NoiseBank.state`)
+when an event happens, so the numbers drawn per event are fixed and nothing is drawn between
+events. :func:`peek_normals` shows, without drawing them, the numbers the next event will use.
 """
 
 from __future__ import annotations
@@ -131,6 +136,45 @@ def _fill(state: np.ndarray, out: np.ndarray, normal: bool, k: np.ndarray, w: np
                 out[t, j, d] = _normal(s, k, w, f) if normal else _uniform(s)
 
 
+@inline_kernel
+def normal_from(streams: np.ndarray, row: int) -> float:
+    """Next standard normal of stream ``row`` of ``streams (n, 4)`` (advanced in place): for
+    compiled loops that draw at need."""
+    return _normal(streams[row], _K, _W, _F)
+
+
+@kernel
+def _normals(state: np.ndarray, out: np.ndarray) -> None:
+    for j in range(out.shape[0]):
+        for d in range(out.shape[1]):
+            out[j, d] = normal_from(state, j)
+
+
+def peek_normals(streams: np.ndarray, count: int) -> np.ndarray:
+    """The next ``count`` standard normals of every stream of ``streams (n, 4)``, ``(n,
+    count)``, without advancing them: what an event drawing ``count`` numbers by
+    :func:`normal_from` will see."""
+    out = np.empty((streams.shape[0], int(count)))
+    _normals(np.array(streams, dtype=np.uint64), out)
+    return out
+
+
+def check_streams(streams: np.ndarray, rows: int) -> None:
+    """Raise ``ValueError`` unless ``streams`` is a C-contiguous ``(rows, 4)`` uint64 array
+    (drawn from in place, so never a converted copy)."""
+    if (not isinstance(streams, np.ndarray) or streams.shape != (rows, 4)
+            or streams.dtype != np.uint64 or not streams.flags.c_contiguous):
+        got = (f"{streams.dtype} {streams.shape}" if isinstance(streams, np.ndarray)
+               else type(streams).__name__)
+        raise ValueError(f"streams must be a C-contiguous ({rows}, 4) uint64 array, got {got}")
+
+
+def independent_streams(n: int, seed: int = 0, purpose: str = "radar") -> np.ndarray:
+    """``(n, 4)`` states of ``n`` independent streams (keyed ``(seed, 0, row, purpose)``): for
+    calling the at-need instruments outside the engine."""
+    return NoiseBank(seed, [0] * n, range(n), purpose, 1).state
+
+
 class NoiseBank:
     """Standard-normal and uniform draws for every ship, step by step, from keyed streams.
 
@@ -156,12 +200,13 @@ class NoiseBank:
         self._keys = (seed, list(zip(encounter, ship_in_encounter, others, strict=True)),
                       purpose)
         self._state: np.ndarray | None = None  # seeded at the first draw: unread banks cost 0
-        self._block = np.empty((self.block_steps, len(others), self.dims))
+        self._block: np.ndarray | None = None  # allocated at the first block: none at need
         self._row = self.block_steps
 
     @property
     def state(self) -> np.ndarray:
-        """``(n, 4)`` uint64 ``SFC64`` state of every stream (advanced by every refill)."""
+        """``(n, 4)`` uint64 ``SFC64`` state of every stream, advanced by every refill (or, for
+        instruments that draw at need, by :func:`normal_from`)."""
         if self._state is None:
             seed, keys, purpose = self._keys
             self._state = np.array(
@@ -170,6 +215,8 @@ class NoiseBank:
         return self._state
 
     def _refill(self) -> None:
+        if self._block is None:
+            self._block = np.empty((self.block_steps, len(self._keys[1]), self.dims))
         _fill(self.state, self._block, self.kind == "normal", _K, _W, _F)
         self._row = 0
 

@@ -81,19 +81,21 @@ class Observation:
                    has_ais=any(c.get("ais") is not None for c in configs),
                    settings=tracker.pair_settings(tracker_p, obs))
 
-    def update(self, x: np.ndarray, est: np.ndarray, vel_ne: np.ndarray, t_s: float) -> None:
+    def update(self, x: np.ndarray, est: np.ndarray, current_ne: np.ndarray, t_s: float
+               ) -> None:
         """Observe at time ``t_s``: ``x`` true ``(8, n)``, ``est`` own estimates ``(6, n)``,
-        ``vel_ne`` true ground velocity ``(2, n)``. Compiled loops over ships and pairs (radar
-        scan and plots, AIS transmission and reception, tracker) update the state in place."""
+        ``current_ne`` current at each ship ``(2, n)``. Compiled loops over ships and pairs
+        (radar scan and plots, AIS transmission and reception, tracker) update the state in
+        place; radar and AIS draw their noise at need, only for scans and reports."""
         plots = reports = None
         if self.has_radar:
             self.radar_s, plots = radar.step(
                 self.radar_p, self.radar_s, t_s, self.obs, self.tgt, x, est[NORTH], est[EAST],
-                est[PSI], self.banks["radar"].next())
+                est[PSI], self.banks["radar"].state)
         if self.has_ais:
             self.ais_s, reports = ais.step(
-                self.ais_p, self.ais_s, t_s, self.obs, self.tgt, x, vel_ne,
-                self.banks["ais"].next(), self.banks["ais_rx"].next(), inplace=True)
+                self.ais_p, self.ais_s, t_s, self.obs, self.tgt, x, current_ne,
+                self.banks["ais"].state, self.banks["ais_rx"].state, inplace=True)
         self.tracks = tracker.step(self.tracker_p, self.tracks, self.obs, t_s, plots, reports,
                                    inplace=True, settings=self.settings)
 

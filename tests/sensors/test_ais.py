@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from trafficsim.errors import InputError
+from trafficsim.noise import independent_streams, peek_normals
 from trafficsim.sensors import ais
 from trafficsim.sensors.radar import directed_pairs
-from trafficsim.ships.base import EAST, N_STATE, NORTH, PSI, R
+from trafficsim.ships.base import EAST, N_STATE, NORTH, PSI, R, U, V
 
 KN = 1852.0 / 3600.0
 TURN = math.radians(1.0)  # 1 deg/s, well above 5 deg in 30 s
@@ -39,22 +40,31 @@ def test_reporting_interval_itu_table(sog_kn: float, turning: bool, anchored: bo
 
 
 def _ships(speeds_kn, rates_radps=None, headings=None):
+    """Ships sailing straight ahead at ``speeds_kn`` in still water: state, current (zero)
+    and ground velocity."""
     n = len(speeds_kn)
     x = np.zeros((N_STATE, n))
     x[PSI] = np.zeros(n) if headings is None else headings
     x[R] = np.zeros(n) if rates_radps is None else rates_radps
-    speed = np.asarray(speeds_kn, dtype=float) * KN
-    vel = np.stack([speed * np.cos(x[PSI]), speed * np.sin(x[PSI])])
-    return x, vel
+    x[U] = np.asarray(speeds_kn, dtype=float) * KN
+    return x, np.zeros((2, n)), _ground(x, np.zeros((2, n)))
 
 
-def _sent_times(params, x, vel, dt, duration, anchored=None):
+def _ground(x, current):
+    """Ground velocity ``(2, n)``: velocity through the water turned to north/east plus the
+    current, as the transmitter works it out."""
+    c, s = np.cos(x[PSI]), np.sin(x[PSI])
+    return np.stack([x[U] * c - x[V] * s + current[0], x[U] * s + x[V] * c + current[1]])
+
+
+def _sent_times(params, x, current, dt, duration, anchored=None):
     n = x.shape[1]
     state = ais.init(params, 0)
+    streams = independent_streams(n)
     times: list[list[float]] = [[] for _ in range(n)]
     for k in range(round(duration / dt)):
         t = k * dt
-        state, sent = ais.transmit(params, state, t, x, vel, np.zeros((n, 5)), anchored)
+        state, sent = ais.transmit(params, state, t, x, current, streams, anchored)
         for i in np.flatnonzero(sent):  # test bookkeeping only
             times[i].append(t)
     return times
@@ -66,8 +76,8 @@ def test_schedule_mean_interval_follows_the_table(dt: float) -> None:
     rates = [0.0, TURN, 0.0, TURN, 0.0, 0.0]
     anchored = np.array([False, False, False, False, False, True])
     params = ais.build([{"sigma_velocity_mps": 0.0}] * 6)
-    x, vel = _ships(speeds, rates)
-    times = _sent_times(params, x, vel, dt, 1800.0, anchored)
+    x, current, _ = _ships(speeds, rates)
+    times = _sent_times(params, x, current, dt, 1800.0, anchored)
     expected = [10.0, 10.0 / 3, 6.0, 2.0, 2.0, 180.0]
     for t, iv in zip(times, expected, strict=True):
         assert t[0] == 0.0
@@ -78,12 +88,12 @@ def test_schedule_mean_interval_follows_the_table(dt: float) -> None:
 
 def test_rate_increases_at_once_when_turning_starts() -> None:
     params = ais.build([{"sigma_velocity_mps": 0.0}])
-    x, vel = _ships([10.0])
-    state = ais.init(params, 0)
+    x, current, _ = _ships([10.0])
+    state, streams = ais.init(params, 0), independent_streams(1)
     sent_at = []
     for k in range(12):
         x[R] = TURN if k >= 5 else 0.0
-        state, sent = ais.transmit(params, state, float(k), x, vel, np.zeros((1, 5)))
+        state, sent = ais.transmit(params, state, float(k), x, current, streams)
         if sent[0]:
             sent_at.append(k)
     # 10 s interval from t = 0; the turn from t = 5 pulls the next report to 5 (0 + 3 1/3
@@ -93,8 +103,8 @@ def test_rate_increases_at_once_when_turning_starts() -> None:
 
 def test_disabled_transponder_never_reports() -> None:
     params = ais.build([{"enabled": False}])
-    x, vel = _ships([12.0])
-    assert _sent_times(params, x, vel, 1.0, 60.0) == [[]]
+    x, current, _ = _ships([12.0])
+    assert _sent_times(params, x, current, 1.0, 60.0) == [[]]
 
 
 def test_quantisation_steps_exact() -> None:
@@ -106,10 +116,12 @@ def test_quantisation_steps_exact() -> None:
     x = np.zeros((N_STATE, n))
     x[NORTH], x[EAST] = rng.uniform(-2e4, 2e4, (2, n))
     x[PSI] = rng.uniform(0.0, 2 * math.pi, n)
-    vel = rng.uniform(-12.0, 12.0, (2, n))
-    state = ais.init(params, 0)
-    draws = rng.standard_normal((n, ais.AIS_TX_NORMAL_DIMS))
-    state, sent = ais.transmit(params, state, 0.0, x, vel, draws)
+    x[U], x[V] = rng.uniform(0.0, 12.0, n), rng.uniform(-1.0, 1.0, n)
+    current = rng.uniform(-1.5, 1.5, (2, n))
+    vel = _ground(x, current)
+    state, streams = ais.init(params, 0), independent_streams(n, 11)
+    draws = peek_normals(streams, ais.AIS_TX_NORMAL_DIMS)
+    state, sent = ais.transmit(params, state, 0.0, x, current, streams)
     assert sent.all()
     north, east, sog, cog, hdg = (state.buf[:, state.head[0], k] for k in range(5))
 
@@ -146,15 +158,15 @@ def test_latency_report_received_later_with_its_time_stamp(latency: float, dt: f
     params = ais.build([{"latency_s": latency, "sigma_position_m": 0.0,
                          "sigma_velocity_mps": 0.0, "sigma_heading_deg": 0.0}] * 2)
     obs, tgt = directed_pairs(np.array([0]), np.array([1]))
-    x, vel = _ships([0.0, 12.0], headings=np.array([0.0, 0.0]))
+    x, current, vel = _ships([0.0, 12.0], headings=np.array([0.0, 0.0]))
     x[EAST, 1] = 3000.0
     state = ais.init(params, obs.shape[0])
+    tx, rx = independent_streams(2), independent_streams(2, 1)
     got = []  # (receive time, stamp, north) for pair 0 -> 1
     for k in range(round(25.0 / dt)):
         t = k * dt
         x[NORTH, 1] = vel[0, 1] * t
-        state, rep = ais.step(params, state, t, obs, tgt, x, vel, np.zeros((2, 5)),
-                              np.zeros((2, 1)))
+        state, rep = ais.step(params, state, t, obs, tgt, x, current, tx, rx)
         if rep.valid[0]:
             got.append((t, rep.stamp_s[0], rep.north_m[0]))
     stamps = [g[1] for g in got]
@@ -168,29 +180,29 @@ def test_reception_range_and_probability() -> None:
     n_pairs = 20000
     n = 2 * n_pairs
     params = ais.build([{"p_receive": 0.7, "latency_s": 0.0}] * n)
-    x, vel = _ships([10.0] * n)
+    x, current, _ = _ships([10.0] * n)
     obs = np.arange(n_pairs)
     tgt = obs + n_pairs
     x[NORTH, tgt] = np.where(obs % 2 == 0, 19.9, 20.1) * 1852.0
     state = ais.init(params, n_pairs)
-    rng = np.random.default_rng(5)
-    state, rep = ais.step(params, state, 0.0, obs, tgt, x, vel, np.zeros((n, 5)),
-                          rng.standard_normal((n_pairs, 1)))
+    tx, rx = independent_streams(n), independent_streams(n_pairs, 5)
+    state, rep = ais.step(params, state, 0.0, obs, tgt, x, current, tx, rx)
     assert not rep.valid[obs % 2 == 1].any()  # beyond 20 NM
     frac = rep.valid[obs % 2 == 0].mean()
     assert frac == pytest.approx(0.7, abs=4 * math.sqrt(0.21 / (n_pairs / 2)))
     # a report is consumed whether heard or not: nothing more arrives until the next report
-    _, rep = ais.step(params, state, 1.0, obs, tgt, x, vel, np.zeros((n, 5)),
-                      np.full((n_pairs, 1), -9.0))
+    before = rx.copy()
+    _, rep = ais.step(params, state, 1.0, obs, tgt, x, current, tx, rx)
     assert not rep.valid.any()
+    np.testing.assert_array_equal(rx, before)  # nothing arrived, nothing drawn
 
 
 def test_position_and_velocity_noise_statistics() -> None:
     n = 20000
     params = ais.build([{"sigma_position_m": 8.0, "sigma_velocity_mps": 0.3}] * n)
-    x, vel = _ships([15.0] * n)
-    draws = np.random.default_rng(3).standard_normal((n, ais.AIS_TX_NORMAL_DIMS))
-    state, _ = ais.transmit(params, ais.init(params, 0), 0.0, x, vel, draws)
+    x, current, _ = _ships([15.0] * n)
+    streams = independent_streams(n, 3)
+    state, _ = ais.transmit(params, ais.init(params, 0), 0.0, x, current, streams)
     north, east, sog, cog, _ = (state.buf[:, state.head[0], k] for k in range(5))
     assert np.std(north) == pytest.approx(8.0, rel=0.03)
     assert np.std(east) == pytest.approx(8.0, rel=0.03)
@@ -210,13 +222,17 @@ def test_bad_config_rejected() -> None:
         ais.build([{"enabled": "yes"}])
 
 
-def _reference_transmit(params, state, t, x, vel, draws, anchored):
+def _reference_transmit(params, state, t, x, current, draws, anchored):
     """Schedule and content of the module docstring with whole-array numpy operations (the
     compiled loop must give the same numbers). Returns the new arrays and ``sent``."""
     sv = params.sigma_velocity_mps
+    vel = _ground(x, current)
+    still = (current == 0.0).all(axis=0)  # speed over ground = speed through the water
+    true_sog = np.where(still, np.hypot(x[U], x[V]), np.hypot(vel[0], vel[1]))
     vn, ve = vel[0] + sv * draws[:, 2], vel[1] + sv * draws[:, 3]
     sog = np.hypot(vn, ve)
-    interval = ais.reporting_interval_s(sog, np.abs(x[R]) > params.turn_rate_radps, anchored)
+    interval = ais.reporting_interval_s(true_sog, np.abs(x[R]) > params.turn_rate_radps,
+                                        anchored)
     pending = np.where(np.isfinite(state.last_tx_s),
                        np.minimum(state.next_tx_s, state.last_tx_s + interval), state.next_tx_s)
     sent = params.enabled & (t >= pending - 1e-9)
@@ -273,31 +289,38 @@ def test_compiled_transmit_and_receive_match_array_formulas() -> None:
     anchored = np.arange(n) % 4 == 0
     pure = ais.init(params, obs.shape[0])
     live = ais.init(params, obs.shape[0])
-    x, vel = _ships(rng.uniform(0.0, 30.0, n), headings=rng.uniform(0, 2 * math.pi, n))
+    x, current, _ = _ships(rng.uniform(0.0, 30.0, n), headings=rng.uniform(0, 2 * math.pi, n))
+    x[V] = rng.uniform(-0.5, 0.5, n)
+    current[:, n // 2:] = rng.uniform(-1.0, 1.0, (2, n - n // 2))  # half in a current
     x[NORTH], x[EAST] = rng.uniform(-5000, 5000, (2, n))
+    tx, rx = independent_streams(n, 17), independent_streams(obs.shape[0], 18)
+    tx_live, rx_live = tx.copy(), rx.copy()
     n_received = 0
     for k in range(90):
         t = 0.7 * k
         x[R] = np.where(rng.random(n) < 0.3, TURN, 0.0)
+        vel = _ground(x, current)
         x[NORTH] += 0.7 * vel[0]
         x[EAST] += 0.7 * vel[1]
-        tx = rng.standard_normal((n, ais.AIS_TX_NORMAL_DIMS))
-        rx = rng.standard_normal((obs.shape[0], ais.AIS_RX_NORMAL_DIMS))
-        want, want_sent = _reference_transmit(params, pure, t, x, vel, tx, anchored)
-        pure, sent = ais.transmit(params, pure, t, x, vel, tx, anchored)
+        tx_before = tx.copy()
+        want, want_sent = _reference_transmit(params, pure, t, x, current,
+                                              peek_normals(tx, ais.AIS_TX_NORMAL_DIMS), anchored)
+        pure, sent = ais.transmit(params, pure, t, x, current, tx, anchored)
         np.testing.assert_array_equal(sent, want_sent)
+        np.testing.assert_array_equal(tx[~sent], tx_before[~sent])  # drawn only to send
         for got, w in zip((pure.next_tx_s, pure.last_tx_s, pure.head, pure.buf_t_s, pure.buf),
                           want, strict=True):
             np.testing.assert_allclose(got, w, rtol=1e-14, atol=0.0)
-        valid, stamp, fields, last_rx = _reference_receive(params, pure, t, obs, tgt, x, rx)
+        valid, stamp, fields, last_rx = _reference_receive(
+            params, pure, t, obs, tgt, x, peek_normals(rx, ais.AIS_RX_NORMAL_DIMS))
         pure, rep = ais.receive(params, pure, t, obs, tgt, x, rx)
         np.testing.assert_array_equal(rep.valid, valid)
         np.testing.assert_array_equal(rep.stamp_s, stamp)
         got = np.stack([rep.north_m, rep.east_m, rep.sog_mps, rep.cog_rad, rep.heading_rad], 1)
         np.testing.assert_allclose(got, fields, rtol=1e-14, atol=0.0)
         np.testing.assert_array_equal(pure.last_rx_s, last_rx)
-        live, rep_live = ais.step(params, live, t, obs, tgt, x, vel, tx, rx, anchored,
-                                  inplace=True)
+        live, rep_live = ais.step(params, live, t, obs, tgt, x, current, tx_live, rx_live,
+                                  anchored, inplace=True)
         np.testing.assert_array_equal(rep_live.north_m, rep.north_m)
         np.testing.assert_array_equal(live.buf, pure.buf)
         n_received += int(valid.sum())
@@ -316,15 +339,15 @@ def test_compiled_schedule_on_the_speed_bin_boundaries() -> None:
                 anchored.append(anchor)
     n = len(speeds)
     speed, angle = np.array(speeds), np.array(angles)
-    vel = np.stack([speed * np.cos(angle), speed * np.sin(angle)])
-    x = np.zeros((N_STATE, n))
+    x = np.zeros((N_STATE, n))  # heading 0: through the water north/east = surge/sway
+    x[U], x[V] = speed * np.cos(angle), speed * np.sin(angle)
     params = ais.build([{"sigma_velocity_mps": 0.0}] * n)
     anchored = np.array(anchored)
-    state = ais.init(params, 0)
-    zeros = np.zeros((n, ais.AIS_TX_NORMAL_DIMS))
+    state, streams, current = ais.init(params, 0), independent_streams(n), np.zeros((2, n))
     for t in (0.0, 1.0, 2.0, 3.0):
-        want, want_sent = _reference_transmit(params, state, t, x, vel, zeros, anchored)
-        state, sent = ais.transmit(params, state, t, x, vel, zeros, anchored)
+        want, want_sent = _reference_transmit(params, state, t, x, current,
+                                              peek_normals(streams, 5), anchored)
+        state, sent = ais.transmit(params, state, t, x, current, streams, anchored)
         np.testing.assert_array_equal(sent, want_sent)
         np.testing.assert_array_equal(state.next_tx_s, want[0])
     assert len(set(state.next_tx_s.tolist())) > 1  # both sides of the boundaries occur
@@ -337,13 +360,14 @@ def test_reception_range_boundary_matches_array_formulas() -> None:
     n_pairs = len(offsets)
     n = 2 * n_pairs
     params = ais.build([{"latency_s": 0.0}] * n)
-    x, vel = _ships([10.0] * n)
+    x, current, _ = _ships([10.0] * n)
     obs, tgt = np.arange(n_pairs), np.arange(n_pairs) + n_pairs
     x[NORTH, tgt] = [r * math.cos(a) for r, a in offsets]
     x[EAST, tgt] = [r * math.sin(a) for r, a in offsets]
-    state, _ = ais.transmit(params, ais.init(params, n_pairs), 0.0, x, vel, np.zeros((n, 5)))
-    rx = np.zeros((n_pairs, 1))
-    valid, *_ = _reference_receive(params, state, 0.0, obs, tgt, x, rx)
+    state, _ = ais.transmit(params, ais.init(params, n_pairs), 0.0, x, current,
+                            independent_streams(n))
+    rx = independent_streams(n_pairs, 1)
+    valid, *_ = _reference_receive(params, state, 0.0, obs, tgt, x, peek_normals(rx, 1))
     _, rep = ais.receive(params, state, 0.0, obs, tgt, x, rx)
     np.testing.assert_array_equal(rep.valid, valid)
     assert 0 < valid.sum() < n_pairs

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from trafficsim.errors import InputError
-from trafficsim.noise import NoiseBank
+from trafficsim.noise import NoiseBank, independent_streams, peek_normals
 from trafficsim.sensors import radar
 from trafficsim.ships.base import EAST, N_STATE, NORTH, PSI
 
@@ -31,11 +31,12 @@ def _scene(n_pairs: int, seed: int, r_min: float = 1.0 * NM, r_max: float = 11.0
     return x, obs, obs + n_pairs
 
 
-def _measure(params, x, obs, tgt, draws, est=None, **kw):
+def _measure(params, x, obs, tgt, seed=0, est=None, **kw):
     n = x.shape[1]
     due = np.ones(n, dtype=bool)
     est_n, est_e, est_psi = (x[NORTH], x[EAST], x[PSI]) if est is None else est
-    return radar.measure(params, due, obs, tgt, x, est_n, est_e, est_psi, draws, 0.0, **kw)
+    streams = independent_streams(obs.shape[0], seed)
+    return radar.measure(params, due, obs, tgt, x, est_n, est_e, est_psi, streams, 0.0, **kw)
 
 
 def test_directed_pairs_both_directions() -> None:
@@ -61,8 +62,7 @@ def test_error_statistics_match_configured_sigmas(sigma_b_deg: float) -> None:
     x, obs, tgt = _scene(n_pairs, seed=1)
     params = radar.build([{"sigma_range_m": 25.0, "sigma_bearing_deg": sigma_b_deg,
                            "p_detect": 1.0}] * (2 * n_pairs))
-    draws = np.random.default_rng(2).standard_normal((n_pairs, radar.RADAR_NORMAL_DIMS))
-    plots = _measure(params, x, obs, tgt, draws)
+    plots = _measure(params, x, obs, tgt, seed=2)
     assert plots.valid.all()
     rel_n = x[NORTH, tgt] - x[NORTH, obs]
     rel_e = x[EAST, tgt] - x[EAST, obs]
@@ -81,16 +81,32 @@ def test_error_statistics_match_configured_sigmas(sigma_b_deg: float) -> None:
     assert np.mean(nees) == pytest.approx(2.0, abs=0.06)
 
 
-def test_noise_bank_draws_give_the_same_statistics() -> None:
-    """Draws as the engine makes them: one ``radar`` stream per observer ship."""
+def test_draws_at_need_only_at_scans() -> None:
+    """Draws as the engine makes them, one ``radar`` stream per directed pair: three numbers
+    per pair at each scan of its observer, none between scans; the plots of one scan use the
+    numbers the streams held, and successive scans are independent."""
     n_pairs = 5000
     x, obs, tgt = _scene(n_pairs, seed=3)
-    params = radar.build([{"p_detect": 1.0}] * (2 * n_pairs))
-    bank = NoiseBank(7, np.zeros(n_pairs, int), np.arange(n_pairs), radar.RADAR_PURPOSE,
-                     radar.RADAR_NORMAL_DIMS)
-    plots = _measure(params, x, obs, tgt, bank.next())
-    e_r = plots.range_m - np.hypot(x[NORTH, tgt] - x[NORTH, obs], x[EAST, tgt] - x[EAST, obs])
-    assert np.std(e_r) == pytest.approx(radar.DEFAULT_SIGMA_RANGE_M, rel=0.04)
+    params = radar.build([{"p_detect": 1.0, "scan_period_s": 2.0}] * (2 * n_pairs))
+    bank = NoiseBank(7, np.zeros(n_pairs, int), obs, radar.RADAR_PURPOSE,
+                     radar.RADAR_NORMAL_DIMS, other=tgt)
+    state, errors = radar.init(params), []
+    true_range = np.hypot(x[NORTH, tgt] - x[NORTH, obs], x[EAST, tgt] - x[EAST, obs])
+    for t in range(4):
+        before = bank.state.copy()
+        z = peek_normals(before, radar.RADAR_NORMAL_DIMS)
+        state, plots = radar.step(params, state, float(t), obs, tgt, x, x[NORTH], x[EAST],
+                                  x[PSI], bank.state)
+        if t % 2:  # between scans: nothing drawn, no plot
+            np.testing.assert_array_equal(bank.state, before)
+            assert not plots.valid.any()
+            continue
+        assert plots.valid.all()
+        np.testing.assert_allclose(plots.range_m, true_range + params.sigma_range_m[obs] * z[:, 0],
+                                   rtol=1e-13)
+        errors.append(plots.range_m - true_range)
+    assert np.std(errors[0]) == pytest.approx(radar.DEFAULT_SIGMA_RANGE_M, rel=0.04)
+    assert abs(np.corrcoef(errors[0], errors[1])[0, 1]) < 4 / math.sqrt(n_pairs)
 
 
 def test_max_and_min_range() -> None:
@@ -99,7 +115,7 @@ def test_max_and_min_range() -> None:
     x[NORTH, n_pairs:] = [11.99 * NM, 12.01 * NM, 30.0, 50.0]
     obs, tgt = np.arange(n_pairs), np.arange(n_pairs) + n_pairs
     params = radar.build([{"p_detect": 1.0, "sigma_range_m": 0.0}] * (2 * n_pairs))
-    plots = _measure(params, x, obs, tgt, np.zeros((n_pairs, 3)))
+    plots = _measure(params, x, obs, tgt)
     assert plots.valid.tolist() == [True, False, False, True]
     assert np.isnan(plots.north_m[1]) and np.isnan(plots.cov[2]).all()
 
@@ -109,8 +125,7 @@ def test_detection_probability_per_scan() -> None:
     n_pairs = 40000
     x, obs, tgt = _scene(n_pairs, seed=4)
     params = radar.build([{}] * (2 * n_pairs))
-    draws = np.random.default_rng(5).standard_normal((n_pairs, radar.RADAR_NORMAL_DIMS))
-    frac = _measure(params, x, obs, tgt, draws).valid.mean()
+    frac = _measure(params, x, obs, tgt, seed=5).valid.mean()
     assert frac == pytest.approx(0.8, abs=4 * math.sqrt(0.16 / n_pairs))
 
 
@@ -131,14 +146,15 @@ def test_no_plot_between_scans_or_when_disabled() -> None:
     x, obs, tgt = _scene(3, seed=6)
     params = radar.build([{"p_detect": 1.0}] * 3 + [{"p_detect": 1.0, "enabled": False}] * 3)
     state = radar.init(params)
+    streams = independent_streams(3)
     state, plots = radar.step(params, state, 0.0, obs, tgt, x, x[NORTH], x[EAST], x[PSI],
-                              np.zeros((3, 3)))
+                              streams)
     assert plots.valid.all()
     state, plots = radar.step(params, state, 1.0, obs, tgt, x, x[NORTH], x[EAST], x[PSI],
-                              np.zeros((3, 3)))
+                              streams)
     assert not plots.valid.any()
     _, plots = radar.step(params, state, 0.0, tgt, obs, x, x[NORTH], x[EAST], x[PSI],
-                          np.zeros((3, 3)))
+                          streams)
     assert not plots.valid.any()  # the observers 3..5 have their radar off
 
 
@@ -150,13 +166,13 @@ def test_own_navigation_errors_propagate() -> None:
     params = radar.build([{"sigma_range_m": 0.0, "sigma_bearing_deg": 0.0, "p_detect": 1.0,
                            "antenna_x_m": 50.0, "antenna_y_m": 5.0}] * 2)
     obs, tgt = np.array([0]), np.array([1])
-    exact = _measure(params, x, obs, tgt, np.zeros((1, 3)))
+    exact = _measure(params, x, obs, tgt)
     assert exact.north_m[0] == pytest.approx(6000.0, abs=1e-6)
     assert exact.east_m[0] == pytest.approx(2000.0, abs=1e-6)
 
     dpsi, dn, de = math.radians(1.0), 30.0, -20.0
     est = (x[NORTH] + dn, x[EAST] + de, x[PSI] + dpsi)
-    plot = _measure(params, x, obs, tgt, np.zeros((1, 3)), est=est)
+    plot = _measure(params, x, obs, tgt, est=est)
     # expected: the antenna estimate plus the true antenna-to-target vector rotated by dpsi
     c0, s0 = math.cos(0.3), math.sin(0.3)
     ant_true = np.array([50.0 * c0 - 5.0 * s0, 50.0 * s0 + 5.0 * c0])
@@ -179,12 +195,17 @@ def test_converted_covariance_includes_own_navigation_uncertainty() -> None:
     obs, tgt = np.array([0]), np.array([1])
     var_psi = math.radians(0.3) ** 2
     pos_cov = np.array([[[4.0, 1.0], [1.0, 9.0]]] * 2)
-    plot = _measure(params, x, obs, tgt, np.zeros((1, 3)), own_heading_var_rad2=np.full(2, var_psi),
+    plot = _measure(params, x, obs, tgt, own_heading_var_rad2=np.full(2, var_psi),
                     own_pos_cov_m2=pos_cov)
-    cross = 5000.0**2 * (math.radians(0.5) ** 2 + var_psi)
-    assert plot.cov[0, 0, 0] == pytest.approx(cross + 4.0)
-    assert plot.cov[0, 1, 1] == pytest.approx(400.0 + 9.0)
-    assert plot.cov[0, 0, 1] == pytest.approx(1.0, abs=1e-6)
+    # about the measured line of sight (near east): range variance along it, cross-range
+    # (bearing and own heading) across it, own position covariance added
+    cross = plot.range_m[0] ** 2 * (math.radians(0.5) ** 2 + var_psi)
+    c, s = math.cos(plot.bearing_rad[0]), math.sin(plot.bearing_rad[0])
+    assert plot.cov[0, 0, 0] == pytest.approx(c * c * 400.0 + s * s * cross + 4.0)
+    assert plot.cov[0, 1, 1] == pytest.approx(s * s * 400.0 + c * c * cross + 9.0)
+    assert plot.cov[0, 0, 1] == pytest.approx(c * s * (400.0 - cross) + 1.0)
+    assert plot.cov[0, 0, 0] == pytest.approx(5000.0**2 * (math.radians(0.5) ** 2 + var_psi)
+                                              + 4.0, rel=0.02)
 
 
 def test_bad_config_and_draws_rejected() -> None:
@@ -196,8 +217,11 @@ def test_bad_config_and_draws_rejected() -> None:
         radar.build([{"scan_period_s": 0.0}])
     params = radar.build([{}] * 2)
     x = np.zeros((N_STATE, 2))
-    with pytest.raises(ValueError):
-        _measure(params, x, np.array([0]), np.array([1]), np.zeros((1, 2)))
+    due = np.ones(2, dtype=bool)
+    for bad in (np.zeros((1, 3)), independent_streams(2), independent_streams(1).astype(float)):
+        with pytest.raises(ValueError, match="streams"):
+            radar.measure(params, due, np.array([0]), np.array([1]), x, x[NORTH], x[EAST],
+                          x[PSI], bad, 0.0)
 
 
 def _reference_plots(params, due, obs, tgt, x, est_n, est_e, est_psi, draws, var_psi=None,
@@ -256,12 +280,13 @@ def test_compiled_plots_match_array_formulas(own_uncertainty: bool) -> None:
     due = rng.random(n) < 0.8
     est = (x[NORTH] + rng.normal(0, 5, n), x[EAST] + rng.normal(0, 5, n),
            x[PSI] + rng.normal(0, 0.01, n))
-    draws = rng.standard_normal((obs.shape[0], radar.RADAR_NORMAL_DIMS))
+    streams = independent_streams(obs.shape[0], 21)
+    draws = peek_normals(streams, radar.RADAR_NORMAL_DIMS)
     extra = {}
     if own_uncertainty:
         a = rng.normal(0, 3, (n, 2, 2))
         extra = {"var_psi": rng.uniform(0, 1e-4, n), "pos_cov": a @ a.transpose(0, 2, 1)}
-    plots = radar.measure(params, due, obs, tgt, x, *est, draws, 5.0,
+    plots = radar.measure(params, due, obs, tgt, x, *est, streams, 5.0,
                           own_heading_var_rad2=extra.get("var_psi"),
                           own_pos_cov_m2=extra.get("pos_cov"))
     valid, *values = _reference_plots(params, due, obs, tgt, x, *est, draws, **extra)

@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from trafficsim.colregs.vocabulary import PORT, STARBOARD
+from trafficsim.jit import kernel
 
 #: candidate course offsets, rad (+ = starboard), and whether a candidate runs at reduced speed
 OFFSETS_RAD = np.radians(np.arange(-90.0, 90.0 + 1e-9, 5.0))
@@ -76,7 +77,8 @@ def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_facto
            current: np.ndarray, pair_ship: np.ndarray, rel_north_m: np.ndarray,
            rel_east_m: np.ndarray, oth_vn_mps: np.ndarray, oth_ve_mps: np.ndarray,
            required_m: np.ndarray, horizon_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Choose a candidate for each of ``s`` manoeuvring ships.
+    """Choose a candidate for each of ``s`` manoeuvring ships (one compiled loop over pairs and
+    candidates, one over ships).
 
     Args:
         base_course_rad: ``(s,)`` course the offsets are taken from (the course over ground
@@ -97,44 +99,92 @@ def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_facto
     Returns:
         ``(s,)`` int chosen candidate and ``(s,)`` bool whether it satisfies every pair.
     """
-    s = base_course_rad.shape[0]
-    course = base_course_rad[:, None] + _OFF[None, :]  # (s, K)
-    speed = route_speed_mps[:, None] * np.where(_REDUCED[None, :], speed_factor[:, None], 1.0)
-    own_vn, own_ve = speed * np.cos(course), speed * np.sin(course)
-    # relative motion of the other ship per pair and candidate
-    dvn = oth_vn_mps[:, None] - own_vn[pair_ship]
-    dve = oth_ve_mps[:, None] - own_ve[pair_ship]
-    pn, pe = rel_north_m[:, None], rel_east_m[:, None]
-    v2 = dvn * dvn + dve * dve
-    margin = closest_approach_m(pn, pe, dvn, dve, horizon_s) - required_m[:, None]  # (q, K)
-    worst = np.full((s, N_CANDIDATES), math.inf)
-    np.minimum.at(worst, pair_ship, margin)
-    ok = worst >= 0.0
-    # running alongside a near ship (little relative speed) keeps the encounter unresolved
-    near = np.hypot(pn, pe) < ALONGSIDE_RANGE_FACTOR * np.maximum(required_m[:, None], 1.0)
-    slow_rel = v2 < ALONGSIDE_SPEED_MPS**2
-    alongside = np.zeros((s, N_CANDIDATES), dtype=bool)
-    np.logical_or.at(alongside, pair_ship, near & slow_rel & (required_m[:, None] > 0))
+    s = np.shape(base_course_rad)[0]
+    chosen, ok = np.empty(s, dtype=np.int64), np.empty(s, dtype=bool)
+    f = np.ascontiguousarray
+    _choose(f(base_course_rad, float), f(route_speed_mps, float), f(speed_factor, float),
+            f(side, float), f(np.degrees(least_change_rad), float), f(reduce_asked, bool),
+            f(current, np.int64), f(pair_ship, np.int64), f(rel_north_m, float),
+            f(rel_east_m, float), f(oth_vn_mps, float), f(oth_ve_mps, float),
+            f(required_m, float), float(horizon_s), _COS_OFF, _SIN_OFF, _OFF_DEG, _REDUCED,
+            chosen, ok)
+    return chosen, ok
 
-    # preference cost: alteration size, wrong side, alterations below the least one, reduced
-    # speed where not asked; every term keeps the ordering of the description above
-    off_deg = np.degrees(_OFF)[None, :]
-    wrong_side = (((side == STARBOARD)[:, None] & (off_deg < 0))
-                  | ((side == PORT)[:, None] & (off_deg > 0)))
-    too_small = (np.abs(off_deg) < np.degrees(least_change_rad)[:, None] - 1e-9) & (
-        off_deg != 0.0)
-    cost = np.abs(off_deg) + 0.5 * (off_deg < 0)  # starboard first among equals (EITHER)
-    cost = cost + 1000.0 * wrong_side + 500.0 * too_small + 400.0 * alongside
-    cost = cost + np.where(_REDUCED[None, :], np.where(reduce_asked[:, None], -0.25, 200.0), 0.0)
-    # a bare speed reduction (no alteration) counts only where no alteration is asked
-    cost = cost + np.where((off_deg == 0.0) & (least_change_rad[:, None] > 0), 300.0, 0.0)
-    rows = np.arange(s)
-    running = np.maximum(current, 0)
-    keep = (current >= 0) & ok[rows, running] & ~alongside[rows, running]
-    # nothing safe: the largest worst-case margin, ties broken by the preference cost
-    fallback = np.where(wrong_side, -math.inf, worst)
-    best = fallback >= fallback.max(axis=1, keepdims=True) - 1e-6
-    chosen = np.where(ok.any(axis=1), np.argmin(np.where(ok, cost, math.inf), axis=1),
-                      np.argmin(np.where(best, cost, math.inf), axis=1))
-    chosen = np.where(keep, current, chosen)
-    return chosen, ok[rows, chosen]
+
+_OFF_DEG, _COS_OFF, _SIN_OFF = np.degrees(_OFF), np.cos(_OFF), np.sin(_OFF)
+
+
+@kernel
+def _closest(pn: float, pe: float, dvn: float, dve: float, span_s: float) -> float:
+    """:func:`closest_approach_m` of one pair and candidate."""
+    v2 = dvn * dvn + dve * dve
+    dot = pn * dvn + pe * dve
+    if not (dot < 0.0 or v2 <= 1e-12):
+        return math.inf
+    t = -dot / max(v2, 1e-12) if v2 > 1e-12 else 0.0
+    t = min(max(t, 0.0), span_s)
+    return math.hypot(pn + dvn * t, pe + dve * t)
+
+
+@kernel
+def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.ndarray,
+            least_deg: np.ndarray, reduce_asked: np.ndarray, current: np.ndarray,
+            pair_ship: np.ndarray, pn: np.ndarray, pe: np.ndarray, ovn: np.ndarray,
+            ove: np.ndarray, required: np.ndarray, horizon_s: float, cos_off: np.ndarray,
+            sin_off: np.ndarray, off_deg: np.ndarray, reduced: np.ndarray, chosen: np.ndarray,
+            ok_out: np.ndarray) -> None:
+    """:func:`choose`: worst margin and running alongside per ship and candidate over its
+    pairs, then the cheapest candidate by the preference cost of the module docstring."""
+    s, n_cand = base.shape[0], off_deg.shape[0]
+    own_vn, own_ve = np.empty((s, n_cand)), np.empty((s, n_cand))
+    worst = np.full((s, n_cand), math.inf)
+    alongside = np.zeros((s, n_cand), dtype=np.bool_)
+    for i in range(s):  # candidate courses base + offset by the angle-sum formulas
+        cb, sb = math.cos(base[i]), math.sin(base[i])
+        for k in range(n_cand):
+            sp = speed[i] * (factor[i] if reduced[k] else 1.0)
+            own_vn[i, k] = sp * (cb * cos_off[k] - sb * sin_off[k])
+            own_ve[i, k] = sp * (sb * cos_off[k] + cb * sin_off[k])
+    for p in range(pair_ship.shape[0]):
+        i, req = pair_ship[p], required[p]
+        near = req > 0.0 and math.hypot(pn[p], pe[p]) < ALONGSIDE_RANGE_FACTOR * max(req, 1.0)
+        for k in range(n_cand):
+            dvn, dve = ovn[p] - own_vn[i, k], ove[p] - own_ve[i, k]
+            margin = _closest(pn[p], pe[p], dvn, dve, horizon_s) - req
+            if margin < worst[i, k]:
+                worst[i, k] = margin
+            if near and dvn * dvn + dve * dve < ALONGSIDE_SPEED_MPS * ALONGSIDE_SPEED_MPS:
+                alongside[i, k] = True
+    cost = np.empty(n_cand)
+    for i in range(s):
+        any_ok, top = False, -math.inf
+        for k in range(n_cand):
+            d = off_deg[k]
+            wrong = (side[i] == STARBOARD and d < 0.0) or (side[i] == PORT and d > 0.0)
+            too_small = abs(d) < least_deg[i] - 1e-9 and d != 0.0
+            c = abs(d) + (0.5 if d < 0.0 else 0.0)  # starboard first among equals (EITHER)
+            c += 1000.0 * wrong + 500.0 * too_small + 400.0 * alongside[i, k]
+            if reduced[k]:
+                c += -0.25 if reduce_asked[i] else 200.0
+            if d == 0.0 and least_deg[i] > 0.0:
+                c += 300.0  # a bare speed reduction only where no alteration is asked
+            cost[k] = c
+            any_ok = any_ok or worst[i, k] >= 0.0
+            fallback = -math.inf if wrong else worst[i, k]
+            top = max(top, fallback)
+        # nothing safe: the largest worst-case margin, ties broken by the preference cost
+        best_k, best_c = 0, math.inf
+        for k in range(n_cand):
+            d = off_deg[k]
+            wrong = (side[i] == STARBOARD and d < 0.0) or (side[i] == PORT and d > 0.0)
+            if any_ok:
+                eligible = worst[i, k] >= 0.0
+            else:
+                eligible = (-math.inf if wrong else worst[i, k]) >= top - 1e-6
+            if eligible and cost[k] < best_c:
+                best_k, best_c = k, cost[k]
+        run = current[i]
+        if run >= 0 and worst[i, run] >= 0.0 and not alongside[i, run]:
+            best_k = run  # a running manoeuvre that still satisfies every pair is kept
+        chosen[i] = best_k
+        ok_out[i] = worst[i, best_k] >= 0.0

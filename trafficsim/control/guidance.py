@@ -8,7 +8,9 @@ wheel-over point, when the distance to go along the leg falls below R tan(|dchi|
 turning radius and dchi the course change at the waypoint (the geometry of a circular turn
 tangent to both legs). After the last waypoint the ship holds the last leg's course.
 
-One compiled loop over ships (:func:`_desired_course`); no Python loop per ship.
+One compiled loop over ships (:func:`_desired_course`); no Python loop per ship. The constants of
+a ship's current leg (course, direction, length, wheel-over distance) are worked out when it
+starts the leg and kept, so a step costs one arctangent per ship.
 """
 
 from __future__ import annotations
@@ -34,16 +36,23 @@ class RouteState:
         leg_start: ``(n, 2)`` north/east of the current leg's start, m.
         wp_index: index of the waypoint being steered to (== n_waypoints when the route is done).
         hold_course_rad: course held when there is no (more) route.
+        leg: ``(n, 5)`` constants of the current leg: course (rad), north and east extent (m),
+            length (m), distance to go at which the ship wheels over (m).
+        leg_index: waypoint index ``leg`` was worked out for (-1: not yet).
     """
 
     leg_start: np.ndarray
     wp_index: np.ndarray
     hold_course_rad: np.ndarray
+    leg: np.ndarray
+    leg_index: np.ndarray
 
     @classmethod
     def start(cls, north_m: np.ndarray, east_m: np.ndarray, heading_rad: np.ndarray) -> RouteState:
-        return cls(np.stack([north_m, east_m], axis=1), np.zeros(north_m.shape, np.int64),
-                   np.asarray(heading_rad, dtype=float).copy())
+        n = np.shape(north_m)[0]
+        return cls(np.stack([north_m, east_m], axis=1), np.zeros(n, np.int64),
+                   np.asarray(heading_rad, dtype=float).copy(), np.zeros((n, 5)),
+                   np.full(n, -1, np.int64))
 
 
 def desired_course(route: RouteState, waypoints: np.ndarray, n_waypoints: np.ndarray,
@@ -56,8 +65,8 @@ def desired_course(route: RouteState, waypoints: np.ndarray, n_waypoints: np.nda
         north_m, east_m, length_m: ``(n,)`` ship positions and lengths.
     """
     out = np.empty(north_m.shape[0])
-    _desired_course(route.leg_start, route.wp_index, route.hold_course_rad, waypoints,
-                    n_waypoints, north_m, east_m, length_m, out)
+    _desired_course(route.leg_start, route.wp_index, route.hold_course_rad, route.leg,
+                    route.leg_index, waypoints, n_waypoints, north_m, east_m, length_m, out)
     return out
 
 
@@ -67,35 +76,45 @@ def _wrap(a: float) -> float:
 
 
 @kernel
+def _leg(i: int, k: int, leg_start: np.ndarray, waypoints: np.ndarray, n_waypoints: np.ndarray,
+         length: np.ndarray, leg: np.ndarray, leg_index: np.ndarray) -> None:
+    """Constants of ship ``i``'s leg to waypoint ``k`` (:class:`RouteState`)."""
+    tn, te = waypoints[i, k, 0], waypoints[i, k, 1]
+    ln, le = tn - leg_start[i, 0], te - leg_start[i, 1]
+    course = math.atan2(le, ln)
+    turn = 0.0
+    if k + 1 < n_waypoints[i]:
+        nn, ne = waypoints[i, k + 1, 0] - tn, waypoints[i, k + 1, 1] - te
+        turn = abs(_wrap(math.atan2(ne, nn) - course))
+    wheel_over = TURN_RADIUS_L * length[i] * math.tan(min(turn, _MAX_TURN) / 2.0)
+    leg[i, 0], leg[i, 1], leg[i, 2] = course, ln, le
+    leg[i, 3] = max(math.hypot(ln, le), 1e-9)
+    leg[i, 4] = max(wheel_over, 0.5 * length[i])
+    leg_index[i] = k
+
+
+@kernel
 def _desired_course(leg_start: np.ndarray, wp_index: np.ndarray, hold: np.ndarray,
-                    waypoints: np.ndarray, n_waypoints: np.ndarray, north: np.ndarray,
-                    east: np.ndarray, length: np.ndarray, out: np.ndarray) -> None:
+                    leg: np.ndarray, leg_index: np.ndarray, waypoints: np.ndarray,
+                    n_waypoints: np.ndarray, north: np.ndarray, east: np.ndarray,
+                    length: np.ndarray, out: np.ndarray) -> None:
     for i in range(north.shape[0]):
         k = wp_index[i]
         if k < n_waypoints[i]:
-            tn, te = waypoints[i, k, 0], waypoints[i, k, 1]
-            ln, le = tn - leg_start[i, 0], te - leg_start[i, 1]
-            leg_len = max(math.hypot(ln, le), 1e-9)
-            course = math.atan2(le, ln)
+            if leg_index[i] != k:
+                _leg(i, k, leg_start, waypoints, n_waypoints, length, leg, leg_index)
             rn, re = north[i] - leg_start[i, 0], east[i] - leg_start[i, 1]
-            to_go = leg_len - (rn * ln + re * le) / leg_len
-            turn = 0.0
-            has_next = k + 1 < n_waypoints[i]
-            if has_next:
-                nn, ne = waypoints[i, k + 1, 0] - tn, waypoints[i, k + 1, 1] - te
-                turn = abs(_wrap(math.atan2(ne, nn) - course))
-            wheel_over = TURN_RADIUS_L * length[i] * math.tan(min(turn, _MAX_TURN) / 2.0)
-            if to_go <= max(wheel_over, 0.5 * length[i]):  # wheel over: next leg
-                if not has_next:
-                    hold[i] = course
-                leg_start[i, 0], leg_start[i, 1] = tn, te
+            to_go = leg[i, 3] - (rn * leg[i, 1] + re * leg[i, 2]) / leg[i, 3]
+            if to_go <= leg[i, 4]:  # wheel over: next leg
+                if k + 1 >= n_waypoints[i]:
+                    hold[i] = leg[i, 0]
+                leg_start[i, 0], leg_start[i, 1] = waypoints[i, k, 0], waypoints[i, k, 1]
                 wp_index[i] = k = k + 1
+                if k < n_waypoints[i]:
+                    _leg(i, k, leg_start, waypoints, n_waypoints, length, leg, leg_index)
         if k < n_waypoints[i]:
-            ln = waypoints[i, k, 0] - leg_start[i, 0]
-            le = waypoints[i, k, 1] - leg_start[i, 1]
-            leg_len = max(math.hypot(ln, le), 1e-9)
             rn, re = north[i] - leg_start[i, 0], east[i] - leg_start[i, 1]
-            cross = (-rn * le + re * ln) / leg_len  # + = starboard of the leg
-            out[i] = math.atan2(le, ln) - math.atan(cross / (LOOKAHEAD_L * length[i]))
+            cross = (-rn * leg[i, 2] + re * leg[i, 1]) / leg[i, 3]  # + = starboard of the leg
+            out[i] = leg[i, 0] - math.atan(cross / (LOOKAHEAD_L * length[i]))
         else:
             out[i] = hold[i]

@@ -19,12 +19,15 @@ Transmission (per ship, :func:`transmit`):
   interval is exact whatever the step), and when the required interval shortens (the ship starts
   to turn or speeds up) the pending report is pulled forward to one new interval after the last
   one, as the station increases its rate at once.
+* The schedule follows the ship's true speed over ground and rate of turn (what the station's
+  own sensors tell it; their noise would move a ship across a bin boundary only when it sails
+  at a boundary speed).
 * Content: the transmitting ship's GNSS position with white noise ``sigma_position_m`` per axis
   (the default 5 m per axis is 12 m horizontal at 95 %, a stand-alone GNSS receiver), its SOG
   and COG from the ground velocity with white noise ``sigma_velocity_mps`` per axis (so COG
   noise grows as speed falls, as a GNSS receiver's does), its gyro heading with
-  ``sigma_heading_deg``. The engine may instead pass a ship's own navigation output as the
-  "truth" and set the sigmas to 0.
+  ``sigma_heading_deg``. The ground velocity is the velocity through the water turned to the
+  earth frame plus the current, worked out only for the ships that transmit.
 * Quantisation of the message fields (ITU-R M.1371-5 annex 2, message 1 table): position in
   1/10000 min (latitude step 1852 m / 10000 = 0.1852 m north; longitude step 0.1852 cos(lat) m
   east, ``ref_latitude_deg``; the local frame's origin is taken on the grid), SOG in 0.1 kn
@@ -41,9 +44,11 @@ If a long step makes several reports deliverable at once, only the newest is del
 others are superseded). Each ship keeps its last ``AIS_BUFFER`` reports in flight, so latencies
 up to ``(AIS_BUFFER - 1) * 2 s`` are exact at the highest rate.
 
-Draws: ``AIS_TX_NORMAL_DIMS`` standard normals per *transmitting ship* per step (position north,
-east; velocity north, east; heading) and ``AIS_RX_NORMAL_DIMS`` per directed pair per step (the
-reception event, received when ``z < Phi^-1(p_receive)``), both of the ``ais`` purpose.
+Draws, at need (:func:`trafficsim.noise.normal_from`): ``AIS_TX_NORMAL_DIMS`` standard normals
+from the transmitting ship's stream (``ais`` purpose) per report sent (position north, east;
+velocity north, east; heading) and ``AIS_RX_NORMAL_DIMS`` from the directed pair's stream
+(``ais_rx``) per report that arrives at the receiver (the reception event, received when
+``z < Phi^-1(p_receive)``). Nothing is drawn between reports.
 
 Config keys (per ship; defaults in brackets): ``enabled`` [true] (transponder fitted),
 ``sigma_position_m`` [5.0], ``sigma_velocity_mps`` [0.1], ``sigma_heading_deg`` [0.5],
@@ -61,13 +66,14 @@ import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.jit import kernel
+from trafficsim.noise import check_streams, normal_from
 from trafficsim.sensors import KNOT_MPS, check_keys, column, flags, wrap_2pi
 from trafficsim.sensors.radar import probit, wrap_2pi_scalar
-from trafficsim.ships.base import EAST, NORTH, PSI, R
+from trafficsim.ships.base import EAST, NORTH, PSI, R, U, V
 
-#: standard normals per transmitting ship per step: position N, E; velocity N, E; heading
+#: standard normals per report sent: position N, E; velocity N, E; heading
 AIS_TX_NORMAL_DIMS = 5
-#: standard normals per directed pair per step: reception event
+#: standard normals per report arriving at a receiver: reception event
 AIS_RX_NORMAL_DIMS = 1
 AIS_PURPOSE = "ais"
 #: reports kept in flight per ship
@@ -252,7 +258,7 @@ def quantise_angle(angle_rad: np.ndarray, step_rad: float) -> np.ndarray:
 
 
 def transmit(params: AisParams, state: AisState, t_s: float, x_true: np.ndarray,
-             vel_ne_mps: np.ndarray, draws: np.ndarray,
+             current_ne_mps: np.ndarray, streams: np.ndarray,
              anchored: np.ndarray | None = None,
              inplace: bool = False) -> tuple[AisState, np.ndarray]:
     """Ships whose report is due at ``t_s`` broadcast it; schedules advance.
@@ -264,19 +270,18 @@ def transmit(params: AisParams, state: AisState, t_s: float, x_true: np.ndarray,
         params: ``(n,)`` AIS parameters.
         state: schedules and reports in flight.
         t_s: time of this step, s.
-        x_true: ``(8, n)`` state of the broadcasting ships (position, heading, yaw rate are used;
-            pass the truth, or a ship's own navigation output with zero sigmas).
-        vel_ne_mps: ``(2, n)`` ground velocity north, east (``trafficsim.engine.earth_velocity``).
-        draws: ``(n, AIS_TX_NORMAL_DIMS)`` standard normals.
+        x_true: ``(8, n)`` true state of the broadcasting ships (position, heading, velocity
+            through the water, yaw rate).
+        current_ne_mps: ``(2, n)`` current at each ship, north and east, m/s.
+        streams: ``(n, 4)`` uint64 random-stream states, one per ship, advanced in place by
+            ``AIS_TX_NORMAL_DIMS`` numbers per report sent.
         anchored: optional ``(n,)`` bool navigational status "at anchor / moored".
         inplace: update ``state``'s arrays instead of copies (the engine's step path).
 
     Returns: the new state and ``sent`` (n,) bool.
     """
     n = x_true.shape[1]
-    draws = np.asarray(draws, dtype=float)
-    if draws.shape != (n, AIS_TX_NORMAL_DIMS):
-        raise ValueError(f"draws must have shape ({n}, {AIS_TX_NORMAL_DIMS}), got {draws.shape}")
+    check_streams(streams, n)
     new = state if inplace else AisState(
         next_tx_s=state.next_tx_s.copy(), last_tx_s=state.last_tx_s.copy(),
         head=state.head.copy(), buf_t_s=state.buf_t_s.copy(), buf=state.buf.copy(),
@@ -288,12 +293,12 @@ def transmit(params: AisParams, state: AisState, t_s: float, x_true: np.ndarray,
     _transmit((_c(p.enabled, bool), _c(p.sigma_position_m), _c(p.sigma_velocity_mps),
                _c(p.sigma_heading_rad), _c(p.turn_rate_radps), _c(p.east_step_m)),
               (new.next_tx_s, new.last_tx_s, new.head, new.buf_t_s, new.buf), float(t_s),
-              _c(x_true), _c(vel_ne_mps), _c(draws), anchor, sent)
+              _c(x_true), _c(current_ne_mps), streams, anchor, sent)
     return new, sent
 
 
 def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
-            x_true: np.ndarray, draws: np.ndarray,
+            x_true: np.ndarray, streams: np.ndarray,
             inplace: bool = False) -> tuple[AisState, AisReports]:
     """Reports of each target that reach each observer at ``t_s`` (one compiled loop over
     pairs).
@@ -301,21 +306,20 @@ def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt
     Args:
         obs, tgt: ``(m,)`` int receiving and transmitting ship indices.
         x_true: ``(8, n)`` true states (for the reception range).
-        draws: ``(m, AIS_RX_NORMAL_DIMS)`` standard normals.
+        streams: ``(m, 4)`` uint64 random-stream states, one per pair, advanced in place by
+            ``AIS_RX_NORMAL_DIMS`` numbers per report that arrives.
         inplace: update ``state.last_rx_s`` itself instead of a copy (the engine's step path).
     """
     m = obs.shape[0]
-    draws = np.asarray(draws, dtype=float)
-    if draws.shape != (m, AIS_RX_NORMAL_DIMS):
-        raise ValueError(f"draws must have shape ({m}, {AIS_RX_NORMAL_DIMS}), got {draws.shape}")
+    check_streams(streams, m)
     last_rx = state.last_rx_s if inplace else state.last_rx_s.copy()
     reports = AisReports(valid=np.empty(m, dtype=bool), stamp_s=np.empty(m),
                          north_m=np.empty(m), east_m=np.empty(m), sog_mps=np.empty(m),
                          cog_rad=np.empty(m), heading_rad=np.empty(m))
     p = params
     _receive((_c(p.enabled, bool), _c(p.latency_s), _c(p.max_range_m), _c(p.z_receive)),
-             _c(state.buf_t_s), _c(state.buf), last_rx, float(t_s), _c(obs, np.int64),
-             _c(tgt, np.int64), _c(x_true), _c(draws),
+             _c(state.buf_t_s), _c(state.buf), _c(state.head, np.int64), last_rx, float(t_s),
+             _c(obs, np.int64), _c(tgt, np.int64), _c(x_true), streams,
              (reports.valid, reports.stamp_s, reports.north_m, reports.east_m, reports.sog_mps,
               reports.cog_rad, reports.heading_rad))
     new = state if inplace else AisState(
@@ -325,16 +329,18 @@ def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt
 
 
 def step(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
-         x_true: np.ndarray, vel_ne_mps: np.ndarray, tx_draws: np.ndarray, rx_draws: np.ndarray,
+         x_true: np.ndarray, current_ne_mps: np.ndarray, tx_streams: np.ndarray,
+         rx_streams: np.ndarray,
          anchored: np.ndarray | None = None,
          inplace: bool = False) -> tuple[AisState, AisReports]:
     """One step: broadcast the reports that are due, then deliver those that have arrived.
 
-    Arguments as in :func:`transmit` (``tx_draws``) and :func:`receive` (``rx_draws``). A report
-    with zero latency is received in the step it is sent.
+    Arguments as in :func:`transmit` (``tx_streams``) and :func:`receive` (``rx_streams``). A
+    report with zero latency is received in the step it is sent.
     """
-    state, _ = transmit(params, state, t_s, x_true, vel_ne_mps, tx_draws, anchored, inplace)
-    return receive(params, state, t_s, obs, tgt, x_true, rx_draws, inplace)
+    state, _ = transmit(params, state, t_s, x_true, current_ne_mps, tx_streams, anchored,
+                        inplace)
+    return receive(params, state, t_s, obs, tgt, x_true, rx_streams, inplace)
 
 
 def _c(a: np.ndarray, dtype: type = float) -> np.ndarray:
@@ -387,6 +393,24 @@ def _interval(vn: float, ve: float, turning: bool, anchored: bool) -> float:
     return INTERVAL_SLOW_TURNING_S if turning else INTERVAL_SLOW_S
 
 
+#: relative and absolute (m/s) widening of the speed-over-ground bracket of a ship in a current
+_BRACKET = 1e-12
+
+
+@kernel
+def _interval_in_current(u: float, v: float, cn: float, ce: float, turning: bool,
+                         anchored: bool) -> float:
+    """:func:`_interval` of a ship sailing ``(u, v)`` through a current ``(cn, ce)`` without
+    its heading: the speed over ground lies within the current's speed of the speed through
+    the water, and where that whole bracket falls in one bin of the table (intervals do not
+    grow with speed) that bin's interval is the answer; -1 when the bracket spans a boundary."""
+    through, drift = math.sqrt(u * u + v * v), math.sqrt(cn * cn + ce * ce)
+    lo = (through - drift) * (1.0 - _BRACKET) - _BRACKET
+    hi = (through + drift) * (1.0 + _BRACKET) + _BRACKET
+    fast = _interval(hi, 0.0, turning, anchored)
+    return fast if _interval(max(lo, 0.0), 0.0, turning, anchored) == fast else -1.0
+
+
 @kernel
 def _quantise_angle(angle_rad: float, step_rad: float, n_steps: float) -> float:
     """:func:`quantise_angle` of one angle (``n_steps`` = 2 pi / step, a whole number)."""
@@ -394,8 +418,8 @@ def _quantise_angle(angle_rad: float, step_rad: float, n_steps: float) -> float:
 
 
 @kernel
-def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, vel: np.ndarray,
-              draws: np.ndarray, anchored: np.ndarray, sent: np.ndarray) -> None:
+def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, current: np.ndarray,
+              streams: np.ndarray, anchored: np.ndarray, sent: np.ndarray) -> None:
     """Schedule, content and buffer of every ship's report (module docstring), in place.
 
     ``params``: ``(enabled, sigma_position_m, sigma_velocity_mps, sigma_heading_rad,
@@ -411,9 +435,19 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, vel: 
         if settled and not (enabled[i] and t_s >= next_tx[i] - 1e-9):
             sent[i] = False
             continue
-        vn = vel[0, i] + sv[i] * draws[i, 2]
-        ve = vel[1, i] + sv[i] * draws[i, 3]
-        interval = _interval(vn, ve, abs(x_true[R, i]) > turn_rate[i], anchored[i])
+        u, v, psi = x_true[U, i], x_true[V, i], x_true[PSI, i]
+        cn, ce = current[0, i], current[1, i]
+        still = cn == 0.0 and ce == 0.0  # speed over ground = speed through the water
+        turning, anchor = abs(x_true[R, i]) > turn_rate[i], anchored[i]
+        vn = ve = 0.0
+        if still:
+            interval = _interval(u, v, turning, anchor)
+        else:
+            interval = _interval_in_current(u, v, cn, ce, turning, anchor)
+            if interval < 0.0:  # near a bin boundary: the ground velocity decides
+                c, s = math.cos(psi), math.sin(psi)
+                vn, ve = u * c - v * s + cn, u * s + v * c + ce
+                interval = _interval(vn, ve, turning, anchor)
         # a shorter required interval pulls the pending report forward
         pending = next_tx[i]
         if math.isfinite(last_tx[i]) and last_tx[i] + interval < pending:
@@ -425,25 +459,31 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, vel: 
         nxt = pending + interval
         next_tx[i] = t_s + interval if nxt <= t_s + 1e-9 else nxt
         last_tx[i] = pending
+        if vn == 0.0 and ve == 0.0:  # not worked out yet
+            c, s = math.cos(psi), math.sin(psi)
+            vn, ve = u * c - v * s + cn, u * s + v * c + ce
+        z_n, z_e = normal_from(streams, i), normal_from(streams, i)
+        z_vn, z_ve, z_h = normal_from(streams, i), normal_from(streams, i), normal_from(streams, i)
+        vn += sv[i] * z_vn
+        ve += sv[i] * z_ve
         sog = math.hypot(vn, ve)
         h = (head[i] + 1) % AIS_BUFFER
         head[i] = h
         buf_t[i, h] = t_s
-        n_q = np.rint((x_true[NORTH, i] + sp[i] * draws[i, 0]) / POSITION_STEP_M)
-        e_q = np.rint((x_true[EAST, i] + sp[i] * draws[i, 1]) / east_step[i])
+        n_q = np.rint((x_true[NORTH, i] + sp[i] * z_n) / POSITION_STEP_M)
+        e_q = np.rint((x_true[EAST, i] + sp[i] * z_e) / east_step[i])
         buf[i, h, 0] = n_q * POSITION_STEP_M
         buf[i, h, 1] = e_q * east_step[i]
         sog_q = np.rint(sog / SOG_STEP_MPS)
         buf[i, h, 2] = (1022.0 if sog_q > 1022.0 else sog_q) * SOG_STEP_MPS
         buf[i, h, 3] = _quantise_angle(math.atan2(ve, vn), COG_STEP_RAD, _COG_STEPS)
-        buf[i, h, 4] = _quantise_angle(x_true[PSI, i] + sh[i] * draws[i, 4], HEADING_STEP_RAD,
-                                       _HEADING_STEPS)
+        buf[i, h, 4] = _quantise_angle(psi + sh[i] * z_h, HEADING_STEP_RAD, _HEADING_STEPS)
 
 
 @kernel
-def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, last_rx: np.ndarray,
-             t_s: float, obs: np.ndarray, tgt: np.ndarray, x_true: np.ndarray,
-             draws: np.ndarray, out: tuple) -> None:
+def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, head: np.ndarray,
+             last_rx: np.ndarray, t_s: float, obs: np.ndarray, tgt: np.ndarray,
+             x_true: np.ndarray, streams: np.ndarray, out: tuple) -> None:
     """Newest arrived report per pair, reception range and probability (module docstring);
     ``last_rx`` advances in place. ``params``: ``(enabled, latency_s, max_range_m,
     z_receive)``; ``out``: the arrays of :class:`AisReports`, NaN where nothing is received."""
@@ -452,16 +492,17 @@ def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, last_rx: np.ndar
     for k in range(obs.shape[0]):
         i, j = obs[k], tgt[k]
         # newest report stamped after the last one consumed that has arrived by now (the
-        # first of equal stamps, as argmax)
+        # first of equal stamps, as argmax); none when the target's newest is consumed already
         slot, newest = 0, -math.inf
-        for s in range(AIS_BUFFER):
-            st = buf_t[j, s]
-            if st > last_rx[k] and st + latency[j] <= t_s + 1e-9 and st > newest:
-                slot, newest = s, st
+        if buf_t[j, head[j]] > last_rx[k]:
+            for s in range(AIS_BUFFER):
+                st = buf_t[j, s]
+                if st > last_rx[k] and st + latency[j] <= t_s + 1e-9 and st > newest:
+                    slot, newest = s, st
         ok = False
         if math.isfinite(newest):
             last_rx[k] = newest  # consumed whether heard or not
-            if enabled[i] and draws[k, 0] < z_receive[i]:
+            if enabled[i] and normal_from(streams, k) < z_receive[i]:
                 dn, de = x_true[NORTH, j] - x_true[NORTH, i], x_true[EAST, j] - x_true[EAST, i]
                 side = _norm_side(dn, de, max_range[i], 1.0)
                 ok = side < 0 if side != 0 else math.hypot(dn, de) <= max_range[i]

@@ -42,9 +42,10 @@ conversion bias ``r (1 - exp(-sigma_b^2 / 2)) ~ r sigma_b^2 / 2`` is 0.03 m at 1
 default ``sigma_b`` and 3.4 m for 1 deg, negligible next to the cross-range sigma ``r sigma_b``
 (33 m and 390 m), so no debiasing is applied.
 
-Draws: ``RADAR_NORMAL_DIMS`` standard normals per pair per step (range, bearing, detection; the
-plot is detected when ``z_3 < Phi^-1(p_detect)``, a uniform event from a normal draw so that one
-stream of the ``radar`` purpose serves all three). The engine maps per-observer streams to pairs.
+Draws: at need, from one stream per directed pair (``radar`` purpose): ``RADAR_NORMAL_DIMS``
+standard normals per pair at every scan of its observer (range, bearing, detection; the plot is
+detected when ``z_3 < Phi^-1(p_detect)``, a uniform event from a normal draw so that one stream
+serves all three), none between scans (:func:`trafficsim.noise.normal_from`).
 
 Config keys (per observer ship; defaults in brackets): ``sigma_range_m`` [22.7],
 ``sigma_bearing_deg`` [0.087], ``max_range_nm`` [12.0], ``min_range_m`` [40.0], ``p_detect``
@@ -63,10 +64,11 @@ import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.jit import kernel
+from trafficsim.noise import check_streams, normal_from
 from trafficsim.sensors import TWO_PI, check_keys, column, flags
 from trafficsim.ships.base import EAST, NORTH, PSI
 
-#: standard normals per directed pair per step: range noise, bearing noise, detection draw
+#: standard normals per directed pair per scan: range noise, bearing noise, detection draw
 RADAR_NORMAL_DIMS = 3
 RADAR_PURPOSE = "radar"
 
@@ -215,7 +217,7 @@ def _scan(enabled: np.ndarray, period: np.ndarray, next_scan: np.ndarray, t_s: f
 
 def measure(params: RadarParams, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
             x_true: np.ndarray, est_north_m: np.ndarray, est_east_m: np.ndarray,
-            est_psi_rad: np.ndarray, draws: np.ndarray, t_s: float,
+            est_psi_rad: np.ndarray, streams: np.ndarray, t_s: float,
             own_heading_var_rad2: np.ndarray | None = None,
             own_pos_cov_m2: np.ndarray | None = None) -> RadarPlots:
     """Radar plots of every directed pair at time ``t_s`` (one compiled loop over pairs).
@@ -227,16 +229,15 @@ def measure(params: RadarParams, due: np.ndarray, obs: np.ndarray, tgt: np.ndarr
         x_true: ``(8, n)`` true states (:mod:`trafficsim.ships.base` layout).
         est_north_m, est_east_m, est_psi_rad: ``(n,)`` each observer's own estimated reference
             point position (m) and heading (rad), used to put the plot on the chart.
-        draws: ``(m, RADAR_NORMAL_DIMS)`` standard normals.
+        streams: ``(m, 4)`` uint64 random-stream states, one per pair
+            (:attr:`trafficsim.noise.NoiseBank.state`), advanced in place by the
+            ``RADAR_NORMAL_DIMS`` numbers of every pair whose observer scans now.
         t_s: time of this step, s.
         own_heading_var_rad2: optional ``(n,)`` variance of the own heading estimate, rad^2.
         own_pos_cov_m2: optional ``(n, 2, 2)`` covariance of the own position estimate, m^2.
     """
     m = obs.shape[0]
-    draws = np.asarray(draws, dtype=float)
-    if draws.shape != (m, RADAR_NORMAL_DIMS):
-        raise ValueError(f"draws must have shape ({m}, {RADAR_NORMAL_DIMS}), "
-                         f"got {draws.shape}")
+    check_streams(streams, m)
     p = params
     var_psi = (_NONE if own_heading_var_rad2 is None
                else _c(np.broadcast_to(own_heading_var_rad2, due.shape)))
@@ -248,7 +249,7 @@ def measure(params: RadarParams, due: np.ndarray, obs: np.ndarray, tgt: np.ndarr
     _plots((_c(p.sigma_range_m), _c(p.sigma_bearing_rad), _c(p.max_range_m),
             _c(p.min_range_m), _c(p.z_detect), _c(p.antenna_x_m), _c(p.antenna_y_m)),
            _c(due, bool), _c(obs, np.int64), _c(tgt, np.int64), _c(x_true), _c(est_north_m),
-           _c(est_east_m), _c(est_psi_rad), _c(draws), var_psi, pos_cov,
+           _c(est_east_m), _c(est_psi_rad), streams, var_psi, pos_cov,
            (plots.valid, plots.north_m, plots.east_m, plots.cov, plots.range_m,
             plots.bearing_rad))
     return plots
@@ -272,7 +273,7 @@ def wrap_2pi_scalar(angle: float) -> float:
 @kernel
 def _plots(params: tuple, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
            x_true: np.ndarray, est_n: np.ndarray, est_e: np.ndarray, est_psi: np.ndarray,
-           draws: np.ndarray, var_psi: np.ndarray, pos_cov: np.ndarray, out: tuple) -> None:
+           streams: np.ndarray, var_psi: np.ndarray, pos_cov: np.ndarray, out: tuple) -> None:
     """The measurement model of the module docstring for every pair; NaN where no plot.
 
     ``params``: per-observer ``(sigma_range_m, sigma_bearing_rad, max_range_m, min_range_m,
@@ -287,7 +288,10 @@ def _plots(params: tuple, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
     for k in range(obs.shape[0]):
         i, j = obs[k], tgt[k]
         ok = False
-        if due[i] and draws[k, 2] < zdet[i]:
+        z_range = z_bearing = 0.0
+        if due[i]:
+            z_range, z_bearing = normal_from(streams, k), normal_from(streams, k)
+        if due[i] and normal_from(streams, k) < zdet[i]:
             psi = x_true[PSI, i]
             ax, ay = ant_x[i], ant_y[i]
             offset = ax != 0.0 or ay != 0.0  # (no rotation of a zero offset: saves two sincos)
@@ -298,7 +302,7 @@ def _plots(params: tuple, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
             rel_n = x_true[NORTH, j] - (x_true[NORTH, i] + off_n)
             rel_e = x_true[EAST, j] - (x_true[EAST, i] + off_e)
             true_range = math.hypot(rel_n, rel_e)
-            rng = true_range + sr[i] * draws[k, 0]
+            rng = true_range + sr[i] * z_range
             ok = true_range <= rmax[i] and true_range >= rmin[i] and rng > 0.0
         valid[k] = ok
         if not ok:
@@ -306,7 +310,7 @@ def _plots(params: tuple, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
             cov[k, 0, 0] = cov[k, 0, 1] = cov[k, 1, 0] = cov[k, 1, 1] = math.nan
             continue
         true_brg = math.atan2(rel_e, rel_n) - psi
-        brg = wrap_2pi_scalar(true_brg + sb[i] * draws[k, 1] + math.pi) - math.pi
+        brg = wrap_2pi_scalar(true_brg + sb[i] * z_bearing + math.pi) - math.pi
         psi_est = est_psi[i]
         if offset:
             ce, se = math.cos(psi_est), math.sin(psi_est)
@@ -336,7 +340,7 @@ def _plots(params: tuple, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
 
 def step(params: RadarParams, state: RadarState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
          x_true: np.ndarray, est_north_m: np.ndarray, est_east_m: np.ndarray,
-         est_psi_rad: np.ndarray, draws: np.ndarray,
+         est_psi_rad: np.ndarray, streams: np.ndarray,
          own_heading_var_rad2: np.ndarray | None = None,
          own_pos_cov_m2: np.ndarray | None = None) -> tuple[RadarState, RadarPlots]:
     """One step: advance the scan schedule and make the plots of observers whose scan is due.
@@ -344,6 +348,6 @@ def step(params: RadarParams, state: RadarState, t_s: float, obs: np.ndarray, tg
     Arguments as in :func:`scan_due` and :func:`measure`.
     """
     state, due = scan_due(params, state, t_s)
-    plots = measure(params, due, obs, tgt, x_true, est_north_m, est_east_m, est_psi_rad, draws,
+    plots = measure(params, due, obs, tgt, x_true, est_north_m, est_east_m, est_psi_rad, streams,
                     t_s, own_heading_var_rad2, own_pos_cov_m2)
     return state, plots

@@ -15,10 +15,11 @@ Kernels are cached on disk (``cache=True``); the first run after installation co
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
-from trafficsim.jit import kernel
+from trafficsim.jit import inline_kernel, kernel
 from trafficsim.ships import mmg, modular, nomoto, response
 from trafficsim.ships.base import gather_ship
 
@@ -41,10 +42,10 @@ def accel(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[flo
     return modular.accel(p, x, env)
 
 
-@kernel
-def _derivative(code: int, p: np.ndarray, a: np.ndarray, x: np.ndarray, rudder_cmd: float,
-                rps_cmd: float, env: np.ndarray, out: np.ndarray) -> None:
-    du, dv, dr = accel(code, p, x, env)
+@inline_kernel
+def _derivative(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: np.ndarray,
+                rudder_cmd: float, rps_cmd: float, env: np.ndarray, out: np.ndarray) -> None:
+    du, dv, dr = accel_fn(p, x, env)
     c, s = math.cos(x[2]), math.sin(x[2])
     out[0] = x[3] * c - x[4] * s + env[0]
     out[1] = x[3] * s + x[4] * c + env[1]
@@ -56,6 +57,28 @@ def _derivative(code: int, p: np.ndarray, a: np.ndarray, x: np.ndarray, rudder_c
     rate = (target - x[6]) / a[RUDDER_TAU]
     out[6] = min(max(rate, -a[RUDDER_RATE]), a[RUDDER_RATE])
     out[7] = (min(max(rps_cmd, a[RPS_MIN]), a[RPS_MAX]) - x[7]) / a[ENGINE_TAU]
+
+
+@inline_kernel
+def _rk4(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: np.ndarray, rc: float, nc: float,
+         env: np.ndarray, h: float, substeps: int, w: np.ndarray) -> None:
+    """``substeps`` classic RK4 steps of ``h`` of one ship in place; ``w`` ``(5, 8)`` scratch.
+    Written once and compiled once per family (``accel_fn``), so a ship's four derivative
+    evaluations carry no family dispatch."""
+    xt, k1, k2, k3, k4 = w[0], w[1], w[2], w[3], w[4]
+    for _ in range(substeps):
+        _derivative(accel_fn, p, a, x, rc, nc, env, k1)
+        for j in range(8):
+            xt[j] = x[j] + 0.5 * h * k1[j]
+        _derivative(accel_fn, p, a, xt, rc, nc, env, k2)
+        for j in range(8):
+            xt[j] = x[j] + 0.5 * h * k2[j]
+        _derivative(accel_fn, p, a, xt, rc, nc, env, k3)
+        for j in range(8):
+            xt[j] = x[j] + h * k3[j]
+        _derivative(accel_fn, p, a, xt, rc, nc, env, k4)
+        for j in range(8):
+            x[j] += (h / 6.0) * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
 
 
 @kernel
@@ -71,30 +94,22 @@ def step_ships(codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
     """
     n = X.shape[1]
     x = np.empty(8)
-    xt = np.empty(8)
-    k1 = np.empty(8)
-    k2 = np.empty(8)
-    k3 = np.empty(8)
-    k4 = np.empty(8)
+    w = np.empty((5, 8))
     env = np.empty(4)
     for i in range(n):
         gather_ship(X, E, i, x, env)
         code, p, a = codes[i], P[i], A[i]
         rc, nc = rudder_cmd[i], rps_cmd[i]
-        h = dt / substeps[i]
-        for _ in range(substeps[i]):
-            _derivative(code, p, a, x, rc, nc, env, k1)
-            for j in range(8):
-                xt[j] = x[j] + 0.5 * h * k1[j]
-            _derivative(code, p, a, xt, rc, nc, env, k2)
-            for j in range(8):
-                xt[j] = x[j] + 0.5 * h * k2[j]
-            _derivative(code, p, a, xt, rc, nc, env, k3)
-            for j in range(8):
-                xt[j] = x[j] + h * k3[j]
-            _derivative(code, p, a, xt, rc, nc, env, k4)
-            for j in range(8):
-                x[j] += (h / 6.0) * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+        m = substeps[i]
+        h = dt / m
+        if code == 0:
+            _rk4(nomoto.accel, p, a, x, rc, nc, env, h, m, w)
+        elif code == 1:
+            _rk4(response.accel, p, a, x, rc, nc, env, h, m, w)
+        elif code == 2:
+            _rk4(mmg.accel, p, a, x, rc, nc, env, h, m, w)
+        else:
+            _rk4(modular.accel, p, a, x, rc, nc, env, h, m, w)
         x[2] = x[2] % TWO_PI
         for j in range(8):
             X[j, i] = x[j]
