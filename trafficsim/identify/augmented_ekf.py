@@ -16,9 +16,12 @@ sampling period, ``s_m(k)`` the mean of the measured inputs at samples ``k`` and
 
 and the measurement ``y = H x^a + e`` with ``H = [I_3 0]``: the surge, sway and yaw rate that
 pre-processing derives from position and heading [seed 001, section 4.1]. The EKF recursion is
-[seed 001, eq 5] with ``Phi`` the analytic Jacobian of the transition; the covariance update
-uses the Joseph form (numerically safer with the paper's ``P(0) = 1e5 I``, same result in exact
-arithmetic).
+[seed 001, eq 5] with ``Phi`` the analytic Jacobian of the transition, computed in square-root
+form (``P = S S^T``, time and measurement updates by QR factorisations of stacked factors, the
+array algorithm of Kaminski, Bryson & Schmidt 1971): with the paper's ``P(0) = 1e5 I`` and
+regressors like ``n^2`` (rpm squared) the covariance spans some twenty orders of magnitude, and
+the conventional update loses its positive definiteness to rounding; the square-root form gives
+the same result in exact arithmetic and stays positive definite.
 
 Units are the paper's (and the ship file's, see :mod:`trafficsim.ships.response`): ``u, v`` in
 m/s, ``r`` in deg/s, rudder ``d`` in deg, propeller ``n`` in rpm, so the estimate goes straight
@@ -119,15 +122,15 @@ def identify_response(runs: Sequence[Any], theta0: np.ndarray | None = None,
     """
     start = time.perf_counter()
     theta = np.zeros(len(NAMES)) if theta0 is None else np.asarray(theta0, float).copy()
-    p_theta = np.eye(len(NAMES)) * p0
     x = np.zeros(N_AUG)
     x[3:] = theta
-    P = np.zeros((N_AUG, N_AUG))
-    P[3:, 3:] = p_theta
+    # square-root form: P = S S^T; S_theta the factor of the coefficients' covariance
+    s_theta = np.eye(len(NAMES)) * np.sqrt(p0)
+    S = np.zeros((N_AUG, N_AUG))
     trace: list[np.ndarray] = []
     run_starts: list[int] = []
     nis: list[np.ndarray] = []
-    eye = np.eye(N_AUG)
+    pre = np.zeros((N_AUG + 3, N_AUG + 3))
     for run in runs:
         sm, tr = run.smooth, run.trial
         y = np.stack([sm["u_mps"], sm["v_mps"], sm["r_radps"] * DEG], axis=1)
@@ -139,29 +142,37 @@ def identify_response(runs: Sequence[Any], theta0: np.ndarray | None = None,
         run_starts.append(len(trace))
         # restart the motion states at the run's first measurement, keep the coefficients
         x[:3] = y[0]
-        P[:3, :] = 0.0
-        P[:, :3] = 0.0
-        P[:3, :3] = np.diag(sig[0] ** 2)
+        S[:] = 0.0
+        S[:3, :3] = np.diag(sig[0])
+        S[3:, 3:] = s_theta
+        q_sqrt = np.sqrt(state_noise_fraction)
         for k in range(y.shape[0] - 1):
             dm, nm = 0.5 * (d[k] + d[k + 1]), 0.5 * (n[k] + n[k + 1])  # s_m(k) [seed 001, eq 4]
             x, phi = transition(x, dm, nm, T)
-            R = np.diag(sig[k + 1] ** 2)
-            P = phi @ P @ phi.T
-            P[:3, :3] += state_noise_fraction * R
-            S = P[:3, :3] + R
-            K = np.linalg.solve(S, P[:3, :]).T  # (19, 3) = P H^T S^-1
+            # time update P = Phi P Phi^T + Q by a QR of the stacked factors
+            stacked = np.zeros((N_AUG + 3, N_AUG))
+            stacked[:N_AUG] = (phi @ S).T
+            stacked[N_AUG:, :3] = np.diag(q_sqrt * sig[k + 1])
+            S = np.linalg.qr(stacked, mode="r").T
+            # measurement update (H = [I 0]) by a QR of the pre-array [[sqrt R, H S], [0, S]]
+            pre[:] = 0.0
+            pre[:3, :3] = np.diag(sig[k + 1])
+            pre[:3, 3:] = S[:3, :]
+            pre[3:, 3:] = S
+            post = np.linalg.qr(pre.T, mode="r").T
+            sy, kbar = post[:3, :3], post[3:, :3]
+            S = post[3:, 3:]
+            gain = np.linalg.solve(sy.T, kbar.T).T  # K = Kbar Sy^-1
             nu = y[k + 1] - x[:3]
-            x = x + K @ nu
-            ikh = eye.copy()
-            ikh[:, :3] -= K
-            P = ikh @ P @ ikh.T + K @ R @ K.T
-            P = 0.5 * (P + P.T)
-            nis.append(nu / np.sqrt(np.diag(S)))
+            x = x + gain @ nu
+            nis.append(nu / np.sqrt(np.sum(sy * sy, axis=1)))
             trace.append(x[3:].copy())
+        # the coefficients' covariance factor carries over to the next run
+        s_theta = np.linalg.qr(S[3:, :].T, mode="r").T
     if not trace:
         raise ValueError("no recursion: runs need at least two samples")
     inn = np.array(nis)
-    return EKFResult(names=NAMES, x=x[3:].copy(), std=np.sqrt(np.clip(np.diag(P)[3:], 0, None)),
+    return EKFResult(names=NAMES, x=x[3:].copy(), std=np.sqrt(np.sum(s_theta * s_theta, axis=1)),
                      trace=np.array(trace), run_starts=run_starts,
                      innovation_rms=np.sqrt(np.mean(inn**2, axis=0)), steps=len(trace),
                      elapsed_s=time.perf_counter() - start)

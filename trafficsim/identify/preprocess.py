@@ -9,7 +9,9 @@ prepares runs for it and keeps the result with the measured inputs:
   unwrapped first; samples farther than one interval from any measurement become NaN);
 * repeated values (a receiver that did not update repeats its last output: the FRT-DS-ESSO
   files hold runs of identical positions and headings up to 2.5 s long) are treated as missing,
-  so the smoother bridges them instead of reading a stop-and-go motion; counted in the report;
+  so the smoother bridges them instead of reading a stop-and-go motion; counted in the report.
+  Only runs of repeats up to 5 s long count: a value held longer is a constant signal (a
+  ship on a steady heading recorded without noise);
 * leading samples are dropped until position and heading are finite twice in a row (the filter
   starts from two samples [seed 001, after eq 8]);
 * all runs with the same sampling interval are smoothed in one vectorised call (padded with
@@ -43,6 +45,8 @@ _SQRT20 = np.sqrt(20.0)
 #: floors of the noise estimates (m, rad)
 MIN_SIGMA_POS_M = 1e-3
 MIN_SIGMA_HEADING_RAD = np.radians(0.01)
+#: longest run of repeated values read as a receiver that did not update, s
+MAX_STALE_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -133,11 +137,32 @@ def resample_uniform(trial: TrialData, dt_s: float | None = None) -> TrialData:
     return out_trial.with_series(**series)
 
 
-def mask_repeats(trial: TrialData) -> tuple[TrialData, dict[str, int]]:
-    """Positions (north and east both) and headings equal to the previous sample -> NaN."""
+def _stale(same: np.ndarray, dt: float, max_stale_s: float) -> np.ndarray:
+    """Samples equal to the previous one within runs of repeats lasting at most
+    ``max_stale_s`` (a longer run of one value is a genuinely constant signal)."""
+    out = np.zeros_like(same)
+    i, n = 0, same.size
+    while i < n:
+        if not same[i]:
+            i += 1
+            continue
+        j = i
+        while j < n and same[j]:
+            j += 1
+        if (j - i) * dt <= max_stale_s:
+            out[i:j] = True
+        i = j
+    return out
+
+
+def mask_repeats(trial: TrialData, max_stale_s: float = MAX_STALE_S
+                 ) -> tuple[TrialData, dict[str, int]]:
+    """Positions (north and east both) and headings equal to the previous sample -> NaN, in
+    runs of repeats up to ``max_stale_s`` long (module doc)."""
     n, e, psi = trial.north_m.copy(), trial.east_m.copy(), trial.psi_rad.copy()
-    same_pos = np.r_[False, (np.diff(n) == 0.0) & (np.diff(e) == 0.0)]
-    same_psi = np.r_[False, np.diff(psi) == 0.0]
+    dt = trial.dt_s
+    same_pos = _stale(np.r_[False, (np.diff(n) == 0.0) & (np.diff(e) == 0.0)], dt, max_stale_s)
+    same_psi = _stale(np.r_[False, np.diff(psi) == 0.0], dt, max_stale_s)
     n[same_pos] = np.nan
     e[same_pos] = np.nan
     psi[same_psi] = np.nan
