@@ -23,10 +23,13 @@ Noise settings, when not given (documented choices, not from seed 001, which giv
   third differences divided by sqrt(20) (white noise of variance s^2 has third differences of
   variance 20 s^2, while a smooth track's third difference is negligible at trial sampling
   rates), with floors of 1 mm and 0.01 deg;
-* process noise of the CA model from the ship's length ``L`` and speed ``U`` (Froude-like
-  scaling of a turning ship, calibrated so a 225 m ship at 13 kn gets about the smoother's
-  defaults): manoeuvre acceleration ``sigma_a = U^2 / (4 L)``, yaw acceleration
-  ``sigma_r' = U^2 / (4 L^2)``, correlation rate ``alpha = U / L``.
+* process noise of the CA model from the ship's length ``L`` and speed ``U`` (the scales of a
+  turning ship: accelerations of order ``U^2 / L``, yaw accelerations ``U^2 / L^2``, time
+  ``L / U``): manoeuvre acceleration ``sigma_a = U^2 / (4 L)``, yaw acceleration
+  ``sigma_r' = U^2 / (4 L^2)``, correlation rate ``alpha = U / L``. A 225 m ship at 13 kn gets
+  the smoother's default ``sigma_a`` (0.05 m/s2) and ``alpha`` (1/30 s) and a fifth of its
+  generous default yaw acceleration; the 3 m FRT-DS-ESSO model at 0.4 m/s gets 0.013 m/s2,
+  0.0044 rad/s2 and 1/7.5 s.
 """
 
 from __future__ import annotations
@@ -75,7 +78,7 @@ class Kinematics:
 
     trial: TrialData
     smooth: dict[str, np.ndarray]
-    settings: dict[str, float]
+    settings: dict[str, Any]
     repeats_masked: dict[str, int]
 
     @property
@@ -191,10 +194,10 @@ def noise_from_data(values: np.ndarray, floor: float) -> float:
 
 
 def resolve_settings(trials: Sequence[TrialData], length_m: float, speed_mps: float,
-                     settings: SmootherSettings) -> dict[str, float]:
+                     settings: SmootherSettings) -> dict[str, Any]:
     """Fill the automatic settings (module doc) from the runs and the ship."""
     s = asdict(settings)
-    if s["sigma_pos_m"] is None:
+    if s["sigma_pos_m"] is None:  # median over runs and axes
         s["sigma_pos_m"] = float(np.median([
             noise_from_data(v, MIN_SIGMA_POS_M) for t in trials for v in (t.north_m, t.east_m)]))
     if s["sigma_heading_rad"] is None:
@@ -207,7 +210,7 @@ def resolve_settings(trials: Sequence[TrialData], length_m: float, speed_mps: fl
         s["sigma_yaw_acc_radps2"] = u * u / (4.0 * length * length)
     if s["alpha_per_s"] is None:
         s["alpha_per_s"] = u / length
-    return {k: float(v) for k, v in s.items()}
+    return {k: v if isinstance(v, bool) else float(v) for k, v in s.items()}
 
 
 def smooth_runs(trials: Sequence[TrialData], length_m: float, speed_mps: float,

@@ -35,22 +35,25 @@ def text(value: str) -> str:
     return json.dumps(value, ensure_ascii=False)
 
 
+def _value(value: Any) -> str:
+    """Any ship-file value (numbers, strings, booleans, mappings, lists) in YAML flow style."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return number(value)
+    if isinstance(value, str):
+        return text(value)
+    if isinstance(value, Mapping):
+        return _flow(value)
+    if isinstance(value, Sequence):
+        return "[" + ", ".join(_value(v) for v in value) + "]"
+    if value is None:
+        return "null"
+    raise TypeError(f"cannot write a {type(value).__name__} to a ship file")
+
+
 def _flow(mapping: Mapping[str, Any]) -> str:
-    items = []
-    for key, value in mapping.items():
-        if isinstance(value, Mapping):
-            items.append(f"{key}: {_flow(value)}")
-        elif isinstance(value, bool):
-            items.append(f"{key}: {'true' if value else 'false'}")
-        elif isinstance(value, (int, float)):
-            items.append(f"{key}: {number(value)}")
-        elif isinstance(value, str):
-            items.append(f"{key}: {text(value)}")
-        elif isinstance(value, Sequence):
-            items.append(f"{key}: [{', '.join(number(v) for v in value)}]")
-        else:
-            raise TypeError(f"cannot write {key}: {type(value).__name__}")
-    return "{" + ", ".join(items) + "}"
+    return "{" + ", ".join(f"{key}: {_value(v)}" for key, v in mapping.items()) + "}"
 
 
 def render(spec: Mapping[str, Any], name: str, description: str, source: str,
