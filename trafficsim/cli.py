@@ -1,4 +1,4 @@
-"""Command line: ``trafficsim run | campaign | explain | trial | validate``.
+"""Command line: ``trafficsim run | campaign | explain | trial | identify | validate``.
 
 Every user error ends as one line on stderr (``trafficsim: error: file:line: key: message``) and
 exit code 2, never a traceback. Heavy imports happen inside the commands so ``--help`` is fast.
@@ -91,6 +91,47 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_argument("--out", type=Path, required=True, help="output folder")
     trial.set_defaults(func=_cmd_trial)
 
+    ident = sub.add_parser("identify", help="fit a ship model to trial runs; writes a ship "
+                           "file, a convergence plot and a validation report")
+    ident.add_argument("--model", required=True, choices=["response", "nomoto", "mmg"])
+    ident.add_argument("--data", type=Path, nargs="+", required=True, metavar="RUN",
+                       help="training runs: trial-data CSV or FRT-DS-ESSO files, or folders")
+    ident.add_argument("--holdout", type=Path, nargs="+", default=[], metavar="RUN",
+                       help="held-out runs for the prediction error")
+    ident.add_argument("--base", required=True,
+                       help="ship type or ship file giving particulars, actuators and every "
+                            "coefficient not fitted (an mmg ship for --model mmg)")
+    ident.add_argument("--out", type=Path, required=True, help="output folder")
+    ident.add_argument("--method", choices=["oe", "ekf", "ekf+oe"], default=None,
+                       help="output error, augmented EKF (response only) or EKF then output "
+                            "error (default: ekf+oe for response, oe otherwise)")
+    ident.add_argument("--fit", type=_names, default=None, metavar="NAME,...",
+                       help="coefficients to fit (default: the model's documented subset)")
+    ident.add_argument("--bounds", type=_bound, nargs="+", default=[], metavar="NAME=LO:HI",
+                       help="bounds of fitted coefficients")
+    ident.add_argument("--horizon-s", type=_positive(float), default=None,
+                       help="replay window length (default 3 L/U)")
+    ident.add_argument("--dt-s", type=_positive(float), default=None,
+                       help="working sampling interval (default: the data's, thinned to "
+                            "L/(20 U))")
+    ident.add_argument("--wind", choices=["auto", "ignore"], default="auto",
+                       help="use measured wind when the model has wind loads (default auto)")
+    ident.add_argument("--reference", default=None,
+                       help="known ship to compare the standard manoeuvres with "
+                            "(simulated trials)")
+    ident.add_argument("--name", default=None, help="name of the identified ship")
+    ident.add_argument("--max-nfev", type=_positive(int), default=60,
+                       help="most model evaluations of the output-error fit (default 60)")
+    ident.add_argument("--columns", type=_mapping, default=None, metavar="NAME=COLUMN,...",
+                       help="read trial-data columns from other columns of the CSV files, "
+                            "e.g. north_m=gnss_fix_north_m,east_m=gnss_fix_east_m,"
+                            "heading_deg=compass_heading_deg (trial --sensors output)")
+    ident.add_argument("--sigma-pos-m", type=_positive(float), default=None,
+                       help="position noise for the smoother (default: from the data)")
+    ident.add_argument("--sigma-heading-deg", type=_positive(float), default=None,
+                       help="heading noise for the smoother (default: from the data)")
+    ident.set_defaults(func=_cmd_identify)
+
     val = sub.add_parser("validate", help="check scenario, ship, rules or campaign files "
                          "without running them")
     val.add_argument("files", type=Path, nargs="+")
@@ -155,6 +196,77 @@ def _cmd_trial(args: argparse.Namespace) -> int:
         verdict = "pass" if c["pass"] else "FAIL"
         print(f"  IMO {key}: {c['value']:.3g} (limit {c['limit']:.3g}) {verdict}")
     print(f"results: {args.out / 'trial.csv'}, {args.out / 'indices.json'}")
+    return 0
+
+
+def _names(text: str) -> list[str]:
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected coefficient names separated by commas, "
+                                         f"got '{text}'")
+    return names
+
+
+def _mapping(text: str) -> dict[str, str]:
+    out = {}
+    for item in text.split(","):
+        key, sep, value = item.partition("=")
+        if not (sep and key.strip() and value.strip()):
+            raise argparse.ArgumentTypeError(f"expected NAME=COLUMN,... got '{text}'")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _bound(text: str) -> tuple[str, float, float]:
+    name, sep, rng = text.partition("=")
+    lo, sep2, hi = rng.partition(":")
+    try:
+        if not (sep and sep2 and name.strip()):
+            raise ValueError
+        return name.strip(), float(lo), float(hi)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected NAME=LOW:HIGH, got '{text}'") from None
+
+
+def _cmd_identify(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from trafficsim.identify.command import identify
+    from trafficsim.identify.preprocess import SmootherSettings
+
+    smoother = SmootherSettings(
+        sigma_pos_m=args.sigma_pos_m,
+        sigma_heading_rad=None if args.sigma_heading_deg is None
+        else float(np.radians(args.sigma_heading_deg)))
+    bounds = {name: (lo, hi) for name, lo, hi in args.bounds}
+    rep = identify(args.model, args.data, args.out, args.base, args.holdout, args.method,
+                   args.fit, bounds, args.horizon_s, args.dt_s, args.wind, args.reference,
+                   args.name, args.max_nfev, smoother=smoother, columns=args.columns)
+    fit = rep["fit"]
+    if fit is not None:
+        print(f"{rep['model']} model: output-error cost {fit['cost_initial']:.4g} -> "
+              f"{fit['cost_final']:.4g} in {fit['evaluations']} evaluations "
+              f"({fit['elapsed_s']:.1f} s)")
+        for name, c in fit["coefficients"].items():
+            print(f"  {name}: {c['value']:.5g} (95 % {c['ci95_low']:.4g} .. "
+                  f"{c['ci95_high']:.4g})")
+    elif rep["ekf"] is not None:
+        for name, c in rep["ekf"]["coefficients"].items():
+            print(f"  {name}: {c['value']:.5g} (std {c['std']:.3g})")
+    for role, by_model in rep["validation"]["prediction"].items():
+        e, e0 = by_model["identified"]["all"], by_model["start"]["all"]
+        print(f"  {role}: end-of-window position error RMS {e['end_position_rms_m']:.3g} m "
+              f"(start model {e0['end_position_rms_m']:.3g} m), heading RMS "
+              f"{e['heading_rms_deg']:.3g} deg ({e0['heading_rms_deg']:.3g} deg)")
+    comparison = rep["validation"]["reference_comparison"]
+    if comparison:
+        turn = comparison["turning_35_starboard"]
+        print("  35 deg turn vs reference: " + ", ".join(
+            f"{k} {v['error_pct']:+.2f} %" for k, v in turn.items()
+            if k != "steady_diameter_m"))
+    out = args.out
+    print(f"results: {out / 'ship.yaml'}, {out / 'convergence.png'}, {out / 'report.json'}, "
+          f"{out / 'report.md'}")
     return 0
 
 

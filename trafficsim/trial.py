@@ -1,5 +1,9 @@
 """``trafficsim trial``: one standard manoeuvre of one ship, written as trial data and indices.
 
+``trial.csv`` is in the trial-data CSV format that :mod:`trafficsim.io.trialdata` reads (actual
+rudder angle and propeller speed as the measured inputs), so a simulated trial can be fed to
+``trafficsim identify`` as it is, or, with ``--sensors``, from the instruments' columns.
+
 With ``--sensors`` the trial also records what the instruments report and what the filters make
 of it, beside the truth: the GNSS receiver's output (``gnss_*``: a DGPS receiver, sigma 2 m, with
 its internal position-velocity Kalman filter at S_p = 0.01 m^2/s^3 [seed 000]) and the ship's own

@@ -138,22 +138,36 @@ def body_velocities(north: np.ndarray, east: np.ndarray, heading: np.ndarray, dt
             :mod:`trafficsim.estimation.ca`), position axes and heading respectively.
         current_north_mps, current_east_mps: scalar or ``(n,)`` current, m/s.
 
+    Uncertainty: the smoothed covariances ``P(k|N)`` of the three independent series give the
+    standard deviations of ``u, v, r`` to first order (the rotation's Jacobian):
+    ``var u = cos^2 psi var u_N + sin^2 psi var u_E + v^2 var psi`` and
+    ``var v = sin^2 psi var u_N + cos^2 psi var u_E + u^2 var psi``; ``var r`` is the heading
+    series' own velocity variance.
+
+    Missing samples (NaN) are skipped by the filter (prediction only); the heading is unwrapped
+    over its finite samples, so a gap does not spoil the rest of the record. The first two samples
+    of every series must be finite (they start the filter).
+
     Returns:
         dict of arrays with the input's shape: ``north_m, east_m, psi_rad`` (smoothed),
         ``u_mps, v_mps, r_radps, speed_mps`` (U), ``course_rad``, ``drift_rad`` (beta),
-        ``vn_mps, ve_mps`` (smoothed ground velocity).
+        ``vn_mps, ve_mps`` (smoothed ground velocity), and the standard deviations
+        ``sigma_u_mps, sigma_v_mps, sigma_r_radps, sigma_psi_rad, sigma_north_m, sigma_east_m``.
     """
     north = np.asarray(north, dtype=float)
     shape = north.shape
     n_rows = 1 if north.ndim == 1 else shape[0]
     pos = np.stack([north.reshape(n_rows, -1), np.asarray(east, float).reshape(n_rows, -1)],
                    axis=1).reshape(2 * n_rows, -1)
-    psi = np.unwrap(np.asarray(heading, float).reshape(n_rows, -1), axis=-1)
+    psi = unwrap_finite(np.asarray(heading, float).reshape(n_rows, -1))
 
-    pos_s = smooth_ca(ca.CAParams.of(2 * n_rows, dt, sigma_pos_m, sigma_acc_mps2, alpha_per_s),
-                      pos).x.reshape(n_rows, 2, -1, 3)
-    psi_s = smooth_ca(ca.CAParams.of(n_rows, dt, sigma_heading_rad, sigma_yaw_acc_radps2,
-                                     alpha_per_s), psi).x
+    pos_sm = smooth_ca(ca.CAParams.of(2 * n_rows, dt, sigma_pos_m, sigma_acc_mps2, alpha_per_s),
+                       pos)
+    psi_sm = smooth_ca(ca.CAParams.of(n_rows, dt, sigma_heading_rad, sigma_yaw_acc_radps2,
+                                      alpha_per_s), psi)
+    pos_s = pos_sm.x.reshape(n_rows, 2, -1, 3)
+    pos_p = pos_sm.p.reshape(n_rows, 2, -1, 3, 3)
+    psi_s = psi_sm.x
 
     vn, ve = pos_s[:, 0, :, 1], pos_s[:, 1, :, 1]
     heading_s, r = psi_s[..., 0], psi_s[..., 1]
@@ -170,4 +184,27 @@ def body_velocities(north: np.ndarray, east: np.ndarray, heading: np.ndarray, dt
         "drift_rad": np.angle(np.exp(1j * (course - heading_s))),
         "vn_mps": vn, "ve_mps": ve,
     }
+    var_vn, var_ve = pos_p[:, 0, :, 1, 1], pos_p[:, 1, :, 1, 1]
+    var_psi = psi_sm.p[..., 0, 0]
+    u, v = out["u_mps"], out["v_mps"]
+    out["sigma_u_mps"] = np.sqrt(c * c * var_vn + s * s * var_ve + v * v * var_psi)
+    out["sigma_v_mps"] = np.sqrt(s * s * var_vn + c * c * var_ve + u * u * var_psi)
+    out["sigma_r_radps"] = np.sqrt(psi_sm.p[..., 1, 1])
+    out["sigma_psi_rad"] = np.sqrt(var_psi)
+    out["sigma_north_m"] = np.sqrt(pos_p[:, 0, :, 0, 0])
+    out["sigma_east_m"] = np.sqrt(pos_p[:, 1, :, 0, 0])
     return {k: v.reshape(shape) for k, v in out.items()}
+
+
+def unwrap_finite(angle: np.ndarray) -> np.ndarray:
+    """``np.unwrap`` along the last axis over the finite samples only (NaN stay NaN).
+
+    ``np.unwrap`` would turn every sample after a NaN into NaN; here a gap is bridged by the
+    shortest turn between the samples either side of it.
+    """
+    a = np.array(angle, dtype=float, copy=True)
+    rows = a.reshape(-1, a.shape[-1])
+    for row in rows:  # one pass per series (records, not ships on a step path)
+        ok = np.isfinite(row)
+        row[ok] = np.unwrap(row[ok])
+    return rows.reshape(a.shape)

@@ -1,0 +1,242 @@
+"""``trafficsim identify``: from trial runs to a validated ship file.
+
+The chain of [seed 001]: pre-processing by the RTS smoother (section 4.1), identification
+(augmented-state EKF, section 3, and/or a batch output-error fit), validation by standard
+manoeuvres (section 4.3, table 2) and by prediction error on held-out runs. Writes into the
+output folder:
+
+* ``ship.yaml``: the identified ship (same schema as the ship library, validated by its loader;
+  usable by path in scenarios and ``trafficsim trial``);
+* ``convergence.png``: EKF estimates per recursion and output-error cost per evaluation;
+* ``report.json``, ``report.md``: data, settings, coefficients with nominal 95 % intervals,
+  prediction errors, measured turning tests, standard manoeuvres.
+
+Choices when not given (documented in the README):
+
+* working sampling interval: the data's, thinned to at most ``L / (20 U)`` (about 20 samples
+  per ship length travelled; 2 s for a 225 m ship at 13 kn, seed 001's T);
+* fit horizon: windows of ``3 L / U`` seconds, each replayed from its measured start;
+* wind: used when the runs carry it and the model has wind loads (``mmg`` with windage
+  particulars); the ``response`` and ``nomoto`` families have no wind model, so wind is then
+  ignored and its effect goes into the identified coefficients;
+* starting values: the base ship's coefficients when it is of the identified family; for
+  ``response`` the EKF starts from zero as in [seed 001, section 4.2]; for ``nomoto`` from
+  another family: K' = T' = 2, n3' = 0, ``rps_service`` from the measured speed per rps at
+  speeds above 30 % of the service speed, ``surge_tau_s = 5 L / U``. ``mmg`` needs an ``mmg``
+  base ship (every coefficient not fitted comes from it).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trafficsim.errors import DataError, InputError
+from trafficsim.identify import augmented_ekf, output_error, preprocess, replay, validation
+from trafficsim.identify.parameters import DEFAULT_FIT, Parametrisation
+from trafficsim.identify.report import convergence_plot, write_reports
+from trafficsim.identify.shipfile import write_ship_file
+from trafficsim.io.trialdata import TrialData, read_trial
+from trafficsim.ships.base import families
+from trafficsim.ships.library import load_ship
+
+MODELS = ("response", "nomoto", "mmg")
+METHODS = ("oe", "ekf", "ekf+oe")
+KNOT = 1852.0 / 3600.0
+
+
+def expand_paths(paths: Sequence[Path], flag: str) -> list[Path]:
+    """Files as given; a folder stands for the ``*.csv`` files in it (sorted)."""
+    out: list[Path] = []
+    for p in paths:
+        if p.is_dir():
+            found = sorted(p.glob("*.csv"))
+            if not found:
+                raise DataError(f"folder has no .csv trial files (given with {flag})", path=str(p))
+            out.extend(found)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise DataError(f"trial data file not found (given with {flag})", path=str(p))
+    return out
+
+
+def starting_spec(model: str, base: Mapping[str, Any], runs: Sequence[preprocess.Kinematics]
+                  ) -> dict[str, Any]:
+    """The base ship turned into a ship of family ``model`` with starting coefficients."""
+    spec = copy.deepcopy(dict(base))
+    if base["model"] == model:
+        return spec
+    if model == "mmg":
+        raise InputError(f"the mmg model needs an mmg base ship (every coefficient not fitted "
+                         f"comes from it); '{base['name']}' is a {base['model']} ship",
+                         key="--base")
+    declared = families()[model].coefficients
+    length = float(base["particulars"]["length_m"])
+    u_service = float(base["service_speed_kn"]) * KNOT
+    coeffs = {k: (0.0 if v is None else float(v)) for k, v in declared.items()}
+    if model == "response":
+        coeffs["rudder_fade_speed_mps"] = min(1.0, 0.15 * u_service)
+    else:  # nomoto
+        u = np.concatenate([r.smooth["u_mps"] for r in runs])
+        n = np.concatenate([r.trial.rps for r in runs])
+        ok = np.isfinite(u) & np.isfinite(n) & (u > 0.3 * u_service) & (n > 0)
+        speed_per_rps = float(np.median(u[ok] / n[ok])) if ok.any() else None
+        if speed_per_rps is None:
+            raise DataError("no samples ahead above 30 % of the service speed to start the "
+                            "nomoto surge model from")
+        coeffs.update({"K_prime": 2.0, "T_prime": 2.0, "n3_prime": 0.0,
+                       "rps_service": u_service / speed_per_rps,
+                       "surge_tau_s": 5.0 * length / u_service})
+    spec["model"] = model
+    spec["coefficients"] = coeffs
+    spec["name"] = f"{base['name']}_{model}"
+    return spec
+
+
+def _has_wind_loads(spec: Mapping[str, Any]) -> bool:
+    parts = spec["particulars"]
+    return (spec["model"] == "mmg" and float(parts.get("windage_lateral_area_m2", 0.0)) > 0
+            and float(parts.get("windage_frontal_area_m2", 0.0)) > 0)
+
+
+def identify(model: str, data: Sequence[Path], out: Path, base: str,
+             holdout: Sequence[Path] = (), method: str | None = None,
+             fit_names: Sequence[str] | None = None,
+             bounds: Mapping[str, tuple[float, float]] | None = None,
+             horizon_s: float | None = None, dt_s: float | None = None, wind: str = "auto",
+             reference: str | None = None, name: str | None = None, max_nfev: int = 60,
+             channels: Sequence[str] = output_error.DEFAULT_CHANNELS,
+             smoother: preprocess.SmootherSettings | None = None,
+             columns: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """Identify ``model`` from the ``data`` runs; write ship file, plot and reports to ``out``.
+
+    ``columns`` maps trial-data column names to other columns of the CSV files (e.g. the raw
+    GNSS fixes and compass of ``trafficsim trial --sensors``), see
+    :func:`trafficsim.io.trialdata.read_trial`. Returns the report (also written as
+    ``report.json``).
+    """
+    start = time.perf_counter()
+    if model not in MODELS:
+        raise InputError(f"unknown model '{model}'; expected one of {', '.join(MODELS)}",
+                         key="--model")
+    method = method or ("ekf+oe" if model == "response" else "oe")
+    if method not in METHODS:
+        raise InputError(f"unknown method '{method}'; expected one of {', '.join(METHODS)}",
+                         key="--method")
+    if "ekf" in method and model != "response":
+        raise InputError(f"the augmented EKF identifies the response model only, not {model}; "
+                         "use --method oe", key="--method")
+    base_spec = load_ship(base)
+    length = float(base_spec["particulars"]["length_m"])
+    u_service = float(base_spec["service_speed_kn"]) * KNOT
+    train_files = expand_paths(data, "--data")
+    hold_files = expand_paths(holdout, "--holdout")
+    files = [*train_files, *hold_files]
+    stems = [p.stem for p in files]
+    trials: list[TrialData] = [
+        read_trial(p, p.stem if stems.count(p.stem) == 1 else f"{p.parent.name}/{p.stem}",
+                   columns)
+        for p in files]
+    native = min(t.dt_s for t in trials)
+    work_dt = dt_s if dt_s is not None else native * max(
+        1, int(np.floor(length / (20.0 * u_service) / native + 1e-9)))
+    kin = preprocess.smooth_runs(trials, length, u_service,
+                                 smoother or preprocess.SmootherSettings(), dt_s=work_dt)
+    train, hold = kin[: len(train_files)], kin[len(train_files):]
+
+    spec0 = starting_spec(model, base_spec, train)
+    if model == "response" and base_spec["model"] != "response" and "ekf" not in method:
+        raise InputError("the response model from a base ship of another family needs the "
+                         "EKF's estimate to start from: use --method ekf+oe", key="--method")
+    use_wind = wind == "auto" and _has_wind_loads(spec0) and any(t.has_wind for t in trials)
+    wind_note = ("used (measured true wind, Isherwood loads)" if use_wind else
+                 "ignored (--wind ignore)" if wind == "ignore" else
+                 "ignored (the model has no wind loads)" if not _has_wind_loads(spec0) else
+                 "none in the data")
+    horizon = horizon_s if horizon_s is not None else 3.0 * length / u_service
+
+    names = tuple(fit_names) if fit_names else DEFAULT_FIT[model]
+    param = Parametrisation.of(spec0, names, bounds)
+    x_start = param.initial()
+    ekf_result = None
+    if "ekf" in method:
+        if param.names != augmented_ekf.NAMES:
+            raise InputError("the augmented EKF estimates all 16 response coefficients; "
+                             "--fit applies to the output-error fit only (--method oe)",
+                             key="--fit")
+        ekf_result = augmented_ekf.identify_response(train)
+        x_start = np.clip(ekf_result.x, param.lower, param.upper)
+    windows_train = replay.windows_from_runs(train, horizon, use_wind)
+    fit_result = None
+    x_final = x_start
+    if "oe" in method:
+        fit_result = output_error.fit(param, windows_train, x0=x_start, channels=channels,
+                                      max_nfev=max_nfev)
+        x_final = fit_result.x
+    if fit_result is not None:
+        ci = fit_result.ci95
+    else:  # EKF only: its own covariance
+        ci = output_error.Z95 * ekf_result.std if ekf_result is not None else np.zeros(param.p)
+
+    out.mkdir(parents=True, exist_ok=True)
+    ship_name = name or f"{base_spec['name']}_identified"
+    fitted_spec = param.specs(x_final[None, :])[0]
+    source = (f"trafficsim identify --model {model} --method {method}; training runs: "
+              f"{', '.join(str(p) for p in train_files)}"
+              + (f"; held-out runs: {', '.join(str(p) for p in hold_files)}" if hold_files
+                 else "")
+              + f"; identified coefficients: {', '.join(param.names)}; everything else "
+              f"(particulars, actuators, other coefficients) from the base ship "
+              f"{base_spec['name']} ({base_spec.get('path', base)}).")
+    description = (f"{model} model identified from {len(train_files)} trial run(s) "
+                   f"({method}), base ship {base_spec['name']}")
+    ship_path = out / "ship.yaml"
+    fitted_spec = write_ship_file(
+        ship_path, fitted_spec, ship_name, description, source,
+        {n: (float(v), float(c)) for n, v, c in zip(param.names, x_final, ci, strict=True)})
+
+    # validation
+    labels = ("identified", "start")
+    models = param.rows(np.stack([x_final, x_start]))
+    prediction = {"training": validation.prediction_errors(models, labels, windows_train)}
+    if hold:
+        windows_hold = replay.windows_from_runs(hold, horizon, use_wind)
+        prediction["holdout"] = validation.prediction_errors(models, labels, windows_hold)
+    turns = validation.measured_turns([*train, *hold], models, labels, use_wind)
+    ref_name = None
+    speed_kn = None
+    comparison = None
+    if reference is not None:
+        ref_spec = load_ship(reference)
+        ref_name = ref_spec["name"]
+        speed_kn = float(ref_spec["service_speed_kn"])
+        ref_man = validation.standard_manoeuvres(ref_spec, speed_kn)
+    standard = validation.standard_manoeuvres(fitted_spec, speed_kn)
+    if reference is not None:
+        comparison = validation.compare_manoeuvres(standard, ref_man)
+
+    if fit_result is not None or ekf_result is not None:
+        convergence_plot(out / "convergence.png", fit_result, ekf_result)
+    roles = ["training"] * len(train) + ["holdout"] * len(hold)
+    report: dict[str, Any] = {
+        "model": model, "method": method, "base_ship": str(base_spec.get("path", base)),
+        "ship": {"name": ship_name, "file": str(ship_path)},
+        "data": [{**k.report(), "role": role} for k, role in zip(kin, roles, strict=True)],
+        "preprocessing": {"dt_s": float(work_dt), "smoother": kin[0].settings,
+                          "wind": wind_note},
+        "ekf": ekf_result.summary() if ekf_result is not None else None,
+        "fit": fit_result.summary() if fit_result is not None else None,
+        "coefficients": {n: float(v) for n, v in zip(param.names, x_final, strict=True)},
+        "validation": {"horizon_s": float(horizon), "prediction": prediction,
+                       "measured_turns": turns, "standard_manoeuvres": standard,
+                       "reference": ref_name, "reference_comparison": comparison},
+        "elapsed_s": time.perf_counter() - start,
+    }
+    write_reports(out, report)
+    return report

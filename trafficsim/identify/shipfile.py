@@ -1,0 +1,94 @@
+"""Writing an identified ship as a ship file (the schema of ``trafficsim/ships/library/*.yaml``).
+
+The file is written as plain YAML text (atomically), with the fitted coefficients marked and
+their nominal 95 % intervals as comments, and then read back through the ship-library loader,
+so a file that the loader would reject is never reported as a result.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from trafficsim.io.results import atomic_write
+
+_PARTS_ORDER = ("length_m", "beam_m", "draught_m")
+
+
+def number(value: float) -> str:
+    """A float as a YAML 1.1 float literal (PyYAML reads ``1e-05`` as a string)."""
+    v = float(value)
+    if not math.isfinite(v):
+        raise ValueError(f"not a finite number: {value}")
+    text = f"{v:.10g}"
+    mantissa, _, exponent = text.partition("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return mantissa + ("e" + exponent if exponent else "")
+
+
+def text(value: str) -> str:
+    """A string as a YAML double-quoted scalar (JSON escapes are valid YAML escapes)."""
+    return json.dumps(value, ensure_ascii=False)
+
+
+def _value(value: Any) -> str:
+    """Any ship-file value (numbers, strings, booleans, mappings, lists) in YAML flow style."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (int, float)):
+        return number(value)
+    if isinstance(value, str):
+        return text(value)
+    if isinstance(value, Mapping):
+        return _flow(value)
+    if isinstance(value, Sequence):
+        return "[" + ", ".join(_value(v) for v in value) + "]"
+    if value is None:
+        return "null"
+    raise TypeError(f"cannot write a {type(value).__name__} to a ship file")
+
+
+def _flow(mapping: Mapping[str, Any]) -> str:
+    return "{" + ", ".join(f"{key}: {_value(v)}" for key, v in mapping.items()) + "}"
+
+
+def render(spec: Mapping[str, Any], name: str, description: str, source: str,
+           fitted: Mapping[str, tuple[float, float]]) -> str:
+    """Ship-file text of ``spec`` (a parsed ship file) with its coefficients as they are,
+    ``fitted`` naming the identified ones ``{name: (value, ci95 half-width)}``."""
+    lines = ["schema_version: 1", f"name: {text(name)}", f"description: {text(description)}",
+             f"source: {text(source)}", f"model: {spec['model']}", "particulars:"]
+    parts = dict(spec["particulars"])
+    for key in (*_PARTS_ORDER, *sorted(k for k in parts if k not in _PARTS_ORDER)):
+        if key in parts:
+            lines.append(f"  {key}: {number(parts[key])}")
+    lines.append(f"service_speed_kn: {number(spec['service_speed_kn'])}")
+    lines.append(f"actuators: {_flow(spec['actuators'])}")
+    lines.append("coefficients:")
+    for key, value in spec["coefficients"].items():
+        if key in fitted:
+            v, ci = fitted[key]
+            lines.append(f"  {key}: {number(v)}   # identified, nominal 95 % interval "
+                         f"+-{abs(ci):.3g}")
+        else:
+            lines.append(f"  {key}: {number(value)}")
+    for key in ("autopilot", "integration"):
+        if spec.get(key):
+            lines.append(f"{key}: {_flow(spec[key])}")
+    if spec.get("sensors"):
+        lines.append(f"sensors: {_flow(spec['sensors'])}")
+    return "\n".join(lines) + "\n"
+
+
+def write_ship_file(path: Path, spec: Mapping[str, Any], name: str, description: str,
+                    source: str, fitted: Mapping[str, tuple[float, float]]) -> dict[str, Any]:
+    """Write the ship file atomically and return it as loaded (validated) by the library."""
+    from trafficsim.ships.library import load_ship
+
+    body = render(spec, name, description, source, fitted)
+    atomic_write(path, lambda fh: fh.write(body.encode()))
+    return load_ship(str(Path(path).resolve()))
