@@ -92,8 +92,13 @@ def _course_offset(kind: str, rng: np.random.Generator) -> float:
 
 def _weighted(weights: dict[str, float], names: tuple[str, ...] | list[str],
               rng: np.random.Generator) -> str:
+    """One of ``names`` with probability proportional to its weight: exactly the draw of
+    ``rng.choice(len(names), p=p)`` (one uniform against the normalised cumulative weights),
+    without its per-call validation."""
     p = np.array([weights.get(n, 0.0) for n in names], dtype=float)
-    return names[int(rng.choice(len(names), p=p / p.sum()))]
+    cdf = np.cumsum(p / p.sum())
+    cdf /= cdf[-1]
+    return names[int(cdf.searchsorted(rng.random(), side="right"))]
 
 
 def _sensors(spec: CampaignSpec, rng: np.random.Generator) -> dict[str, Any]:
