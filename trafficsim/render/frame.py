@@ -135,10 +135,10 @@ class Renderer:
             layers.draw_routes(pg, self._chart, self.view, self.style, self.data)
             self._drawn = 0
             layers.draw_tracks(pg, self._chart, self.view, self.style, self.data, 0, 0,
-                               self.options.measurements)
+                               self.options.measurements, stepwise=True)
         if k > self._drawn:
             layers.draw_tracks(pg, self._chart, self.view, self.style, self.data, self._drawn,
-                               k, self.options.measurements)
+                               k, self.options.measurements, stepwise=True)
             self._drawn = k
         return self._chart
 

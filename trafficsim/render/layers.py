@@ -9,6 +9,7 @@ Pixel transforms are numpy over all points of a layer at once; only the drawing 
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -34,24 +35,29 @@ SMALL_HULL_PX = 8.0  # hulls shorter than this get a ring so the ship stays visi
 
 
 class Text:
-    """Fonts at the style's DPI and a bounded cache of rendered strings."""
+    """Fonts at the style's DPI and a small cache of recently rendered strings (names, roles and
+    legend entries come back frame after frame; times and distances mostly do not)."""
+
+    CACHE = 256
 
     def __init__(self, pg: Any, style: st.Style) -> None:
         # pygame's built-in font draws at about 0.69 of the requested size
         self.pg = pg
         self.fonts = {"small": pg.font.Font(None, round(style.font_px(7.5) / 0.6875)),
                       "normal": pg.font.Font(None, round(style.font_px(9) / 0.6875))}
-        self._cache: dict[tuple, Any] = {}
+        self._cache: OrderedDict[tuple, Any] = OrderedDict()
 
     def render(self, text: str, colour: st.Colour, size: str = "normal",
                background: st.Colour | None = None) -> Any:
         key = (text, colour, size, background)
         surf = self._cache.get(key)
         if surf is None:
-            if len(self._cache) >= 2048:
-                self._cache.clear()
             surf = self.fonts[size].render(text, True, colour, background)
             self._cache[key] = surf
+            if len(self._cache) > self.CACHE:
+                self._cache.popitem(last=False)
+        else:
+            self._cache.move_to_end(key)
         return surf
 
     def height(self, size: str = "normal") -> int:
@@ -131,30 +137,51 @@ def _dots(pg: Any, surf: Any, pts: np.ndarray, colour: st.Colour, size: int) -> 
 
 
 def draw_tracks(pg: Any, surf: Any, view: View, style: st.Style, data: RunData, k0: int,
-                k1: int, measurements: bool) -> None:
+                k1: int, measurements: bool, stepwise: bool = False) -> None:
     """Records ``k0 .. k1`` (inclusive) of every ship's true track, its estimated track (ships
     with a filter) and, with ``measurements``, its valid GNSS fixes.
 
-    Drawing records ``0 .. k`` at once or in consecutive pieces gives the same pixels (lines
-    are drawn segment by segment without blending), which lets a fixed view add each frame's
-    new segments to a kept surface."""
-    if k1 <= k0 and not measurements:
-        return
+    ``stepwise``: draw record by record (each ship's segment into the record and its fix, then
+    the next record), so that drawing ``0 .. k`` at once or in consecutive pieces ``0 .. j``,
+    ``j .. k`` runs the same drawing calls in the same order and gives the same pixels; a fixed
+    view relies on it to add each frame's new records to a kept surface. Otherwise each layer
+    is one polyline per ship (faster)."""
     rows = slice(k0, k1 + 1)
-    width = style.px(2)
-    for k in range(data.ships.n):
-        if k1 > k0:
-            if data.has_estimate[k]:
-                pts = view.points(data.est_north_m[rows, k], data.est_east_m[rows, k])
-                pg.draw.lines(surf, st.estimate_colour(k), False, pts.tolist(), 1)
-            pts = view.points(data.north_m[rows, k], data.east_m[rows, k])
-            pg.draw.lines(surf, st.ship_colour(k), False, pts.tolist(), width)
-        if measurements:
-            valid = data.gnss_valid[rows, k] == 1
-            n, e = data.gnss_north_m[rows, k][valid], data.gnss_east_m[rows, k][valid]
-            ok = np.isfinite(n) & np.isfinite(e)
-            if ok.any():
-                _dots(pg, surf, view.points(n[ok], e[ok]), st.GNSS, style.px(2))
+    n = data.ships.n
+    width, dot = style.px(2), style.px(2)
+    true = [view.points(data.north_m[rows, j], data.east_m[rows, j]).tolist() for j in range(n)]
+    est = [view.points(data.est_north_m[rows, j], data.est_east_m[rows, j]).tolist()
+           if data.has_estimate[j] else None for j in range(n)]
+    fixes = []
+    for j in range(n):
+        if not measurements:
+            fixes.append(None)
+            continue
+        ok = ((data.gnss_valid[rows, j] == 1) & np.isfinite(data.gnss_north_m[rows, j])
+              & np.isfinite(data.gnss_east_m[rows, j]))
+        pts = np.zeros((ok.shape[0], 2), dtype=np.int64)
+        pts[ok] = view.points(data.gnss_north_m[rows, j][ok], data.gnss_east_m[rows, j][ok])
+        fixes.append((ok, pts))
+    if not stepwise:
+        for j in range(n):
+            if k1 > k0:
+                if est[j] is not None:
+                    pg.draw.lines(surf, st.estimate_colour(j), False, est[j], 1)
+                pg.draw.lines(surf, st.ship_colour(j), False, true[j], width)
+            if fixes[j] is not None and fixes[j][0].any():
+                _dots(pg, surf, fixes[j][1][fixes[j][0]], st.GNSS, dot)
+        return
+    half = dot // 2
+    # record k0 itself was drawn by the piece before this one (unless it is the first record)
+    for r in range(0 if k0 == 0 else 1, k1 - k0 + 1):
+        for j in range(n):
+            if r > 0:
+                if est[j] is not None:
+                    pg.draw.line(surf, st.estimate_colour(j), est[j][r - 1], est[j][r], 1)
+                pg.draw.line(surf, st.ship_colour(j), true[j][r - 1], true[j][r], width)
+            if fixes[j] is not None and fixes[j][0][r]:
+                x, y = fixes[j][1][r]
+                pg.draw.rect(surf, st.GNSS, (x - half, y - half, dot, dot))
 
 
 def draw_domains(pg: Any, surf: Any, view: View, style: st.Style, data: RunData, k: int

@@ -150,6 +150,7 @@ def write_report(campaign_dir: str | Path, out_dir: str | Path | None = None, wo
     picks = worst_encounters(rows, worst)
     spec = campaign_spec(campaign_dir) if picks else None
     figures = write_figures(rows, out)
+    _drop_stale(out / "encounters", {p.encounter for p in picks})
     for pick in tqdm(picks, unit="encounter", disable=not progress, leave=False):
         name = f"encounter_{pick.encounter}"
         run_dir = out / "encounters" / name
@@ -166,6 +167,24 @@ def write_report(campaign_dir: str | Path, out_dir: str | Path | None = None, wo
 
     atomic_write(out / "index.html", lambda fh: fh.write(page.encode()))
     return Report(out / "index.html", picks, time.perf_counter() - t0)
+
+
+def _drop_stale(folder: Path, keep: set[int]) -> None:
+    """Remove the replays, GIFs and thumbnails of encounters an earlier report picked and this
+    one does not (only names this module writes: ``encounter_K``, ``.gif``, ``.png``)."""
+    import shutil
+
+    if not folder.is_dir():
+        return
+    for item in folder.iterdir():
+        stem = item.name.removesuffix(".gif").removesuffix(".png")
+        number = stem.removeprefix("encounter_")
+        if stem == item.name.split(".")[0] and stem.startswith("encounter_") and \
+                number.isdigit() and int(number) not in keep:
+            if item.is_dir():
+                shutil.rmtree(item)
+            else:
+                item.unlink()
 
 
 def _rate(stat: dict[str, Any]) -> str:

@@ -4,9 +4,9 @@ not grow with the number of frames.
 * :class:`PngFrames`: one PNG per frame (``frame_00000.png`` ...), each written atomically, with
   the DPI in the file (``pHYs``);
 * :class:`GifWriter`: one animated GIF. The frames share one fixed palette
-  (:func:`trafficsim.render.style.gif_palette`, so colours do not flicker between frames) and
-  are LZW-encoded one by one by Pillow and appended to the file (imageio's GIF writer keeps
-  every frame in memory until it closes);
+  (:func:`trafficsim.render.style.gif_palette`, so colours do not flicker between frames; every
+  colour of the style comes out exactly), are LZW-encoded one by one by Pillow and appended to
+  the file (imageio's GIF writer keeps every frame in memory until it closes);
 * :class:`Mp4Writer`: H.264 video through imageio's ffmpeg writer (imageio-ffmpeg ships the
   ffmpeg binary), frames piped to ffmpeg as they come.
 
@@ -16,6 +16,7 @@ it is complete: an interrupted export never leaves a truncated file under the fi
 
 from __future__ import annotations
 
+import functools
 import os
 import struct
 import tempfile
@@ -52,15 +53,17 @@ class PngFrames:
         out_dir.mkdir(parents=True, exist_ok=True)
         self.out_dir, self.size, self.dpi = out_dir, size_px, dpi
         self.prefix, self.level = prefix, compress_level
-        self.paths: list[Path] = []
+        self.frames = 0
+
+    def path(self, k: int) -> Path:
+        return self.out_dir / f"{self.prefix}_{k:05d}.png"
 
     def write(self, rgb: bytes) -> None:
-        path = self.out_dir / f"{self.prefix}_{len(self.paths):05d}.png"
-        write_png(path, rgb, self.size, self.dpi, self.level)
-        self.paths.append(path)
+        write_png(self.path(self.frames), rgb, self.size, self.dpi, self.level)
+        self.frames += 1
 
     def close(self) -> list[Path]:
-        return list(self.paths)
+        return [self.path(k) for k in range(self.frames)]
 
     def abort(self) -> None:
         pass  # every file written is complete
@@ -100,18 +103,46 @@ class _TempTarget:
         self.tmp.unlink(missing_ok=True)
 
 
+class PaletteMap:
+    """RGB pixels to indices of a fixed palette through a table of every 24-bit colour: a
+    colour of the palette maps to its own entry (exactly; Pillow's quantizer looks colours up
+    at reduced precision and may pick a neighbour), any other colour to the entry nearest the
+    centre of its 8 x 8 x 8 cell."""
+
+    def __init__(self, palette: np.ndarray) -> None:
+        cell = np.arange(32, dtype=np.int32) * 8 + 4
+        centres = np.stack(np.meshgrid(cell, cell, cell, indexing="ij"), axis=-1).reshape(-1, 3)
+        pal = palette.astype(np.int32)
+        near = np.empty(centres.shape[0], dtype=np.uint8)
+        for a in range(0, centres.shape[0], 4096):  # 4096 x 256 distances at a time
+            d = ((centres[a:a + 4096, None, :] - pal[None, :, :]) ** 2).sum(axis=2)
+            near[a:a + 4096] = np.argmin(d, axis=1)
+        lut = near.reshape(32, 32, 32).repeat(8, axis=0).repeat(8, axis=1).repeat(8, axis=2)
+        # entries later in the palette must not overwrite an earlier copy of the same colour
+        for k in range(pal.shape[0] - 1, -1, -1):
+            lut[pal[k, 0], pal[k, 1], pal[k, 2]] = k
+        self._lut = lut.ravel()  # (2**24,) uint8, 16 MB
+
+    def indices(self, rgb: bytes) -> np.ndarray:
+        """``(n_pixels,)`` uint8 palette index of every pixel of packed RGB."""
+        px = np.frombuffer(rgb, dtype=np.uint8).reshape(-1, 3).astype(np.int32)
+        return self._lut[(px[:, 0] << 16) | (px[:, 1] << 8) | px[:, 2]]
+
+
+@functools.cache
+def _gif_map() -> PaletteMap:
+    return PaletteMap(gif_palette())
+
+
 class GifWriter:
     """An animated GIF (looping) at ``fps`` frames per second."""
 
     def __init__(self, path: Path, size_px: tuple[int, int], fps: float) -> None:
-        from PIL import Image
-
         self.target = _TempTarget(path)
         self.size = size_px
         self.delay_ms = max(10, round(100.0 / fps) * 10)  # GIF counts hundredths
         palette = gif_palette()
-        self._palette = Image.new("P", (1, 1))
-        self._palette.putpalette(palette.ravel().tolist())
+        self._map = _gif_map()
         self._fh: IO[bytes] = open(self.target.tmp, "wb")  # noqa: SIM115 (closed in close)
         w, h = size_px
         self._fh.write(b"GIF89a" + struct.pack("<HHBBB", w, h, 0xF7, 0, 0))  # 256-colour table
@@ -122,8 +153,7 @@ class GifWriter:
     def write(self, rgb: bytes) -> None:
         from PIL import GifImagePlugin, Image
 
-        image = Image.frombytes("RGB", self.size, rgb).quantize(
-            palette=self._palette, dither=Image.Dither.NONE)
+        image = Image.frombytes("P", self.size, self._map.indices(rgb).tobytes())
         for block in GifImagePlugin.getdata(image, duration=self.delay_ms):
             self._fh.write(block)
         self.frames += 1
