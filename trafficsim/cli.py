@@ -11,10 +11,13 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from trafficsim import __version__
 from trafficsim.errors import InputError, TrafficsimError
+
+if TYPE_CHECKING:
+    from trafficsim.render.frame import FrameOptions
 
 EXIT_USER_ERROR = 2
 
@@ -176,7 +179,7 @@ def _frame_flags(group: argparse._ActionsContainer) -> None:
                        help="GIF and MP4 frames per second (default 10)")
 
 
-def _frame_options(args: argparse.Namespace) -> object:
+def _frame_options(args: argparse.Namespace) -> FrameOptions:
     from trafficsim.render.frame import FrameOptions
 
     return FrameOptions(size_px=args.size, dpi=args.dpi, follow=args.follow,

@@ -98,5 +98,11 @@ def test_dpi_scales_text_and_boxes(synthetic_run):
     assert white((960, 720), 192.0) == pytest.approx(4 * base, rel=0.1)  # twice each way
 
 
+def test_a_ship_alone_at_rest(synthetic_run):
+    renderer = Renderer(load_run(synthetic_run([Ship("a", 0.0, 0.0, 0.0)], 1)), BARE)
+    assert renderer.view.m_per_px == pytest.approx(NM / (0.88 * 300))  # the smallest extent
+    assert _pixel(renderer.array(0), 200, 150) == st.ship_colour(0)
+
+
 def test_clock():
     assert clock(0.0) == "0:00:00" and clock(3725.4) == "1:02:05"

@@ -106,8 +106,9 @@ def _rss_bytes() -> int:
         return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
-@pytest.mark.parametrize("kind, size", [("gif", (400, 300)), ("png", (320, 240))])
-def test_a_thousand_frames_do_not_grow_memory(synthetic_run, tmp_path, kind, size):
+@pytest.mark.parametrize("kind", ["gif", "png"])
+def test_a_thousand_frames_do_not_grow_memory(synthetic_run, tmp_path, kind):
+    size = (320, 240)
     run = synthetic_run(_ships(), 1000, every_s=2.0, turn_degps=0.1)
     renderer = Renderer(load_run(run), FrameOptions(size_px=size, measurements=True))
     writer = (GifWriter(tmp_path / "m.gif", size, 25.0) if kind == "gif"

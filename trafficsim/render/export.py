@@ -92,13 +92,20 @@ def render_run(run_dir: str | Path, out_dir: str | Path, fmt: str = "png",
 
 
 def render_frame(run_dir: str | Path, path: str | Path, t_s: float,
-                 options: FrameOptions = DEFAULT_OPTIONS) -> Path:
-    """One PNG of a run folder at the record nearest ``t_s``."""
+                 options: FrameOptions = DEFAULT_OPTIONS, window_s: float | None = None
+                 ) -> Path:
+    """One PNG of a run folder at the record nearest ``t_s``; with ``window_s`` a fixed view
+    fits the ships' positions within ``window_s`` of that time only (a close-up)."""
     from trafficsim.render.writers import write_png
 
     data = load_run(run_dir)
-    k = int(np.argmin(np.abs(data.t_s[: data.count] - t_s)))
-    renderer = Renderer(data, options)
+    t = data.t_s[: data.count]
+    k = int(np.argmin(np.abs(t - t_s)))
+    fit_to = None
+    if window_s is not None:
+        near = np.abs(t - t[k]) <= window_s
+        fit_to = (data.north_m[: data.count][near], data.east_m[: data.count][near])
+    renderer = Renderer(data, options, fit_to)
     write_png(Path(path), renderer.rgb(k), options.size_px, options.dpi)
     return Path(path)
 
@@ -126,7 +133,8 @@ class LiveFrames:
     ``every_s`` of simulated time as the run goes (into ``out_dir``, as :func:`render_run`).
 
     Raises (when built):
-        InputError: a bad option, or ``every_s`` not a multiple of the scenario's record period.
+        InputError: a bad option, an unknown ship to follow, or ``every_s`` not a multiple of
+            the scenario's record period.
     """
 
     def __init__(self, scenario_path: str | Path, out_dir: str | Path, fmt: str = "png",
@@ -137,6 +145,10 @@ class LiveFrames:
 
         check_options(fmt, options, fps)
         scn = load_scenario(scenario_path)
+        names = [ship.name for ship in scn.ships]
+        if options.follow is not None and options.follow not in names:
+            raise InputError(f"no ship {options.follow!r} in {scenario_path}; ships: "
+                             f"{', '.join(names)}", key="--follow")
         self.record_every_s = record_steps(scn) * scn.dt_s
         self.stride = frame_stride(every_s, self.record_every_s, key="--frames-every-s")
         self.name, self.duration_s = scn.name, scn.duration_s

@@ -8,8 +8,9 @@ into the report folder), and the ``k`` worst encounters. Those are picked in tur
 rankings, each encounter once: collisions (smallest range first), smallest CPA, blind spots
 (smallest range first) and lowest compliance score of any ship. Each is replayed alone
 (:func:`trafficsim.campaign.replay.replay_encounter`, the same streams as the campaign) into
-``encounters/encounter_K/`` (a run folder), drawn as a GIF and as a thumbnail at its closest
-approach, and shown with the commands that replay and render it.
+``encounters/encounter_K/`` (a run folder), drawn as a GIF of the whole encounter and as a
+thumbnail of its closest approach (a close-up of the ships within five minutes of it), and
+shown with the commands that replay and render it.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from trafficsim.units import NM
 CRITERIA = ("collision", "smallest CPA", "blind spot", "lowest compliance")
 GIF_OPTIONS = FrameOptions(size_px=(640, 480), dpi=72.0)
 THUMB_OPTIONS = FrameOptions(size_px=(320, 240), dpi=64.0, legend=False, panel=False)
+THUMB_WINDOW_S = 300.0  # a thumbnail shows where the ships are within 5 min of the CPA
 GIF_FRAMES = 90  # about this many frames per GIF (a frame every whole record period)
 
 
@@ -161,7 +163,7 @@ def write_report(campaign_dir: str | Path, out_dir: str | Path | None = None, wo
         render_run(run_dir, out / "encounters", "gif", frames_every, GIF_OPTIONS, fps=10.0,
                    name=name)
         render_frame(run_dir, out / "encounters" / f"{name}.png", pick.t_min_range_s,
-                     THUMB_OPTIONS)
+                     THUMB_OPTIONS, window_s=THUMB_WINDOW_S)
     page = _page(campaign_dir, spec, summarise(rows), figures, picks)
     from trafficsim.io.results import atomic_write
 

@@ -2,7 +2,7 @@
 not grow with the number of frames.
 
 * :class:`PngFrames`: one PNG per frame (``frame_00000.png`` ...), each written atomically, with
-  the DPI in the file (``pHYs``);
+  the DPI in the file (``pHYs``), encoded by :func:`encode_png`;
 * :class:`GifWriter`: one animated GIF. The frames share one fixed palette
   (:func:`trafficsim.render.style.gif_palette`, so colours do not flicker between frames; every
   colour of the style comes out exactly), are LZW-encoded one by one by Pillow and appended to
@@ -20,6 +20,7 @@ import functools
 import os
 import struct
 import tempfile
+import zlib
 from pathlib import Path
 from typing import IO, Protocol
 
@@ -49,7 +50,7 @@ class PngFrames:
     """Numbered PNG files in a folder."""
 
     def __init__(self, out_dir: Path, size_px: tuple[int, int], dpi: float,
-                 prefix: str = "frame", compress_level: int = 1) -> None:
+                 prefix: str = "frame", compress_level: int = 3) -> None:
         out_dir.mkdir(parents=True, exist_ok=True)
         self.out_dir, self.size, self.dpi = out_dir, size_px, dpi
         self.prefix, self.level = prefix, compress_level
@@ -69,15 +70,35 @@ class PngFrames:
         pass  # every file written is complete
 
 
-def write_png(path: Path, rgb: bytes, size_px: tuple[int, int], dpi: float,
-              compress_level: int = 1) -> None:
-    """One RGB image as a PNG, atomically (zlib level 1: half the time of the default level 6
-    for about a third more bytes on these flat-coloured pictures)."""
-    from PIL import Image
+def encode_png(rgb: bytes, size_px: tuple[int, int], dpi: float, level: int = 3) -> bytes:
+    """PNG bytes of packed RGB rows (W3C PNG specification, 2nd ed.: ``IHDR`` 8-bit truecolour,
+    ``pHYs`` in pixels per metre, one ``IDAT``, ``IEND``).
 
-    image = Image.frombytes("RGB", size_px, rgb)
-    atomic_write(path, lambda fh: image.save(fh, "PNG", compress_level=compress_level,
-                                             dpi=(dpi, dpi)))
+    Every row gets filter type 0 (none): on these flat-coloured pictures zlib finds the long
+    runs itself, and the bytes come out no larger than with Pillow's per-row adaptive filters
+    at a quarter of the time (most of Pillow's time goes to trying the five filters)."""
+    w, h = size_px
+    rows = np.empty((h, 3 * w + 1), dtype=np.uint8)
+    rows[:, 0] = 0
+    rows[:, 1:] = np.frombuffer(rgb, dtype=np.uint8).reshape(h, 3 * w)
+    per_m = round(dpi / 0.0254)
+    return b"".join((b"\x89PNG\r\n\x1a\n",
+                     _chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)),
+                     _chunk(b"pHYs", struct.pack(">IIB", per_m, per_m, 1)),
+                     _chunk(b"IDAT", zlib.compress(rows.tobytes(), level)),
+                     _chunk(b"IEND", b"")))
+
+
+def _chunk(tag: bytes, data: bytes) -> bytes:
+    return (struct.pack(">I", len(data)) + tag + data
+            + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF))
+
+
+def write_png(path: Path, rgb: bytes, size_px: tuple[int, int], dpi: float,
+              level: int = 3) -> None:
+    """One RGB image as a PNG file, atomically."""
+    data = encode_png(rgb, size_px, dpi, level)
+    atomic_write(path, lambda fh: fh.write(data))
 
 
 class _TempTarget:
