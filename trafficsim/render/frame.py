@@ -1,8 +1,8 @@
 """The renderer: keeps what does not change between frames and draws one frame per record.
 
 With a fixed view (every ship fitted) the sea, the routes and the tracks drawn so far live on
-one kept surface: a frame copies it, adds the segments recorded since the previous frame to it,
-then draws what moves. With a view that follows a ship everything on the chart moves, so the
+one kept surface: a frame adds the records since the previous frame to it, copies it, then
+draws what moves. With a view that follows a ship everything on the chart moves, so the
 chart layers are drawn afresh each frame. The overlay (scale bar, north arrow, legend) is drawn
 once either way.
 """

@@ -11,7 +11,6 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -289,14 +288,6 @@ def draw_hulls(pg: Any, surf: Any, view: View, style: st.Style, data: RunData, k
         pg.draw.polygon(surf, colour, poly)
         if length_px[j] >= 3.0 * SMALL_HULL_PX:
             pg.draw.polygon(surf, st.INK, poly, 1)
-
-
-@dataclass(frozen=True)
-class ShipState:
-    """What a ship's label says."""
-
-    role: str
-    speed_kn: float
 
 
 def draw_labels(surf: Any, view: View, style: st.Style, text: Text, data: RunData, k: int,
