@@ -1,4 +1,5 @@
-"""Command line: ``trafficsim run | campaign | explain | trial | identify | validate``.
+"""Command line: ``trafficsim run | campaign | explain | trial | identify | validate | render |
+report | replay``.
 
 Every user error ends as one line on stderr (``trafficsim: error: file:line: key: message``) and
 exit code 2, never a traceback. Heavy imports happen inside the commands so ``--help`` is fast.
@@ -10,10 +11,13 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import TYPE_CHECKING, NoReturn
 
 from trafficsim import __version__
 from trafficsim.errors import InputError, TrafficsimError
+
+if TYPE_CHECKING:
+    from trafficsim.render.frame import FrameOptions
 
 EXIT_USER_ERROR = 2
 
@@ -48,6 +52,14 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="simulate a scenario file")
     run.add_argument("scenario", type=Path, help="scenario YAML file")
     run.add_argument("--out", type=Path, required=True, help="output folder")
+    frames = run.add_argument_group("frames drawn as the run goes (into OUT/frames)")
+    frames.add_argument("--frames", nargs="?", const="png", default=None,
+                        choices=["png", "gif", "mp4"],
+                        help="draw frames while the run goes: png (default), gif or mp4")
+    frames.add_argument("--frames-every-s", type=_positive(float), default=None,
+                        help="a frame every this many simulated seconds (a multiple of the "
+                             "record period; default: every record)")
+    _frame_flags(frames)
     run.set_defaults(func=_cmd_run)
 
     camp = sub.add_parser("campaign", help="Monte Carlo campaign of random encounters "
@@ -136,13 +148,101 @@ def build_parser() -> argparse.ArgumentParser:
                          "without running them")
     val.add_argument("files", type=Path, nargs="+")
     val.set_defaults(func=_cmd_validate)
+
+    ren = sub.add_parser("render", help="pictures of a run: PNG frames, GIF or MP4 (headless)")
+    ren.add_argument("run_dir", type=Path, help="output folder of 'trafficsim run' or 'replay'")
+    ren.add_argument("--format", choices=["png", "gif", "mp4"], default="png",
+                     help="numbered PNG frames (default), one animated GIF or one MP4")
+    ren.add_argument("--every-s", type=_positive(float), default=None,
+                     help="a frame every this many simulated seconds (a multiple of the "
+                          "run's record period; default: every record)")
+    ren.add_argument("--out", type=Path, required=True, help="output folder")
+    _frame_flags(ren)
+    ren.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    ren.set_defaults(func=_cmd_render)
+
+    rep = sub.add_parser("report", help="HTML report of a campaign with figures and the worst "
+                         "encounters as GIFs")
+    rep.add_argument("campaign_dir", type=Path, help="output folder of 'trafficsim campaign'")
+    rep.add_argument("--worst", type=_non_negative_int, default=6,
+                     help="how many of the worst encounters to replay and draw (default 6)")
+    rep.add_argument("--out", type=Path, default=None,
+                     help="report folder (default: CAMPAIGN_DIR/report)")
+    rep.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    rep.set_defaults(func=_cmd_report)
+
+    rpl = sub.add_parser("replay", help="re-simulate one encounter of a campaign into a run "
+                         "folder")
+    rpl.add_argument("campaign_dir", type=Path, help="output folder of 'trafficsim campaign'")
+    rpl.add_argument("--encounter", type=_non_negative_int, required=True,
+                     help="encounter index (the 'encounter' column of encounters.parquet)")
+    rpl.add_argument("--out", type=Path, required=True, help="output folder (a run folder)")
+    rpl.add_argument("--record-every-s", type=_positive(float), default=None,
+                     help="record period (a multiple of the campaign's step; default 5 s)")
+    rpl.set_defaults(func=_cmd_replay)
     return p
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got '{text}'") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got '{text}'")
+    return value
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels (e.g. 960x720), "
+                                         f"got '{text}'") from None
+    if not (64 <= w <= 8192 and 64 <= h <= 8192):
+        raise argparse.ArgumentTypeError(f"expected 64 to 8192 pixels each way, got '{text}'")
+    return w, h
+
+
+def _frame_flags(group: argparse._ActionsContainer) -> None:
+    """How frames look (``render`` and ``run --frames``)."""
+    group.add_argument("--size", type=_size, default=(960, 720),
+                       help="frame size WIDTHxHEIGHT in pixels (default 960x720)")
+    group.add_argument("--dpi", type=_positive(float), default=96.0,
+                       help="dots per inch: text and lines scale with it (default 96)")
+    group.add_argument("--follow", default=None, metavar="SHIP",
+                       help="follow this ship (default: a fixed view that fits every ship)")
+    group.add_argument("--range-nm", type=_positive(float), default=3.0,
+                       help="with --follow: distance from the ship to the view's edge "
+                            "(default 3)")
+    group.add_argument("--measurements", action="store_true", help="draw the raw GNSS fixes")
+    group.add_argument("--fps", type=_positive(float), default=10.0,
+                       help="GIF and MP4 frames per second (default 10)")
+
+
+def _frame_options(args: argparse.Namespace) -> FrameOptions:
+    from trafficsim.render.frame import FrameOptions
+
+    return FrameOptions(size_px=args.size, dpi=args.dpi, follow=args.follow,
+                        range_nm=args.range_nm, measurements=args.measurements)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from trafficsim.run import run_scenario
 
-    summary = run_scenario(args.scenario, args.out)
+    hook = None
+    if args.frames is not None:
+        from trafficsim.render.export import LiveFrames
+
+        hook = LiveFrames(args.scenario, args.out / "frames", args.frames, args.frames_every_s,
+                          _frame_options(args), args.fps)
+    try:
+        summary = run_scenario(args.scenario, args.out, hook)
+    except BaseException:
+        if hook is not None:
+            hook.abort()
+        raise
+    frame_files = [] if hook is None else hook.close()
     print(f"{summary['scenario']}: {summary['n_ships']} ships, {summary['duration_s']:g} s "
           f"simulated in {summary['wall_time_s']:.2f} s "
           f"({summary['ship_steps_per_s']:,.0f} ship-steps/s)")
@@ -156,6 +256,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
               f"from t = {spot['from_s']:.0f} s")
     files = ["trajectories.parquet", "tracks.parquet", "decisions.parquet", "summary.json"]
     print("results: " + ", ".join(str(args.out / f) for f in files if (args.out / f).exists()))
+    if hook is not None:
+        where = frame_files[0] if args.frames != "png" else args.out / "frames"
+        print(f"frames: {hook.frames} ({args.frames}) in {where}")
     return 0
 
 
@@ -274,6 +377,41 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from trafficsim.validate import validate_files
 
     return validate_files(args.files)
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    from trafficsim.render.export import render_run
+
+    done = render_run(args.run_dir, args.out, args.format, args.every_s, _frame_options(args),
+                      args.fps, progress=not args.no_progress)
+    where = done.paths[0] if args.format != "png" else args.out
+    print(f"{done.frames} frames in {done.seconds:.1f} s ({done.frames_per_s:.0f} frames/s): "
+          f"{where}")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from trafficsim.render.report import write_report
+
+    rep = write_report(args.campaign_dir, args.out, args.worst, progress=not args.no_progress)
+    print(f"report with {len(rep.worst)} worst encounters in {rep.seconds:.1f} s: {rep.path}")
+    return 0
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from trafficsim.campaign.replay import replay_encounter
+
+    summary = replay_encounter(args.campaign_dir, args.encounter, args.out,
+                               args.record_every_s)
+    print(f"{summary['scenario']} ({summary['encounter_type']}): {summary['n_ships']} ships, "
+          f"{summary['duration_s']:g} s")
+    for pair in summary["pairs"]:
+        flag = "  COLLISION" if pair["collision"] else ""
+        print(f"  {pair['ship_a']} - {pair['ship_b']}: min range {pair['min_range_m']:.0f} m "
+              f"at t = {pair['t_min_range_s']:.0f} s{flag}")
+    print(f"results: {args.out} (render it: trafficsim render {args.out} --format gif "
+          f"--out {args.out / 'frames'})")
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

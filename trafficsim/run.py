@@ -1,10 +1,14 @@
 """Run one scenario file: build the batch, simulate, write ``trajectories.parquet`` and
-``summary.json`` to the output folder."""
+``summary.json`` to the output folder.
+
+:func:`record_run` and :func:`write_run` are shared with the replay of a campaign encounter
+(:mod:`trafficsim.campaign.replay`), so both write the same run folder."""
 
 from __future__ import annotations
 
 import platform
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -184,7 +188,61 @@ def package_versions() -> dict[str, str]:
             "shapely": shapely.__version__, "pyarrow": pyarrow.__version__}
 
 
-def run_scenario(path: Path, out_dir: Path) -> dict[str, Any]:
+def record_steps(scn: Scenario) -> int:
+    """Steps between records of a scenario run (its ``record_every_s``, at least one step)."""
+    return max(1, round(scn.record_every_s / scn.dt_s))
+
+
+#: ``on_record(recorder, sim)``: called after each record (frames drawn while a run goes)
+RecordHook = Callable[[Recorder, Simulation], None]
+
+
+def record_run(sim: Simulation, n_steps: int, every: int, on_record: RecordHook | None = None
+               ) -> tuple[Recorder, float]:
+    """Step ``sim`` ``n_steps`` times, recording every ``every`` steps (and at the start).
+
+    Returns the recorder and the wall time of steps 2 .. n (the first step compiles any kernel
+    not yet in the cache; time spent in ``on_record`` is not counted)."""
+    batch = sim.batch
+    rec = Recorder.allocate(n_steps // every + 1, batch.n_ships, batch.x.shape[0])
+    hook_s = 0.0
+
+    def record() -> None:
+        nonlocal hook_s
+        rec(sim)
+        if on_record is not None:
+            t0 = time.perf_counter()
+            on_record(rec, sim)
+            hook_s += time.perf_counter() - t0
+
+    record()
+    sim.step()
+    if every == 1:
+        record()
+    hook_s = 0.0
+    wall = time.perf_counter()
+    for k in range(2, n_steps + 1):
+        sim.step()
+        if k % every == 0:
+            record()
+    return rec, time.perf_counter() - wall - hook_s
+
+
+def write_run(out_dir: Path, rec: Recorder, sim: Simulation, summary: dict[str, Any]) -> None:
+    """Write a run folder: trajectories, tracks and decisions (when there are any), summary."""
+    batch = sim.batch
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_parquet(out_dir / "trajectories.parquet", rec.columns(batch))
+    tracks = rec.track_columns(sim)
+    if tracks is not None:
+        write_parquet(out_dir / "tracks.parquet", tracks)
+    if sim.decider is not None and sim.decider.record:
+        write_parquet(out_dir / "decisions.parquet", sim.decider.records(batch.names))
+    write_json(out_dir / "summary.json", summary)
+
+
+def run_scenario(path: Path, out_dir: Path, on_record: RecordHook | None = None
+                 ) -> dict[str, Any]:
     """Simulate the scenario at ``path``; write results to ``out_dir``; return the summary."""
     scn = load_scenario(path)
     ships, env = scenario_setups(scn)
@@ -193,32 +251,21 @@ def run_scenario(path: Path, out_dir: Path) -> dict[str, Any]:
     sim = Simulation.start(batch, scn.dt_s, scn.seed, decider, scn.decision_period_s,
                            scn.domain)
     n_steps = round(scn.duration_s / scn.dt_s)
-    every = max(1, round(scn.record_every_s / scn.dt_s))
-    rec = Recorder.allocate(n_steps // every + 1, batch.n_ships, batch.x.shape[0])
-    rec(sim)
-    sim.step()  # the first step compiles any kernel not yet in the cache: keep it off the clock
-    if every == 1:
-        rec(sim)
-    wall = time.perf_counter()
-    for k in range(2, n_steps + 1):
-        sim.step()
-        if k % every == 0:
-            rec(sim)
-    wall = time.perf_counter() - wall
-    summary = _summary(scn, sim, n_steps, wall, max(n_steps - 1, 1))
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_parquet(out_dir / "trajectories.parquet", rec.columns(batch))
-    tracks = rec.track_columns(sim)
-    if tracks is not None:
-        write_parquet(out_dir / "tracks.parquet", tracks)
-    if decider is not None:
-        write_parquet(out_dir / "decisions.parquet", decider.records(batch.names))
-    write_json(out_dir / "summary.json", summary)
+    every = record_steps(scn)
+    rec, wall = record_run(sim, n_steps, every, on_record)
+    header = {"scenario": scn.name, "scenario_file": str(scn.path), "seed": scn.seed,
+              "duration_s": scn.duration_s, "dt_s": scn.dt_s}
+    summary = run_summary(header, sim, n_steps, wall, max(n_steps - 1, 1), every * scn.dt_s,
+                          scn.domain)
+    write_run(out_dir, rec, sim, summary)
     return summary
 
 
-def _summary(scn: Scenario, sim: Simulation, n_steps: int, wall_s: float, timed_steps: int
-             ) -> dict[str, Any]:
+def run_summary(header: dict[str, Any], sim: Simulation, n_steps: int, wall_s: float,
+                timed_steps: int, record_every_s: float, domain: str) -> dict[str, Any]:
+    """``summary.json`` of a run: ``header`` (scenario, scenario_file, seed, duration_s, dt_s)
+    then the outcome per pair, the ships (with what drawing them needs: particulars,
+    behaviour, route) and the run's metadata."""
     b, m = sim.batch, sim.metrics
     pairs = [
         {"ship_a": b.names[i], "ship_b": b.names[j],
@@ -233,19 +280,19 @@ def _summary(scn: Scenario, sim: Simulation, n_steps: int, wall_s: float, timed_
     ships = [
         {"name": b.names[k], "type": b.types[k], "north_m": float(x[NORTH, k]),
          "east_m": float(x[EAST, k]), "heading_deg": float(compass_deg(x[PSI, k])),
-         "route_done": bool(sim.route.wp_index[k] >= b.n_waypoints[k])}
+         "route_done": bool(sim.route.wp_index[k] >= b.n_waypoints[k]),
+         "length_m": float(b.length_m[k]), "beam_m": float(b.beam_m[k]),
+         "behaviour": b.behaviours[k] if b.behaviours else "keep_course",
+         "route_m": b.waypoints[k, : b.n_waypoints[k]].tolist()}
         for k in range(b.n_ships)
     ]
     return {
-        "scenario": scn.name,
-        "scenario_file": str(scn.path),
-        "seed": scn.seed,
-        "duration_s": scn.duration_s,
-        "dt_s": scn.dt_s,
+        **header,
         "n_ships": b.n_ships,
         "n_steps": n_steps,
+        "record_every_s": record_every_s,
         "collisions": int(m.collision.sum()),
-        "domain": scn.domain,
+        "domain": domain,
         "domain_violations": int(m.domain_violation.sum()),
         "blind_spots": [] if sim.decider is None else sim.decider.blind_spot_report(b.names),
         "pairs": pairs,

@@ -1,0 +1,108 @@
+"""Frames: ships where the view transform puts them, in their colours; frames that show
+something; the same input giving the same picture however it is reached."""
+
+import numpy as np
+import pytest
+
+from tests.render.conftest import Ship
+from trafficsim.errors import InputError
+from trafficsim.render import style as st
+from trafficsim.render.data import load_run
+from trafficsim.render.frame import FrameOptions, Renderer, clock
+from trafficsim.units import NM
+
+BARE = FrameOptions(size_px=(400, 300), legend=False, panel=False)
+
+
+def _pixel(frame: np.ndarray, x: float, y: float) -> tuple:
+    return tuple(int(c) for c in frame[int(np.floor(y)), int(np.floor(x))])
+
+
+def _metres_to_px(north, east, centre_n, centre_e, m_per_px, origin):
+    return origin[0] + (east - centre_e) / m_per_px, origin[1] - (north - centre_n) / m_per_px
+
+
+def test_ships_are_drawn_at_their_pixels_in_their_colours(synthetic_run):
+    ships = [Ship("a", 500.0, -300.0, 30.0, length_m=200.0, beam_m=40.0),
+             Ship("b", 1500.0, 700.0, 250.0, length_m=150.0, beam_m=25.0)]
+    renderer = Renderer(load_run(synthetic_run(ships, 3)), BARE)
+    frame = renderer.array(2)
+    # the fitted view, worked out by hand: both ships within the smallest extent (1 NM), 6 %
+    # margins, centred between them in a 400 x 300 frame
+    scale = NM / (0.88 * 300)
+    assert renderer.view.m_per_px == pytest.approx(scale)
+    for k, s in enumerate(ships):
+        x, y = _metres_to_px(s.north_m, s.east_m, 1000.0, 200.0, scale, (200.0, 150.0))
+        assert _pixel(frame, x, y) == st.ship_colour(k)
+        psi = np.radians(s.heading_deg)
+        ahead = 0.35 * s.length_m  # forward of the reference point, inside the bow taper
+        xb, yb = _metres_to_px(s.north_m + ahead * np.cos(psi), s.east_m + ahead * np.sin(psi),
+                               1000.0, 200.0, scale, (200.0, 150.0))
+        assert _pixel(frame, xb, yb) == st.ship_colour(k)
+        # to port, three beams off: open sea (labels are drawn to the right of the ship)
+        side = 3.0 * s.beam_m
+        xp, yp = _metres_to_px(s.north_m - side * np.sin(psi), s.east_m + side * np.cos(psi)
+                               * -1.0, 1000.0, 200.0, scale, (200.0, 150.0))
+        assert _pixel(frame, xp, yp) == st.SEA
+
+
+def test_a_ship_followed_stays_at_the_centre_of_the_chart(synthetic_run):
+    ships = [Ship("a", 0.0, 0.0, 90.0, speed_kn=20.0, length_m=300.0, beam_m=50.0),
+             Ship("b", 4000.0, 0.0, 180.0, speed_kn=10.0)]
+    run = synthetic_run(ships, 30)
+    renderer = Renderer(load_run(run), FrameOptions(size_px=(400, 300), follow="a",
+                                                    range_nm=1.0, legend=False, panel=False))
+    assert renderer.view.m_per_px == pytest.approx(NM / 150.0)
+    for k in (0, 12, 29):
+        assert _pixel(renderer.array(k), 200, 150) == st.ship_colour(0)
+    with pytest.raises(InputError, match="no ship 'c'"):
+        Renderer(load_run(run), FrameOptions(follow="c"))
+
+
+def test_frames_are_not_blank(synthetic_run):
+    ships = [Ship("a", 0.0, 0.0, 45.0, speed_kn=15.0), Ship("b", 3000.0, 0.0, 135.0, 15.0)]
+    renderer = Renderer(load_run(synthetic_run(ships, 60)), FrameOptions(size_px=(480, 360)))
+    first, last = renderer.array(0), renderer.array(59)
+    for frame in (first, last):
+        colours = {tuple(c) for c in frame.reshape(-1, 3)[::7]}
+        assert len(colours) > 20
+        assert st.ship_colour(0) in colours and st.ship_colour(1) in colours
+        assert st.INK in colours  # panel, legend, scale bar
+        assert np.mean(np.any(frame != st.SEA, axis=2)) > 0.02
+    assert np.mean(np.any(first != last, axis=2)) > 0.005  # the ships moved
+
+
+@pytest.mark.parametrize("follow", [None, "a"])
+def test_the_same_input_gives_the_same_picture(synthetic_run, follow):
+    ships = [Ship("a", 0.0, 0.0, 10.0, speed_kn=12.0), Ship("b", 2500.0, 1500.0, 200.0, 9.0)]
+    run = synthetic_run(ships, 40, turn_degps=0.2)
+    options = FrameOptions(size_px=(320, 240), follow=follow, measurements=True)
+    one, two = Renderer(load_run(run), options), Renderer(load_run(run), options)
+    sequence = [one.array(k) for k in range(40)]
+    # a fresh renderer drawing one frame alone, and the first going backwards
+    for k in (0, 17, 39):
+        np.testing.assert_array_equal(two.array(k), sequence[k])
+    np.testing.assert_array_equal(one.array(5), sequence[5])
+
+
+def test_dpi_scales_text_and_boxes(synthetic_run):
+    ships = [Ship("a", 0.0, 0.0, 45.0, speed_kn=15.0), Ship("b", 3000.0, 0.0, 135.0, 15.0)]
+    run = synthetic_run(ships, 20)
+
+    def white(size, dpi):  # pixels of the panel and legend boxes
+        frame = Renderer(load_run(run), FrameOptions(size_px=size, dpi=dpi)).array(19)
+        return np.sum(np.all(frame == st.PANEL, axis=2))
+
+    base = white((480, 360), 96.0)
+    assert white((960, 720), 96.0) == base  # more pixels, same DPI: boxes keep their size
+    assert white((960, 720), 192.0) == pytest.approx(4 * base, rel=0.1)  # twice each way
+
+
+def test_a_ship_alone_at_rest(synthetic_run):
+    renderer = Renderer(load_run(synthetic_run([Ship("a", 0.0, 0.0, 0.0)], 1)), BARE)
+    assert renderer.view.m_per_px == pytest.approx(NM / (0.88 * 300))  # the smallest extent
+    assert _pixel(renderer.array(0), 200, 150) == st.ship_colour(0)
+
+
+def test_clock():
+    assert clock(0.0) == "0:00:00" and clock(3725.4) == "1:02:05"

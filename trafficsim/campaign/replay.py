@@ -1,0 +1,98 @@
+"""Re-simulate one encounter of a finished campaign alone and write a normal run folder.
+
+Encounter ``k`` depends only on (campaign seed, ``k``) (:func:`trafficsim.campaign.generator.draw`),
+and its ships' random streams are keyed by ``k`` whatever batch it runs in
+(:mod:`trafficsim.campaign.runner`), so :func:`replay_encounter` rebuilds it with the same
+streams, rules, policy, domain and step as the campaign (:func:`~.runner.prepare` on the one
+encounter) and reproduces its rows exactly. The folder is the one ``trafficsim run`` writes
+(:func:`trafficsim.run.record_run`, :func:`trafficsim.run.write_run`), so ``trafficsim
+render`` and ``trafficsim explain`` work on it; its ``summary.json`` adds ``campaign_dir``,
+``encounter`` and ``encounter_type``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from trafficsim.campaign.spec import CampaignSpec
+from trafficsim.errors import InputError
+
+#: record period of a replay unless asked otherwise (rounded to whole steps)
+RECORD_EVERY_S = 5.0
+
+
+def campaign_spec(campaign_dir: str | Path) -> CampaignSpec:
+    """The spec a campaign folder was run with, checked to be unchanged since.
+
+    Raises:
+        InputError: not a campaign folder, the spec file gone or changed since the run.
+    """
+    from trafficsim.campaign.execute import _spec_hash
+    from trafficsim.campaign.spec import load_spec
+
+    folder = Path(campaign_dir)
+    manifest = folder / "campaign.json"
+    if not folder.is_dir():
+        raise InputError("no such folder (the output folder of 'trafficsim "
+                         "campaign' was expected)", path=str(folder))
+    if not manifest.is_file():
+        raise InputError("no campaign.json here (the output folder of 'trafficsim "
+                         "campaign' was expected)", path=str(folder))
+    try:
+        info = json.loads(manifest.read_text())
+        spec_path = Path(info["spec"])
+        digest = info["spec_sha256"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise InputError(f"unreadable ({err})", path=str(manifest)) from None
+    if not spec_path.is_file():
+        raise InputError(f"the campaign's spec {spec_path} is gone; a replay needs "
+                         "it", path=str(manifest))
+    if _spec_hash(spec_path) != digest:
+        raise InputError(f"changed since the campaign in {folder} ran; a replay "
+                         "would not reproduce it (restore the spec, or run the campaign "
+                         "again)", path=str(spec_path))
+    return load_spec(spec_path)
+
+
+def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Path,
+                     record_every_s: float | None = None, on_record: Any = None
+                     ) -> dict[str, Any]:
+    """Simulate encounter ``encounter`` of the campaign in ``campaign_dir`` and write its run
+    folder to ``out_dir``; return the summary. ``on_record`` as for
+    :func:`trafficsim.run.record_run`.
+
+    Raises:
+        InputError: see :func:`campaign_spec`; an encounter index outside the campaign; a
+            record period that is not a positive multiple of the campaign's step.
+    """
+    from trafficsim.campaign.runner import prepare
+    from trafficsim.run import record_run, run_summary, write_run
+
+    spec = campaign_spec(campaign_dir)
+    if not 0 <= encounter < spec.n_encounters:
+        raise InputError(f"expected an encounter index 0 .. {spec.n_encounters - 1}, got "
+                         f"{encounter}", key="--encounter")
+    every_s = RECORD_EVERY_S if record_every_s is None else record_every_s
+    every = round(every_s / spec.dt_s)
+    if every < 1 or abs(every * spec.dt_s - every_s) > 1e-9 * every_s:
+        if record_every_s is not None:
+            raise InputError(f"expected a whole multiple of the campaign's step "
+                             f"({spec.dt_s:g} s), got {record_every_s:g}",
+                             key="--record-every-s")
+        every = max(1, every)
+    encounters, sim = prepare(spec, encounter, encounter + 1)
+    if sim.decider is not None:
+        sim.decider.record = True  # decisions.parquet (recording changes nothing else)
+    n_steps = round(spec.duration_s / spec.dt_s)
+    rec, wall = record_run(sim, n_steps, every, on_record)
+    header = {"scenario": f"{spec.name} encounter {encounter}",
+              "scenario_file": str(spec.path), "seed": spec.seed,
+              "duration_s": spec.duration_s, "dt_s": spec.dt_s,
+              "campaign_dir": str(Path(campaign_dir).resolve()), "encounter": encounter,
+              "encounter_type": encounters[0].kind}
+    summary = run_summary(header, sim, n_steps, wall, max(n_steps - 1, 1), every * spec.dt_s,
+                          spec.domain)
+    write_run(Path(out_dir), rec, sim, summary)
+    return summary
