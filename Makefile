@@ -26,7 +26,8 @@ lint: $(STAMP)
 	$(PY) -m ruff check trafficsim tests
 
 bench: $(STAMP)
-	$(PY) -m pytest tests/benchmarks --benchmark-only --benchmark-json=out/benchmark.json
+	$(PY) -m pytest tests/benchmarks --benchmark-only --benchmark-timer=time.process_time \
+		--benchmark-json=out/benchmark.json
 
 clean:
 	rm -rf $(VENV) out build *.egg-info
