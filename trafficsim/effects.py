@@ -190,6 +190,35 @@ def bounds(name: str, length_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarr
             np.array([p.start for p in ps]) * scale)
 
 
+def start_grid(name: str, length_m: float) -> np.ndarray:
+    """``(g, p)`` coarse grid of starting values of an effect's fit (the cost of a delay,
+    lag or direction has local minima; the best grid point starts the least squares)."""
+    ang = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
+
+    def circle(radii: Sequence[float]) -> np.ndarray:
+        pts = [[0.0, 0.0]] + [[r * np.cos(a), r * np.sin(a)] for r in radii for a in ang]
+        return np.array(pts)
+
+    if name == "current":
+        return circle((0.25, 0.6))
+    if name == "wind":
+        return circle((10.0, 25.0))
+    if name == "lever_arm":
+        return np.array([[x * length_m, y * length_m] for x in (-0.3, 0.0, 0.3)
+                         for y in (-0.05, 0.0, 0.05)])
+    if name == "compass_bias":
+        return np.array([[b, 0.0, 0.0] for b in (-5.0, -2.5, 0.0, 2.5, 5.0)])
+    if name == "steering_lag":
+        return np.array([[t, r] for t in (1.0, 3.0, 6.0, 10.0, 15.0, 25.0)
+                         for r in (1.0, 3.0, 10.0)])
+    one = {"gnss_lag": (1.0, 2.0, 4.0, 8.0, 12.0, 18.0, 27.0, 40.0, 60.0, 100.0),
+           "resistance": (0.5, 0.7, 0.85, 1.0, 1.2, 1.5, 2.0, 3.0),
+           "propeller_asymmetry": (-4.0, -2.0, -1.0, 0.0, 1.0, 2.0, 4.0),
+           "shallow_water": (0.0, 0.2, 0.4, 0.6, 0.8),
+           "ais_latency": (0.0, 1.0, 2.0, 4.0, 6.0, 8.0, 11.0, 15.0, 20.0, 30.0)}[name]
+    return np.array(one)[:, None]
+
+
 # ---------------------------------------------------------------------------------------------
 # hull and steering: the ship spec
 
@@ -315,24 +344,32 @@ def pv_sp(tau_s: float, sigma_m: float) -> float:
 
 
 def true_start(x0: np.ndarray, effects: Mapping[str, Mapping[str, float]],
-               current_ne: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
+               current_ne: tuple[float, float] = (0.0, 0.0),
+               ahead: np.ndarray | None = None) -> np.ndarray:
     """True state ``(8, W)`` at the start of each window from the MEASURED one.
 
     ``x0`` holds the state smoothed from the measured position and heading (over-ground
     velocities of the antenna, body frame of the measured heading). Undone, in order: report
-    latency (the truth is ``latency`` ahead: first-order extrapolation), compass error, antenna
+    latency (the truth is the measured state ``latency`` later: ``ahead`` ``(8, W)`` when the
+    caller has it from the data, else first-order extrapolation), compass error, antenna
     lever arm (``p = p_a - R(psi) r_a``, ``v = v_a - r x r_a``), and the current (the model's
     ``u, v`` are through the water: over-ground minus current).
     """
     x = np.array(x0, dtype=float, copy=True)
-    if "ais_latency" in effects:
+    if "ais_latency" in effects and ahead is not None:
+        x = np.array(ahead, dtype=float, copy=True)
+    elif "ais_latency" in effects:
         lat = effects["ais_latency"]["latency_s"]
         c, s = np.cos(x[2]), np.sin(x[2])
         x[0] += lat * (x[3] * c - x[4] * s)
         x[1] += lat * (x[3] * s + x[4] * c)
         x[2] += lat * x[5]
     if "compass_bias" in effects:
-        x[2] -= compass_error(x[2], effects["compass_bias"])
+        # heading, and the smoothed velocities from the measured body frame to the true one
+        e = compass_error(x[2], effects["compass_bias"])
+        x[2] -= e
+        c, s = np.cos(e), np.sin(e)
+        x[3], x[4] = x[3] * c - x[4] * s, x[3] * s + x[4] * c
     if "lever_arm" in effects:
         xa, ya = effects["lever_arm"]["x_m"], effects["lever_arm"]["y_m"]
         c, s = np.cos(x[2]), np.sin(x[2])

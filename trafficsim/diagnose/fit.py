@@ -22,7 +22,7 @@ candidate that lowers the penalised held-out cost most, fitting the whole set jo
 lowers it by at least ``MIN_GAIN`` (5 %).
 
 Noise floor: ``J_floor = 1/2 sum_channels m_c (sigma_c / s_c)^2`` with ``sigma_c`` each measured
-channel's white noise; a gap below ``FLOOR_FACTOR`` (4) times its floor is "not attributable"
+channel's white noise; a gap below ``FLOOR_FACTOR`` (3) times its floor is "not attributable"
 (a perfect model also carries the smoothed start state's error through each window, which is why
 the factor is above 1).
 """
@@ -42,7 +42,7 @@ from trafficsim.identify import output_error
 from trafficsim.identify.replay import model_rows, simulate
 
 MIN_GAIN = 0.05
-FLOOR_FACTOR = 4.0
+FLOOR_FACTOR = 3.0
 
 
 @dataclass
@@ -114,6 +114,43 @@ class EffectResiduals:
         self._angle = np.array([c in ANGLES for c in self.channels])
         self._weights = 1.0 / np.array([self.scales[c] for c in self.channels])
         self.last_diverged = np.zeros(0, dtype=bool)
+        self._smooth = [(run.t_s, np.stack([run.smooth[k] for k in
+                                            ("north_m", "east_m", "psi_rad", "u_mps", "v_mps",
+                                             "r_radps")])) for run in data.runs]
+
+    def gear_start(self, steer: np.ndarray) -> np.ndarray:
+        """``(k, W)`` rudder angle of each model's steering gear at each window's start: the
+        gear (lag and rate limit, :func:`trafficsim.effects.steering`) run over the logged
+        rudder from the start of the run (Euler, 10 steps per sample)."""
+        win = self.data.windows
+        k = steer.shape[0]
+        out = np.repeat(win.inputs[None, :, 0, 0], k, axis=0)
+        on = steer[:, 0] > 0.0
+        if not on.any():
+            return out
+        tau, rate = steer[on, 0], steer[on, 1]
+        for r, run in enumerate(self.data.runs):
+            rud = np.nan_to_num(run.trial.rudder_rad)
+            dt = run.dt_s / 10.0
+            state = np.full(tau.size, rud[0])
+            at = np.empty((tau.size, rud.size))
+            for j in range(rud.size):
+                at[:, j] = state
+                for _ in range(10):
+                    state = state + dt * np.clip((rud[j] - state) / tau, -rate, rate)
+            for i in np.flatnonzero(win.run == r):
+                j0 = round(float(win.t0_s[i] - run.t_s[0]) / run.dt_s)
+                out[on, i] = at[:, j0]
+        return out
+
+    def ahead(self, lag_s: float) -> np.ndarray:
+        """``(8, W)`` smoothed measured state ``lag_s`` after each window's start."""
+        win = self.data.windows
+        x = np.array(win.x0, dtype=float, copy=True)
+        for i in range(win.w):
+            t, states = self._smooth[int(win.run[i])]
+            x[:6, i] = [np.interp(win.t0_s[i] + lag_s, t, row) for row in states]
+        return x
 
     @property
     def m(self) -> int:
@@ -125,9 +162,12 @@ class EffectResiduals:
         vals = [self.param.values(th) for th in thetas]
         rows = model_rows([effects.apply_spec(self.param.spec, v) for v in vals])
         win = self.data.windows
-        x0 = np.stack([effects.true_start(win.x0, v) for v in vals])
+        x0 = np.stack([effects.true_start(
+            win.x0, v, ahead=self.ahead(v["ais_latency"]["latency_s"])
+            if "ais_latency" in v else None) for v in vals])
         env_off = np.stack([effects.environment_offset(v) for v in vals])
         steer = np.array([effects.steering(v) for v in vals], dtype=float).reshape(-1, 2)
+        x0[:, 6, :] = self.gear_start(steer)
         out, diverged = simulate(rows, win, x0, env_off, steer)
         self.last_diverged = diverged
         meas = effects.measure(np.nan_to_num(out), win.dt_s, vals)
@@ -217,7 +257,13 @@ def fit_set(spec: Mapping[str, Any], names: Sequence[str], train: Dataset, hold:
     res_h = EffectResiduals(param, hold, sc)
     if param.p == 0:
         return Candidate((), {}, {}, res_t.cost(np.zeros(0)), res_h.cost(np.zeros(0)), 0)
-    result = output_error.fit(param, train.windows, x0=param.initial(), max_nfev=max_nfev,
+    x_start = param.initial()
+    if len(names) == 1 and start is None:  # best point of a coarse grid, in one replay
+        grid = np.clip(effects.start_grid(names[0], float(spec["particulars"]["length_m"])),
+                       param.lower, param.upper)
+        costs = np.sum(res_t(grid) ** 2, axis=1)
+        x_start = grid[int(np.argmin(costs))]
+    result = output_error.fit(param, train.windows, x0=x_start, max_nfev=max_nfev,
                               rel_step=1e-4, tol=1e-6, residuals=res_t)
     x = result.x
     return Candidate(tuple(names), param.values(x), result.table(), result.cost,

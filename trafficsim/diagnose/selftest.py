@@ -50,7 +50,7 @@ def hidden_effect(name: str, rng: np.random.Generator) -> dict[str, float]:
     sign = lambda: float(rng.choice([-1.0, 1.0]))  # noqa: E731
     u = rng.uniform
     if name in ("current", "wind"):
-        speed = u(0.2, 0.6) if name == "current" else u(12.0, 25.0)
+        speed = u(0.2, 0.6) if name == "current" else u(25.0, 40.0)
         ang = u(0.0, 2 * np.pi)
         return {"north_mps": speed * np.cos(ang), "east_mps": speed * np.sin(ang)}
     if name == "gnss_lag":
@@ -65,7 +65,7 @@ def hidden_effect(name: str, rng: np.random.Generator) -> dict[str, float]:
     if name == "resistance":
         return {"scale": u(1.3, 1.8) if rng.random() < 0.5 else u(0.55, 0.75)}
     if name == "propeller_asymmetry":
-        return {"rudder_offset_deg": sign() * u(1.0, 3.0)}
+        return {"rudder_offset_deg": sign() * u(1.5, 3.5)}
     if name == "shallow_water":
         return {"draught_to_depth": u(0.5, 0.8)}
     return {"latency_s": u(4.0, 15.0)}

@@ -141,7 +141,8 @@ def simulate(models: ModelRows, windows: Windows, x0: np.ndarray | None = None,
             as it is.
         steering: ``(k, 2)`` steering gear between the measured rudder angle and the hull:
             first-order lag ``tau_s`` (s) and rate limit (rad/s); ``tau_s <= 0`` (default)
-            means the hull feels the measured angle.
+            means the hull feels the measured angle. The gear's angle at each window's start is
+            row 6 of ``x0`` (default: the measured angle).
 
     Returns:
         ``out`` ``(k, W, N, 6)`` simulated :data:`OUTPUTS` (NaN beyond each window's samples)
@@ -150,7 +151,8 @@ def simulate(models: ModelRows, windows: Windows, x0: np.ndarray | None = None,
     out = np.full((models.k, windows.w, windows.n, N_OUT), np.nan)
     diverged = np.zeros((models.k, windows.w), dtype=np.bool_)
     if x0 is None:
-        x0 = np.broadcast_to(windows.x0, (models.k, *windows.x0.shape))
+        x0 = np.repeat(windows.x0[None], models.k, axis=0)
+        x0[:, 6, :] = windows.inputs[:, 0, 0]  # a steering gear starts at the measured angle
     if env_offset is None:
         env_offset = np.zeros((models.k, 4))
     if steering is None:
@@ -241,8 +243,6 @@ def _replay(codes: np.ndarray, P: np.ndarray, sub: np.ndarray, X0: np.ndarray,
             u_in, env_w = U_in[w], E[w]
             for j in range(8):
                 x[j] = X0[m, j, w]
-            if lag:
-                x[6] = u_in[0, 0]
             for j in range(6):
                 out[m, w, 0, j] = x[j]
                 last[j] = x[j]
