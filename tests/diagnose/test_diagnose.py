@@ -78,3 +78,16 @@ def test_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:
     err = capsys.readouterr().err
     assert "did you mean 'current'" in err and len(err.strip().splitlines()) == 1
     assert cli.main(["diagnose", "--data", "x.csv"]) == 2
+
+
+def test_mmg_folder_reports_what_it_cannot_represent(capsys: pytest.CaptureFixture[str],
+                                                     tmp_path: Path) -> None:
+    folder = (Path(__file__).parents[2] / ".." / "shared" / "data" / "esso-osaka-mmg"
+              / "python_module" / "input_csv")
+    if not folder.is_dir():
+        pytest.skip("MMG parameter folder not available")
+    assert cli.main(["diagnose", "--ship", str(folder), "--data", "x.csv", "--out",
+                     str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "cannot represent" in err and "coeff_drag_sway" in err and "ai_coeff_prop0" in err
