@@ -49,6 +49,9 @@ class ShipSetup:
     filter: str = "none"
     behaviour: str = "colregs"
     stream_encounter: int | None = None
+    #: sim-to-real effects of this ship (:mod:`trafficsim.effects`; current and wind here, the
+    #: others are already in ``spec`` and ``sensors``)
+    effects: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -212,9 +215,21 @@ def _ship_env(ships: Sequence[ShipSetup], envs: Sequence[EncounterEnv]) -> Env:
     enc = np.array([s.encounter for s in ships], dtype=np.int64)
     cs = np.array([e.current_speed_mps for e in envs])[enc]
     ct = np.array([e.current_towards_rad for e in envs])[enc]
-    return Env(
+    env = Env(
         current_north_mps=cs * np.cos(ct),
         current_east_mps=cs * np.sin(ct),
         wind_speed_mps=np.array([e.wind_speed_mps for e in envs])[enc],
         wind_from_rad=np.array([e.wind_from_rad for e in envs])[enc],
     )
+    if not any(s.effects.get("current") or s.effects.get("wind") for s in ships):
+        return env
+    from trafficsim import effects
+
+    off = np.array([effects.environment_offset(s.effects) for s in ships])
+    speed, from_rad = env.wind_speed_mps, env.wind_from_rad
+    windy = np.any(off[:, 2:] != 0.0, axis=1)
+    ws, wf = effects.add_wind(speed, from_rad, off[:, 2], off[:, 3])
+    return Env(current_north_mps=env.current_north_mps + off[:, 0],
+               current_east_mps=env.current_east_mps + off[:, 1],
+               wind_speed_mps=np.where(windy, ws, speed),
+               wind_from_rad=np.where(windy, wf, from_rad))

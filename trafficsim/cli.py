@@ -1,5 +1,5 @@
-"""Command line: ``trafficsim run | campaign | explain | trial | identify | validate | render |
-report | replay``.
+"""Command line: ``trafficsim run | campaign | explain | trial | identify | diagnose |
+validate | render | report | replay``.
 
 Every user error ends as one line on stderr (``trafficsim: error: file:line: key: message``) and
 exit code 2, never a traceback. Heavy imports happen inside the commands so ``--help`` is fast.
@@ -143,6 +143,26 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--sigma-heading-deg", type=_positive(float), default=None,
                        help="heading noise for the smoother (default: from the data)")
     ident.set_defaults(func=_cmd_identify)
+
+    diag = sub.add_parser("diagnose", help="sim-to-real gap: where it lies, which effect "
+                          "causes it, how far it shrinks (or --self-test N)")
+    diag.add_argument("--ship", default=None,
+                      help="base model: library name, ship file or MMG parameter folder")
+    diag.add_argument("--data", type=Path, nargs="+", default=[],
+                      help="training runs (trial-data CSV or FRT-DS-ESSO files, or folders)")
+    diag.add_argument("--holdout", type=Path, nargs="+", default=[],
+                      help="held-out runs (default: alternate windows of --data)")
+    diag.add_argument("--out", type=Path, default=None, help="output folder")
+    diag.add_argument("--effects", nargs="+", default=None,
+                      help="candidate effects (default: the whole library)")
+    diag.add_argument("--horizon-s", type=_positive(float), default=None,
+                      help="replay window length (default 3 L/U)")
+    diag.add_argument("--dt-s", type=_positive(float), default=None,
+                      help="working sampling interval (default: as identify)")
+    diag.add_argument("--self-test", type=_positive(int), default=None, metavar="N",
+                      help="N trials with a random hidden effect; prints the confusion matrix")
+    diag.add_argument("--seed", type=int, default=0, help="self-test seed")
+    diag.set_defaults(func=_cmd_diagnose)
 
     val = sub.add_parser("validate", help="check scenario, ship, rules or campaign files "
                          "without running them")
@@ -370,6 +390,34 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     out = args.out
     print(f"results: {out / 'ship.yaml'}, {out / 'convergence.png'}, {out / 'report.json'}, "
           f"{out / 'report.md'}")
+    return 0
+
+
+def _cmd_diagnose(args: argparse.Namespace) -> int:
+    from trafficsim.diagnose import command
+
+    if args.self_test is not None:
+        from trafficsim.diagnose.selftest import confusion_text
+
+        res = command.self_test(args.self_test, args.out, args.seed)
+        print(confusion_text(res))
+        print(f"{res['n']} trials in {res['elapsed_s']:.1f} s")
+        return 0
+    if args.ship is None or not args.data or args.out is None:
+        raise InputError("diagnose needs --ship, --data and --out (or --self-test N)",
+                         key="--ship")
+    rep = command.diagnose(args.ship, args.data, args.out, args.holdout, args.horizon_s,
+                           args.dt_s, args.effects)
+    print(rep["verdict"])
+    for i, r in enumerate(rep["ranking"][:5], 1):
+        par = ", ".join(f"{k.split('.', 1)[1]} {v['value']:.4g}"
+                        for k, v in r["parameters"].items())
+        print(f"  {i}. {r['effect']}: held-out shrinkage {100 * r['shrinkage_holdout']:.0f} % "
+              f"(train {100 * r['shrinkage_train']:.0f} %); {par}")
+    if "confirmation" in rep:
+        print(f"  {rep['confirmation']}")
+    print(f"results: {args.out / 'report.md'}, {args.out / 'report.json'} "
+          f"({rep['elapsed_s']:.1f} s)")
     return 0
 
 

@@ -41,17 +41,24 @@ def scenario_decider(scn: Scenario, batch: Batch, record: bool = True) -> Decide
 
 def scenario_setups(scn: Scenario, encounter: int = 0) -> tuple[list[ShipSetup], EncounterEnv]:
     """Ships and environment of a scenario in SI units."""
+    from trafficsim import effects
+
     base_dir = Path(scn.path).parent
     ships = []
     for k, s in enumerate(scn.ships):
         spec = load_ship(s.type, base_dir)
+        found = s.effects or {}
+        sensors = merge_sensors(spec.get("sensors"), s.sensors)
+        if found:
+            spec = effects.apply_spec(spec, found)
+            sensors = effects.apply_sensors(sensors, found)
         speed_kn = s.speed_kn if s.speed_kn is not None else spec["service_speed_kn"]
         route = np.array(s.route, dtype=float).reshape(-1, 2) if s.route else np.zeros((0, 2))
         ships.append(ShipSetup(name=s.name, spec=spec, encounter=encounter, north_m=s.north_m,
                                east_m=s.east_m, heading_rad=float(np.radians(s.heading_deg)),
                                speed_mps=from_kn(speed_kn), route_m=route, ship_in_encounter=k,
-                               sensors=merge_sensors(spec.get("sensors"), s.sensors),
-                               filter=s.filter, behaviour=s.behaviour))
+                               sensors=sensors, filter=s.filter, behaviour=s.behaviour,
+                               effects=found))
     env = scn.environment
     enc_env = EncounterEnv()
     if env is not None:

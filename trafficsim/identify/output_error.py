@@ -176,7 +176,8 @@ def jacobian(residuals: Residuals, x: np.ndarray, r0: np.ndarray, h: np.ndarray)
 
 def fit(param: Parametrisation, windows: Windows, x0: np.ndarray | None = None,
         channels: Sequence[str] = DEFAULT_CHANNELS, scales: Mapping[str, float] | None = None,
-        max_nfev: int = 60, rel_step: float = 1e-6, tol: float = 1e-8) -> FitResult:
+        max_nfev: int = 60, rel_step: float = 1e-6, tol: float = 1e-8,
+        residuals: Any = None) -> FitResult:
     """Output-error least-squares fit of ``param``'s coefficients on ``windows``.
 
     Args:
@@ -187,11 +188,15 @@ def fit(param: Parametrisation, windows: Windows, x0: np.ndarray | None = None,
         max_nfev: most model evaluations of the optimiser (Jacobians not counted).
         rel_step: relative finite-difference step.
         tol: ``ftol = xtol = gtol`` of ``least_squares``.
+        residuals: another residual function of the same interface as :class:`Residuals`
+            (``(k, p)`` candidates -> ``(k, m)`` weighted residuals in one replay, with
+            ``channels``, ``scales``, ``last_diverged``), e.g. the effect models of
+            :mod:`trafficsim.diagnose`; ``param`` then only gives names, bounds and start.
     """
     from scipy.optimize import least_squares
 
     start = time.perf_counter()
-    res = Residuals(param, windows, channels, scales)
+    res = Residuals(param, windows, channels, scales) if residuals is None else residuals
     lo, hi = param.lower, param.upper
     x_start = np.clip(param.initial() if x0 is None else np.asarray(x0, float), lo, hi)
     cache: dict[bytes, np.ndarray] = {}

@@ -125,8 +125,24 @@ def substeps(models: ModelRows, windows: Windows) -> np.ndarray:
                       ).astype(np.int64)
 
 
-def simulate(models: ModelRows, windows: Windows) -> tuple[np.ndarray, np.ndarray]:
+def simulate(models: ModelRows, windows: Windows, x0: np.ndarray | None = None,
+             env_offset: np.ndarray | None = None, steering: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
     """Replay every model on every window in one compiled call.
+
+    Args:
+        models, windows: the ``k`` models and ``W`` windows.
+        x0: ``(k, 8, W)`` initial state per model (default: every model starts from
+            ``windows.x0``); a measurement effect (antenna lever arm, compass bias, report
+            latency) moves the true start away from the measured one.
+        env_offset: ``(k, 4)`` per-model environment added to the windows' (current north,
+            current east, air velocity north, air velocity east over ground, all m/s, the
+            air velocity "towards"); default none. A zero air velocity leaves the windows' wind
+            as it is.
+        steering: ``(k, 2)`` steering gear between the measured rudder angle and the hull:
+            first-order lag ``tau_s`` (s) and rate limit (rad/s); ``tau_s <= 0`` (default)
+            means the hull feels the measured angle. The gear's angle at each window's start is
+            row 6 of ``x0`` (default: the measured angle).
 
     Returns:
         ``out`` ``(k, W, N, 6)`` simulated :data:`OUTPUTS` (NaN beyond each window's samples)
@@ -134,10 +150,19 @@ def simulate(models: ModelRows, windows: Windows) -> tuple[np.ndarray, np.ndarra
     """
     out = np.full((models.k, windows.w, windows.n, N_OUT), np.nan)
     diverged = np.zeros((models.k, windows.w), dtype=np.bool_)
+    if x0 is None:
+        x0 = np.repeat(windows.x0[None], models.k, axis=0)
+        x0[:, 6, :] = windows.inputs[:, 0, 0]  # a steering gear starts at the measured angle
+    if env_offset is None:
+        env_offset = np.zeros((models.k, 4))
+    if steering is None:
+        steering = np.zeros((models.k, 2))
     _replay(models.codes, np.ascontiguousarray(models.params),
-            substeps(models, windows), np.ascontiguousarray(windows.x0),
+            substeps(models, windows), np.ascontiguousarray(x0, dtype=float),
             np.ascontiguousarray(windows.inputs), np.ascontiguousarray(windows.env),
-            windows.dt_s.astype(float), windows.n_samples.astype(np.int64), out, diverged)
+            windows.dt_s.astype(float), windows.n_samples.astype(np.int64),
+            np.ascontiguousarray(env_offset, dtype=float),
+            np.ascontiguousarray(steering, dtype=float), out, diverged)
     return out, diverged
 
 
@@ -156,65 +181,104 @@ def _derivative(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray,
 
 
 @kernel
-def _set_inputs(x: np.ndarray, u_in: np.ndarray, k: int, f: float) -> None:
-    """Rudder and rps rows of ``x`` at fraction ``f`` of the interval ``k -> k+1``."""
-    x[6] = (1.0 - f) * u_in[k, 0] + f * u_in[k + 1, 0]
+def _set_inputs(x: np.ndarray, u_in: np.ndarray, k: int, f: float, lag: bool) -> float:
+    """Rudder and rps rows of ``x`` at fraction ``f`` of the interval ``k -> k+1``; with a
+    steering ``lag`` the rudder row is a state and the measured angle is returned instead."""
+    rudder = (1.0 - f) * u_in[k, 0] + f * u_in[k + 1, 0]
+    if not lag:
+        x[6] = rudder
     x[7] = (1.0 - f) * u_in[k, 1] + f * u_in[k + 1, 1]
+    return rudder
+
+
+@kernel
+def _window_env(env_k: np.ndarray, off: np.ndarray, env: np.ndarray) -> None:
+    """Environment of one sample: the window's plus a model's offset (``simulate``)."""
+    env[0] = env_k[0] + off[0]
+    env[1] = env_k[1] + off[1]
+    env[2] = env_k[2]
+    env[3] = env_k[3]
+    if off[2] != 0.0 or off[3] != 0.0:
+        # air velocity over ground (towards) = the window's wind + the offset
+        an = -env_k[2] * math.cos(env_k[3]) + off[2]
+        ae = -env_k[2] * math.sin(env_k[3]) + off[3]
+        env[2] = math.sqrt(an * an + ae * ae)
+        env[3] = math.atan2(-ae, -an)
+
+
+@kernel
+def _rudder_rate(measured: float, x: np.ndarray, steer: np.ndarray) -> float:
+    """Steering gear: first-order lag with a rate limit towards the measured angle."""
+    rate = (measured - x[6]) / steer[0]
+    return min(max(rate, -steer[1]), steer[1])
 
 
 @kernel
 def _replay(codes: np.ndarray, P: np.ndarray, sub: np.ndarray, X0: np.ndarray,
             U_in: np.ndarray, E: np.ndarray, dt: np.ndarray, n_samples: np.ndarray,
-            out: np.ndarray, diverged: np.ndarray) -> None:
+            E_off: np.ndarray, steer: np.ndarray, out: np.ndarray, diverged: np.ndarray) -> None:
     """RK4 replay of ``k`` models x ``W`` windows with first-order-hold measured inputs.
 
     Args:
-        codes ``(k,)``, P ``(k, c)``, sub ``(k, W)`` sub-steps per interval; X0 ``(8, W)``;
+        codes ``(k,)``, P ``(k, c)``, sub ``(k, W)`` sub-steps per interval; X0 ``(k, 8, W)``;
         U_in ``(W, N, 2)`` rudder rad, rps; E ``(W, N, 4)`` environment per sample;
-        dt ``(W,)`` s; n_samples ``(W,)``; out ``(k, W, N, 6)`` (written); diverged ``(k, W)``.
+        dt ``(W,)`` s; n_samples ``(W,)``; E_off ``(k, 4)`` environment offsets; steer
+        ``(k, 2)`` steering lag (s) and rate (rad/s); out ``(k, W, N, 6)`` (written);
+        diverged ``(k, W)``.
     """
     n_models = codes.shape[0]
-    n_win = X0.shape[1]
+    n_win = X0.shape[2]
     x = np.empty(8)
     xt = np.empty(8)
     last = np.empty(6)
-    k1 = np.empty(6)
-    k2 = np.empty(6)
-    k3 = np.empty(6)
-    k4 = np.empty(6)
+    k1 = np.empty(7)
+    k2 = np.empty(7)
+    k3 = np.empty(7)
+    k4 = np.empty(7)
+    env = np.empty(4)
     for m in range(n_models):
-        code, p = codes[m], P[m]
+        code, p, off, st = codes[m], P[m], E_off[m], steer[m]
+        lag = st[0] > 0.0
         for w in range(n_win):
             u_in, env_w = U_in[w], E[w]
             for j in range(8):
-                x[j] = X0[j, w]
+                x[j] = X0[m, j, w]
             for j in range(6):
                 out[m, w, 0, j] = x[j]
                 last[j] = x[j]
             frozen = False
             ns = sub[m, w]
             h = dt[w] / ns
+            nx = 7 if lag else 6
             for k in range(n_samples[w] - 1):
-                env = env_w[k]
+                _window_env(env_w[k], off, env)
                 if not frozen:
                     for s in range(ns):
                         f0 = s / ns
                         fm = (s + 0.5) / ns
                         f1 = (s + 1.0) / ns
-                        _set_inputs(x, u_in, k, f0)
+                        d = _set_inputs(x, u_in, k, f0, lag)
                         _derivative(code, p, x, env, k1)
-                        for j in range(6):
+                        if lag:
+                            k1[6] = _rudder_rate(d, x, st)
+                        for j in range(nx):
                             xt[j] = x[j] + 0.5 * h * k1[j]
-                        _set_inputs(xt, u_in, k, fm)
+                        d = _set_inputs(xt, u_in, k, fm, lag)
                         _derivative(code, p, xt, env, k2)
-                        for j in range(6):
+                        if lag:
+                            k2[6] = _rudder_rate(d, xt, st)
+                        for j in range(nx):
                             xt[j] = x[j] + 0.5 * h * k2[j]
                         _derivative(code, p, xt, env, k3)
-                        for j in range(6):
+                        if lag:
+                            k3[6] = _rudder_rate(d, xt, st)
+                        for j in range(nx):
                             xt[j] = x[j] + h * k3[j]
-                        _set_inputs(xt, u_in, k, f1)
+                        d = _set_inputs(xt, u_in, k, f1, lag)
                         _derivative(code, p, xt, env, k4)
-                        for j in range(6):
+                        if lag:
+                            k4[6] = _rudder_rate(d, xt, st)
+                        for j in range(nx):
                             x[j] += (h / 6.0) * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
                     ok = True
                     for j in range(6):

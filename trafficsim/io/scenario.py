@@ -23,6 +23,9 @@ A scenario places one or more ships in an environment for a fixed duration::
         route: [[5000, 0], [9000, 3000]]   # optional [north_m, east_m] waypoints
         behaviour: colregs         # optional: colregs (default), keep_course, turn_port,
                                    #   late_action (see trafficsim.colregs.decider)
+        effects:                   # optional sim-to-real effects (trafficsim.effects), e.g.
+          current: {north_mps: 0.3, east_mps: 0.0}
+          steering_lag: {tau_s: 5, rate_degps: 2}
     rules: ../rules/colregs.yaml   # optional decision network (relative to this file);
                                    #   default: the bundled rules/colregs.yaml
     domain: coldwell               # optional ship domain: coldwell, goodwin, fujii, kijima
@@ -150,6 +153,20 @@ class ShipEntry(Strict):
     sensors: dict[str, dict[str, Any]] | None = None
     filter: Literal["none", "pv", "ekf"] = "none"
     behaviour: Literal["colregs", "keep_course", "turn_port", "late_action"] = "colregs"
+    effects: dict[str, Any] | None = None
+
+    @field_validator("effects")
+    @classmethod
+    def _valid_effects(cls, effects: dict[str, Any] | None) -> dict[str, dict[str, float]] | None:
+        if effects is None:
+            return None
+        from trafficsim import effects as registry
+
+        try:
+            return registry.check(effects)
+        except InputError as err:
+            loc = tuple((err.key or "").split(".")[1:])
+            raise FieldError(err.message, loc=loc) from None
 
     @field_validator("sensors")
     @classmethod

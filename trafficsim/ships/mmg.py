@@ -60,6 +60,9 @@ Implementation choices (documented deviations, none changes the paper's model at
   - the drift angle is beta = asin(-v/U_d), bounded for any u, and alpha_R uses atan2 so flow
     from behind (u_R < 0) reverses the rudder force, as it does on a real rudder.
 * Wind: Isherwood (1972) loads of :mod:`trafficsim.ships.wind` are added to X, Y, N.
+* Rudder neutral offset ``delta_0`` (rad, default 0): the hull feels ``delta + delta_0``, the
+  "neutral rudder angle" of a single-screw ship's propeller asymmetry (the
+  ``propeller_asymmetry`` effect of :mod:`trafficsim.effects`); 0 changes nothing.
 
 Layout: :meth:`MMGFamily.build` turns ship files into :class:`MMGParams` (``(n,)`` columns, all
 constant products precomputed); :func:`accel` is the compiled scalar kernel for one ship on its
@@ -179,6 +182,7 @@ class MMGParams:
     wind_qx: np.ndarray
     wind_qy: np.ndarray
     wind_qn: np.ndarray
+    delta0: np.ndarray
 
 
 _HULL = (("x0", "R0"), ("x1", "X_vv"), ("x2", "X_vr"), ("x3", "X_rr"), ("x4", "X_vvvv"),
@@ -195,6 +199,7 @@ _FIELDS = tuple(f.name for f in fields(MMGParams))
  _XR_K, _YR_K, _NR_K, _MX_DEN, _M_MY, _M_MX, _XG_M, _INV11, _INV12, _INV22) = range(48)
 _W0 = _FIELDS.index(wind.WINDAGE_FIELDS[0])
 _W1 = _W0 + len(wind.WINDAGE_FIELDS)
+_DELTA0 = _FIELDS.index("delta0")
 assert _FIELDS[_INV22] == "inv22" and _FIELDS[_W0:_W1] == wind.WINDAGE_FIELDS
 
 
@@ -223,6 +228,8 @@ class MMGFamily:
         "epsilon": None, "kappa": None, "f_alpha": None,
         # astern fallback: astern bollard K_T / ahead bollard K_T (not in [YY15])
         "astern_thrust_ratio": 0.7,
+        # rudder neutral offset, rad (propeller asymmetry; not in [YY15])
+        "delta_0": 0.0,
     }
 
     def build(self, ships: Sequence[Mapping[str, Any]]) -> MMGParams:
@@ -288,6 +295,7 @@ class MMGFamily:
             inv12=-xg_m / det,
             inv22=m_my / det,
             **{f.name: getattr(w, f.name) for f in fields(w)},
+            delta0=col("delta_0"),
         )
 
 
@@ -296,7 +304,7 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     """Body-frame accelerations of ONE ship ([YY15] motion equations at midship).
 
     Args:
-        p: ``float64[58]`` packed parameter row (``base.pack(params)[i]``, see
+        p: ``float64[59]`` packed parameter row (``base.pack(params)[i]``, see
             :class:`MMGParams`).
         x: ``float64[8]`` state in the ``base`` layout: u, v (at midship, relative to the
             water, m/s), r (rad/s), rudder (rad, + = starboard turn), rps (rev/s).
@@ -306,7 +314,8 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     Returns:
         ``(du, dv, dr)`` in m/s2, m/s2, rad/s2.
     """
-    u, v, r, delta, n = x[U], x[V], x[YAW_RATE], x[RUDDER], x[RPS]
+    u, v, r, n = x[U], x[V], x[YAW_RATE], x[RPS]
+    delta = x[RUDDER] + p[_DELTA0]
     u2, v2 = u * u, v * v
     big_u2 = u2 + v2
     ud2 = big_u2 + p[_U0SQ]

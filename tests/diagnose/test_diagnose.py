@@ -1,0 +1,93 @@
+"""trafficsim diagnose: phases, recovery of a changed hull from its trials, the noise-floor
+verdict, a small injection-recovery self-test, and the command line's errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trafficsim import cli, effects
+from trafficsim.diagnose import command, fit, selftest
+from trafficsim.diagnose.data import PHASES, phases
+from trafficsim.ships.library import LIBRARY_DIR, load_ship
+from trafficsim.trial import run_trial
+
+
+def test_phases_of_a_turn_and_a_zigzag() -> None:
+    t = np.arange(0.0, 300.0, 1.0)
+    rudder = np.radians(np.where(t < 50, 0.0, 35.0))
+    r = np.where(t < 50, 0.0, 0.01 * (1 - np.exp(-(t - 50) / 20.0)))
+    ph = phases(rudder, r, 1.0)
+    names = [PHASES[k] for k in ph]
+    assert names[0] == "approach" and names[55] == "execute" and names[-1] == "steady"
+    # counter rudder against the yaw rate is a check; rudder amidships while turning, pull-out
+    rudder2 = np.radians(np.where(t < 150, 20.0, np.where(t < 250, -20.0, 0.0)))
+    r2 = np.full(t.size, 0.005)
+    ph2 = [PHASES[k] for k in phases(rudder2, r2, 1.0)]
+    assert ph2[200] == "checks" and ph2[280] == "pullout"
+
+
+def test_fouled_hull_found_and_measured(tmp_path: Path) -> None:
+    text = (LIBRARY_DIR / "kvlcc2.yaml").read_text()
+    assert "  R0: 0.022\n" in text
+    ship = tmp_path / "fouled.yaml"
+    ship.write_text(text.replace("  R0: 0.022\n", "  R0: 0.0286\n").replace(
+        "name: kvlcc2\n", "name: kvlcc2_fouled\n"))
+    run_trial(str(ship), "zigzag", 10.0, None, False, None, 2.0, tmp_path / "z10")
+    run_trial(str(ship), "zigzag", 20.0, None, False, None, 2.0, tmp_path / "z20")
+    run_trial(str(ship), "turning", 35.0, None, True, None, 2.0, tmp_path / "tc")
+    rep = command.diagnose("kvlcc2", [tmp_path / "z10", tmp_path / "z20"], tmp_path / "out",
+                           [tmp_path / "tc"], candidates=["current", "resistance",
+                                                          "shallow_water"])
+    best = rep["ranking"][0]
+    assert best["effect"] == "resistance"
+    assert best["parameters"]["resistance.scale"]["value"] == pytest.approx(1.3, rel=0.01)
+    assert best["shrinkage_holdout"] > 0.95 and rep["chosen"]["effects"] == ["resistance"]
+    saved = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert next(r["effect"] for r in saved["ranking"]) == "resistance"
+    assert set(saved["ranking"][0]) >= {"effect", "parameters", "shrinkage_train",
+                                        "shrinkage_holdout", "per_phase"}
+    assert (tmp_path / "out" / "residuals_by_phase.png").stat().st_size > 1000
+    assert "## Where" in (tmp_path / "out" / "report.md").read_text()
+
+
+def test_no_effect_is_not_attributable() -> None:
+    spec = load_ship("kvlcc2")
+    rng = np.random.default_rng(3)
+    train, hold = selftest.simulate_trial(spec, {}, rng)
+    dt, dh = selftest.prepare(spec, train, hold)
+    diag = fit.diagnose(spec, dt, dh, ("current", "resistance"), forward_steps=1)
+    assert not diag.attributable and "not attributable" in diag.verdict
+
+
+def test_self_test_small() -> None:
+    res = selftest.run(3, seed=11)
+    assert res["correct"] >= 2
+    assert res["magnitude_within_20pct"] >= 2
+    assert np.asarray(res["confusion"]).sum() == 3
+    text = selftest.confusion_text(res)
+    assert "first-ranked correct" in text and len(text.splitlines()) == len(effects.NAMES) + 2
+
+
+def test_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli.main(["diagnose", "--ship", "kvlcc2", "--data", "x.csv", "--out", "o",
+                     "--effects", "curent"]) == 2
+    err = capsys.readouterr().err
+    assert "did you mean 'current'" in err and len(err.strip().splitlines()) == 1
+    assert cli.main(["diagnose", "--data", "x.csv"]) == 2
+
+
+def test_mmg_folder_reports_what_it_cannot_represent(capsys: pytest.CaptureFixture[str],
+                                                     tmp_path: Path) -> None:
+    folder = (Path(__file__).parents[2] / ".." / "shared" / "data" / "esso-osaka-mmg"
+              / "python_module" / "input_csv")
+    if not folder.is_dir():
+        pytest.skip("MMG parameter folder not available")
+    assert cli.main(["diagnose", "--ship", str(folder), "--data", "x.csv", "--out",
+                     str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "cannot represent" in err and "coeff_drag_sway" in err and "ai_coeff_prop0" in err
