@@ -115,8 +115,8 @@ _OFF_DEG, _COS_OFF, _SIN_OFF = np.degrees(_OFF), np.cos(_OFF), np.sin(_OFF)
 
 
 @kernel
-def _closest(pn: float, pe: float, dvn: float, dve: float, span_s: float) -> float:
-    """:func:`closest_approach_m` of one pair and candidate."""
+def closest_m(pn: float, pe: float, dvn: float, dve: float, span_s: float) -> float:
+    """:func:`closest_approach_m` of one relative position and velocity (compiled loops)."""
     v2 = dvn * dvn + dve * dve
     dot = pn * dvn + pe * dve
     if not (dot < 0.0 or v2 <= 1e-12):
@@ -150,7 +150,7 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
         near = req > 0.0 and math.hypot(pn[p], pe[p]) < ALONGSIDE_RANGE_FACTOR * max(req, 1.0)
         for k in range(n_cand):
             dvn, dve = ovn[p] - own_vn[i, k], ove[p] - own_ve[i, k]
-            margin = _closest(pn[p], pe[p], dvn, dve, horizon_s) - req
+            margin = closest_m(pn[p], pe[p], dvn, dve, horizon_s) - req
             if margin < worst[i, k]:
                 worst[i, k] = margin
             if near and dvn * dvn + dve * dve < ALONGSIDE_SPEED_MPS * ALONGSIDE_SPEED_MPS:

@@ -58,6 +58,7 @@ from trafficsim.colregs.vocabulary import (
 )
 from trafficsim.control.guidance import LOOKAHEAD_L
 from trafficsim.errors import InputError
+from trafficsim.jit import kernel
 from trafficsim.sensors.radar import directed_pairs
 
 #: the bundled rules files (``rules/`` at the top of the project)
@@ -413,49 +414,21 @@ class Decider:
         slow = np.where(self.speed_factor[r] < 1.0, self.speed_factor[r], DEFAULT_SLOW_FACTOR)
         factor = np.where(np.arange(4) < 2, 1.0, slow[:, None])  # (s, 4)
         present = np.hypot(own_vel[0, r], own_vel[1, r])
-        pn = (other[0, pairs] - own_state[0, o[pairs]])[:, None, None]
-        pe = (other[1, pairs] - own_state[1, o[pairs]])[:, None, None]
-        wn, we = other[2, pairs][:, None, None], other[3, pairs][:, None, None]
-        h = self.horizon_s
-        # where each candidate course meets the route line, and the line's direction
+        # where each candidate course meets the route line
         across = np.sin(course - chi[:, None, None])  # cross-track rate per unit speed
         meets = e[:, None, None] * across < -1e-9
         dist = np.where(meets, -e[:, None, None] / np.where(meets, across, 1.0), math.inf)
-        c1, s1 = np.cos(course)[ps], np.sin(course)[ps]
-        c2, s2 = np.cos(chi)[ps, None, None], np.sin(chi)[ps, None, None]
-        meet_m = dist[ps]
-        steered = np.full((pairs.size, 4, k), math.inf)  # as steered (straight on)
-        leads = np.full((pairs.size, 4, k), math.inf)  # the path it leads to
-        # at the speed to be sailed, and where it turns, at the present speed too
-        for sp, cols in ((route_speed_mps[r, None] * factor, np.ones(k, dtype=bool)),
-                         (np.broadcast_to(present[:, None], (s, 4)), np.arange(k) > 0)):
-            v = sp[ps][:, :, None]
-            dn1, de1 = wn - v * c1, we - v * s1
-            straight = arbitration.closest_approach_m(pn, pe, dn1, de1, h)
-            t1 = np.minimum(meet_m / np.maximum(v, 1e-9), h)
-            dn2, de2 = wn - v * c2, we - v * s2
-            line = np.minimum(
-                arbitration.closest_approach_m(pn, pe, dn1, de1, t1),
-                np.where(t1 < h, arbitration.closest_approach_m(
-                    pn + dn1 * t1, pe + de1 * t1, dn2, de2, h - t1), math.inf))
-            steered = np.where(cols, np.minimum(steered, straight), steered)
-            leads = np.where(cols, np.minimum(leads, line), leads)
-        # the course steered keeps the distance with the margin on both; a course only turned
-        # through keeps the distance itself as steered
-        kept = self.kept_distance_m[o[pairs]][:, None, None]
         worst = np.full((s, 4, k), math.inf)
-        np.minimum.at(worst, ps, np.minimum(steered, leads) - kept * (1.0 + RESUME_MARGIN))
         passing = np.full((s, 4, k), math.inf)
-        np.minimum.at(passing, ps, steered - kept)
-        reach = (np.cumsum(passing < 0.0, axis=2) == 0) & (worst >= 0.0)
-        # running alongside a near ship (little relative speed) makes no way back to the route:
-        # a reduced speed that lets her draw ahead comes first
-        sp = (route_speed_mps[r, None] * factor)[ps][:, :, None]
-        near = ((np.hypot(pn, pe) < arbitration.ALONGSIDE_RANGE_FACTOR * kept
-                 * (1.0 + RESUME_MARGIN))
-                & ((wn - sp * c1) ** 2 + (we - sp * s1) ** 2 < arbitration.ALONGSIDE_SPEED_MPS**2))
         alongside = np.zeros((s, 4, k), dtype=bool)
-        np.logical_or.at(alongside, ps, near)
+        c = np.ascontiguousarray
+        _resume_margins(c(np.cos(course)), c(np.sin(course)), c(np.cos(chi)), c(np.sin(chi)),
+                        c(dist), c(route_speed_mps[r, None] * factor), c(present), c(ps),
+                        c(other[0, pairs] - own_state[0, o[pairs]]),
+                        c(other[1, pairs] - own_state[1, o[pairs]]), c(other[2, pairs]),
+                        c(other[3, pairs]), c(self.kept_distance_m[o[pairs]]),
+                        float(self.horizon_s), worst, passing, alongside)
+        reach = (np.cumsum(passing < 0.0, axis=2) == 0) & (worst >= 0.0)
         off_route = np.abs((course - route[:, None, None] + math.pi) % (2 * math.pi) - math.pi)
         # a course that takes the ship further off its line comes after a reduced speed; there,
         # where a safe course nearer the route lies beyond courses it cannot turn through at
@@ -584,3 +557,52 @@ class Decider:
         """Blind spots as records: ship, other ship, role, time first seen."""
         return [{"ship": names[b.ship], "other": names[b.other], "role": b.role,
                  "from_s": b.from_s} for b in self.blind_spots]
+
+
+@kernel
+def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarray,
+                    meet_m: np.ndarray, speed: np.ndarray, present: np.ndarray,
+                    pair_ship: np.ndarray, pn: np.ndarray, pe: np.ndarray, wn: np.ndarray,
+                    we: np.ndarray, kept: np.ndarray, horizon_s: float, worst: np.ndarray,
+                    passing: np.ndarray, alongside: np.ndarray) -> None:
+    """The safety of :meth:`Decider._resume`'s candidates over the pairs, in place.
+
+    Per pair (own ship ``pair_ship``, other ship at ``pn, pe`` relative, velocity ``wn, we``)
+    and candidate ``(row, step)`` of course ``(c1, s1)`` (cos, sin) at ``speed[ship, row]``,
+    and at the ``present`` speed for the turns (step > 0): the closest approach as steered
+    (straight on) and along the path it leads to (straight on for ``meet_m`` until the route
+    line of direction ``(c2, s2)``, then along it). ``worst`` takes the smaller of the two less
+    the kept distance with :data:`RESUME_MARGIN`; ``passing`` the steered one less the kept
+    distance; ``alongside`` marks a near ship passed at little relative speed.
+    """
+    n_rows, k = c1.shape[1], c1.shape[2]
+    for p in range(pair_ship.shape[0]):
+        i = pair_ship[p]
+        keep = kept[p] * (1.0 + RESUME_MARGIN)
+        near = (math.hypot(pn[p], pe[p])
+                < arbitration.ALONGSIDE_RANGE_FACTOR * kept[p] * (1.0 + RESUME_MARGIN))
+        for row in range(n_rows):
+            for step in range(k):
+                steered = leads = math.inf
+                for variant in range(2):
+                    if variant == 1 and step == 0:
+                        continue
+                    v = speed[i, row] if variant == 0 else present[i]
+                    dn1 = wn[p] - v * c1[i, row, step]
+                    de1 = we[p] - v * s1[i, row, step]
+                    straight = arbitration.closest_m(pn[p], pe[p], dn1, de1, horizon_s)
+                    t1 = min(meet_m[i, row, step] / max(v, 1e-9), horizon_s)
+                    line = arbitration.closest_m(pn[p], pe[p], dn1, de1, t1)
+                    if t1 < horizon_s:
+                        dn2, de2 = wn[p] - v * c2[i], we[p] - v * s2[i]
+                        line = min(line, arbitration.closest_m(
+                            pn[p] + dn1 * t1, pe[p] + de1 * t1, dn2, de2, horizon_s - t1))
+                    steered, leads = min(steered, straight), min(leads, line)
+                worst[i, row, step] = min(worst[i, row, step], min(steered, leads) - keep)
+                passing[i, row, step] = min(passing[i, row, step], steered - kept[p])
+                if near:
+                    sp = speed[i, row]
+                    dvn = wn[p] - sp * c1[i, row, step]
+                    dve = we[p] - sp * s1[i, row, step]
+                    if dvn * dvn + dve * dve < arbitration.ALONGSIDE_SPEED_MPS**2:
+                        alongside[i, row, step] = True
