@@ -93,3 +93,19 @@ def test_draws_at_need_follow_the_stream_and_peek_does_not_draw():
                       (np.asfortranarray(np.tile(states, (1, 2)))[:, ::2], 2)):
         with pytest.raises(ValueError, match="streams"):
             check_streams(bad, rows)
+
+
+def test_streams_seeded_in_one_loop_are_numpys():
+    """``seeded_states`` is ``SFC64(SeedSequence(seed, spawn_key=key))`` bit for bit: seeds and
+    key entries above 32 bits (several entropy words), keys of any length, the empty key."""
+    from trafficsim.noise import seeded_states
+
+    rng = np.random.default_rng(0)
+    keys = [tuple(int(v) for v in rng.integers(0, 2**40 if k % 5 == 0 else 60, k % 6))
+            for k in range(300)]
+    for seed in (0, 7, 2026, 2**32 + 5, 2**70 + 3):
+        want = [np.random.SFC64(np.random.SeedSequence(seed, spawn_key=key)).state["state"]
+                ["state"] for key in keys]
+        np.testing.assert_array_equal(seeded_states(seed, keys), np.array(want, np.uint64))
+    with pytest.raises(ValueError, match=">= 0"):
+        seeded_states(-1, [(0,)])
