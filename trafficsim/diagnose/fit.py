@@ -15,7 +15,12 @@ Gap shrinkage: ``1 - J_with / J_base``.
 
 Ranking (documented choice): every effect is fitted alone on the training runs and scored on the
 held-out runs by the penalised shrinkage ``1 - (J_with / J_base) (1 + 2 p / n_eff)``, ``p`` the
-effect's parameters and ``n_eff`` the held-out windows times channels (an AIC-like penalty that
+effect's parameters the held-out prediction uses and ``n_eff`` the held-out windows times
+channels. Environmental effects (``current``, ``wind``) are conditions of each run: one vector
+per run, fitted on the training runs with the rest and on each held-out run alone (the other
+parameters fixed as trained), and ``p`` counts two per held-out run. With ``refit``, base
+coefficients are fitted on the training runs jointly with every candidate set, the base
+included (an AIC-like penalty that
 counts one independent error per window and channel, since successive samples of a trajectory
 are strongly correlated). Combinations: forward selection adds, to the best set so far, the
 candidate that lowers the penalised held-out cost most, fitting the whole set jointly, while it
