@@ -159,6 +159,10 @@ def build_parser() -> argparse.ArgumentParser:
                       help="replay window length (default 3 L/U)")
     diag.add_argument("--dt-s", type=_positive(float), default=None,
                       help="working sampling interval (default: as identify)")
+    diag.add_argument("--refit", nargs="?", const="default", default=None,
+                      metavar="NAME,...",
+                      help="base coefficients fitted on the training runs jointly with every "
+                      "candidate, the base included (no value: identify's default subset)")
     diag.add_argument("--self-test", type=_positive(int), default=None, metavar="N",
                       help="N trials with a random hidden effect; prints the confusion matrix")
     diag.add_argument("--seed", type=int, default=0, help="self-test seed")
@@ -395,6 +399,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     from trafficsim.diagnose import command
+    from trafficsim.diagnose.report import parameter_text
 
     if args.self_test is not None:
         from trafficsim.diagnose.selftest import confusion_text
@@ -407,15 +412,14 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         raise InputError("diagnose needs --ship, --data and --out (or --self-test N)",
                          key="--ship")
     rep = command.diagnose(args.ship, args.data, args.out, args.holdout, args.horizon_s,
-                           args.dt_s, args.effects)
+                           args.dt_s, args.effects, args.refit)
     print(rep["verdict"])
     for i, r in enumerate(rep["ranking"][:5], 1):
-        par = ", ".join(f"{k.split('.', 1)[1]} {v['value']:.4g}"
-                        for k, v in r["parameters"].items())
+        par = parameter_text(r["parameters"])
         print(f"  {i}. {r['effect']}: held-out shrinkage {100 * r['shrinkage_holdout']:.0f} % "
               f"(train {100 * r['shrinkage_train']:.0f} %); {par}")
     if "confirmation" in rep:
-        print(f"  {rep['confirmation']}")
+        print(f"  {rep['confirmation']['text']}")
     print(f"results: {args.out / 'report.md'}, {args.out / 'report.json'} "
           f"({rep['elapsed_s']:.1f} s)")
     return 0

@@ -130,6 +130,9 @@ REGISTRY: dict[str, Effect] = {e.name: e for e in (
            "report latency (reception time stamps)"),
 )}
 NAMES = tuple(REGISTRY)
+#: effects whose parameters are conditions of each run (the weather of the day), not of the
+#: ship: the diagnosis fits one value per run (training and held-out runs alike)
+PER_RUN = tuple(n for n, e in REGISTRY.items() if e.kind == "environment")
 
 
 def check(effects: Mapping[str, Any] | None, where: str = "effects") -> dict[str, dict[str, float]]:
@@ -190,9 +193,14 @@ def bounds(name: str, length_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarr
             np.array([p.start for p in ps]) * scale)
 
 
-def start_grid(name: str, length_m: float) -> np.ndarray:
+def start_grid(name: str, length_m: float, speed_mps: float | None = None) -> np.ndarray:
     """``(g, p)`` coarse grid of starting values of an effect's fit (the cost of a delay,
-    lag or direction has local minima; the best grid point starts the least squares)."""
+    lag or direction has local minima; the best grid point starts the least squares).
+
+    With the ship's speed ``speed_mps`` the current and wind radii scale with it (0.03 and
+    0.075 U; 1.25 and 3.1 U, the values of the KVLCC2 at 15.5 kn); without it they are the
+    KVLCC2's (0.25, 0.6 m/s; 10, 25 m/s).
+    """
     ang = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
 
     def circle(radii: Sequence[float]) -> np.ndarray:
@@ -200,9 +208,11 @@ def start_grid(name: str, length_m: float) -> np.ndarray:
         return np.array(pts)
 
     if name == "current":
-        return circle((0.25, 0.6))
+        return circle((0.25, 0.6) if speed_mps is None else (0.03 * speed_mps,
+                                                             0.075 * speed_mps))
     if name == "wind":
-        return circle((10.0, 25.0))
+        return circle((10.0, 25.0) if speed_mps is None else (1.25 * speed_mps,
+                                                              3.1 * speed_mps))
     if name == "lever_arm":
         return np.array([[x * length_m, y * length_m] for x in (-0.3, 0.0, 0.3)
                          for y in (-0.05, 0.0, 0.05)])
@@ -344,7 +354,7 @@ def pv_sp(tau_s: float, sigma_m: float) -> float:
 
 
 def true_start(x0: np.ndarray, effects: Mapping[str, Mapping[str, float]],
-               current_ne: tuple[float, float] = (0.0, 0.0),
+               current_ne: tuple[Any, Any] = (0.0, 0.0),
                ahead: np.ndarray | None = None) -> np.ndarray:
     """True state ``(8, W)`` at the start of each window from the MEASURED one.
 
@@ -353,7 +363,8 @@ def true_start(x0: np.ndarray, effects: Mapping[str, Mapping[str, float]],
     latency (the truth is the measured state ``latency`` later: ``ahead`` ``(8, W)`` when the
     caller has it from the data, else first-order extrapolation), compass error, antenna
     lever arm (``p = p_a - R(psi) r_a``, ``v = v_a - r x r_a``), and the current (the model's
-    ``u, v`` are through the water: over-ground minus current).
+    ``u, v`` are through the water: over-ground minus current; ``current_ne`` north and east,
+    scalars or ``(W,)`` per window, plus the ``current`` effect).
     """
     x = np.array(x0, dtype=float, copy=True)
     if "ais_latency" in effects and ahead is not None:
@@ -379,7 +390,7 @@ def true_start(x0: np.ndarray, effects: Mapping[str, Mapping[str, float]],
         x[4] -= x[5] * xa
     cn = current_ne[0] + effects.get("current", {}).get("north_mps", 0.0)
     ce = current_ne[1] + effects.get("current", {}).get("east_mps", 0.0)
-    if cn or ce:
+    if np.any(cn) or np.any(ce):
         c, s = np.cos(x[2]), np.sin(x[2])
         x[3] -= cn * c + ce * s
         x[4] -= -cn * s + ce * c
@@ -409,7 +420,8 @@ def measure(truth: np.ndarray, dt_s: np.ndarray,
             water, :data:`trafficsim.identify.replay.OUTPUTS`).
         dt_s: ``(W,)`` sampling interval of each window.
         values: per model its effects (:func:`check` form).
-        current_ne: ``(W, 2)`` current of each window (data), default none.
+        current_ne: ``(W, 2)`` current of each window, or ``(k, W, 2)`` per model and window
+            (e.g. a current fitted per run), added to the ``current`` effect; default none.
 
     Returns:
         ``north, east`` (antenna, receiver output), ``psi`` (compass), ``u, v`` (over-ground
@@ -421,7 +433,8 @@ def measure(truth: np.ndarray, dt_s: np.ndarray,
     north, east, psi, u, v, r = (truth[..., j] for j in range(6))
     cur = np.zeros((k, w, 2))
     if current_ne is not None:
-        cur += np.asarray(current_ne)[None, :, :]
+        cn = np.asarray(current_ne, dtype=float)
+        cur += cn if cn.ndim == 3 else cn[None, :, :]
     off = np.array([environment_offset(e)[:2] for e in values])
     cur += off[:, None, :]
     vn, ve = rotate_body_to_earth(psi, u, v)

@@ -91,3 +91,32 @@ def test_mmg_folder_reports_what_it_cannot_represent(capsys: pytest.CaptureFixtu
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert "cannot represent" in err and "coeff_drag_sway" in err and "ai_coeff_prop0" in err
+
+
+def test_wind_of_each_run_recovered() -> None:
+    """Every run sails in its own wind (the weather of its day): the environment is fitted per
+    run, on the training and the held-out runs alike, and each run's wind is recovered."""
+    spec = load_ship("kvlcc2")
+    rng = np.random.default_rng(5)
+    winds = [(30.0, 20.0), (28.0, 140.0), (35.0, 250.0), (32.0, 310.0), (26.0, 75.0)]
+
+    def hidden(speed: float, towards_deg: float) -> dict:
+        a = np.radians(towards_deg)
+        return {"wind": {"north_mps": speed * np.cos(a), "east_mps": speed * np.sin(a)}}
+
+    train, hold = selftest.simulate_runs(spec, [hidden(*w) for w in winds[:3]],
+                                         [hidden(*w) for w in winds[3:]], rng)
+    dt, dh = selftest.prepare(spec, train, hold)
+    diag = fit.diagnose(spec, dt, dh, ("wind", "current", "resistance", "compass_bias"),
+                        forward_steps=1)
+    assert diag.attributable and diag.singles[0].effects == ("wind",)
+    best = diag.singles[0]
+    # the gap is about 7 times the noise floor before; what is left is near the floor
+    assert best.shrinkage(diag.base)[1] > 0.6
+    assert best.p == 2 * len(hold)  # per-run parameters of the held-out runs are counted
+    names = [*dt.windows.run_names, *dh.windows.run_names]
+    for run, (speed, towards) in zip(names, winds, strict=True):
+        v = best.run_values[run]["wind"]
+        err = (np.degrees(np.arctan2(v["east_mps"], v["north_mps"])) - towards + 180) % 360 - 180
+        assert abs(err) < 10.0, (run, err)
+        assert np.hypot(v["north_mps"], v["east_mps"]) == pytest.approx(speed, rel=0.3)

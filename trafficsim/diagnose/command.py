@@ -49,13 +49,36 @@ def _candidates(names: Sequence[str] | None) -> tuple[str, ...]:
     return tuple(names)
 
 
+def _refit(spec: dict[str, Any], refit: str | Sequence[str] | None) -> tuple[str, ...]:
+    """Names of the base coefficients refitted with every candidate (checked)."""
+    from trafficsim.identify.parameters import DEFAULT_FIT, Parametrisation
+
+    if not refit:
+        return ()
+    if isinstance(refit, str):
+        names = DEFAULT_FIT.get(spec["model"], ()) if refit == "default" else tuple(
+            n.strip() for n in refit.split(",") if n.strip())
+    else:
+        names = tuple(refit)
+    try:
+        return Parametrisation.of(spec, names).names
+    except InputError as exc:
+        raise InputError(exc.message, key="--refit") from None
+
+
 def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path] = (),
              horizon_s: float | None = None, dt_s: float | None = None,
-             candidates: Sequence[str] | None = None) -> dict[str, Any]:
-    """Diagnose the runs ``data`` (held-out ``holdout``) against ``ship``; write the reports."""
+             candidates: Sequence[str] | None = None,
+             refit: str | Sequence[str] | None = None) -> dict[str, Any]:
+    """Diagnose the runs ``data`` (held-out ``holdout``) against ``ship``; write the reports.
+
+    ``refit``: base coefficients fitted jointly with every candidate (``"default"``: the
+    family's subset of ``trafficsim identify``, :data:`trafficsim.identify.parameters.
+    DEFAULT_FIT`; a comma-separated string or a sequence of names)."""
     start = time.perf_counter()
     spec = load_base(ship)
     names = _candidates(candidates)
+    refit_names = _refit(spec, refit)
     length = float(spec["particulars"]["length_m"])
     u_service = float(spec["service_speed_kn"]) * KNOT
     train_files = expand_paths(data, "--data")
@@ -81,13 +104,15 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
                              "longer runs", key="--data")
         train, hold = every.subset(~odd), every.subset(odd)
         split = "alternate windows of the same runs (no --holdout given)"
-    diag = fit.diagnose(spec, train, hold, names)
+    diag = fit.diagnose(spec, train, hold, names, refit=refit_names)
     extra: dict[str, Any] = {
         "data": {"train": [str(p) for p in train_files], "holdout": [str(p) for p in hold_files],
                  "holdout_split": split, "working_dt_s": work_dt, "horizon_s": horizon,
                  "wind_columns": "withheld (not used by the diagnosis)"},
+        "refit": list(refit_names),
         "candidates": list(names)}
-    conf = confirmation(diag, kin[: len(train_files)])
+    conf = confirmation(diag, kin, ["training"] * len(train_files) + ["holdout"] * len(
+        hold_files) if hold_files else ["training and holdout"] * len(kin))
     if conf:
         extra["confirmation"] = conf
     if "mmg_folder" in spec:
@@ -98,28 +123,73 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
     return rep
 
 
-def confirmation(diag: fit.Diagnosis, runs: Sequence[preprocess.Kinematics]) -> str | None:
-    """With the logged wind (never used by the fit): compare the fitted wind or current with
-    the mean logged true wind of the training runs (direction it blows towards)."""
-    logged = [r.trial for r in runs if r.trial.has_wind]
+def logged_wind(trial: Any) -> tuple[float, float, float, float]:
+    """A run's logged true wind: mean air velocity over ground (towards) north and east,
+    mean speed and RMS speed (m/s)."""
+    sp = np.asarray(trial.wind_speed_mps, float)
+    fr = np.asarray(trial.wind_from_rad, float)
+    ok = np.isfinite(sp) & np.isfinite(fr)
+    sp, fr = sp[ok], fr[ok]
+    return (float(np.mean(-sp * np.cos(fr))), float(np.mean(-sp * np.sin(fr))),
+            float(np.mean(sp)), float(np.sqrt(np.mean(sp * sp))))
+
+
+def confirmation(diag: fit.Diagnosis, runs: Sequence[preprocess.Kinematics],
+                 roles: Sequence[str]) -> dict[str, Any] | None:
+    """With the logged wind (never used by the fit, read only here): per run, the fitted
+    environmental effect (wind, and current) against the run's mean logged true wind as an
+    air velocity over ground: direction error, speed ratio, and over all runs the
+    correlation of the fitted and logged north and east components."""
+    logged = {r.name: (role, logged_wind(r.trial)) for r, role in zip(runs, roles, strict=True)
+              if r.trial.has_wind}
     if not logged:
         return None
-    sp = np.concatenate([np.nan_to_num(t.wind_speed_mps) for t in logged])
-    fr = np.concatenate([np.nan_to_num(t.wind_from_rad) for t in logged])
-    vn, ve = float(np.mean(-sp * np.cos(fr))), float(np.mean(-sp * np.sin(fr)))
-    text = (f"Logged true wind on the training runs (used only here): mean speed "
-            f"{np.mean(sp):.2f} m/s, mean air velocity {np.hypot(vn, ve):.2f} m/s towards "
-            f"{np.degrees(np.arctan2(ve, vn)) % 360:.0f} deg.")
-    for c in diag.singles:
-        name = c.effects[0]
-        if name in ("wind", "current"):
-            v = c.values[name]
+    out: dict[str, Any] = {}
+    for cand in diag.singles:
+        name = cand.effects[0]
+        if name not in effects.PER_RUN:
+            continue
+        rows = []
+        for run, (role, (ln, le, mean_sp, rms_sp)) in logged.items():
+            v = cand.run_values.get(run, {}).get(name)
+            if v is None:
+                continue
             fn, fe = v["north_mps"], v["east_mps"]
-            diff = (np.degrees(np.arctan2(fe, fn) - np.arctan2(ve, vn)) + 180) % 360 - 180
-            text += (f" Fitted {name}: {np.hypot(fn, fe):.3g} m/s towards "
-                     f"{np.degrees(np.arctan2(fe, fn)) % 360:.0f} deg ({diff:+.0f} deg from the "
-                     f"logged wind's direction).")
-    return text
+            diff = (np.degrees(np.arctan2(fe, fn) - np.arctan2(le, ln)) + 180.0) % 360.0 - 180.0
+            rows.append({"run": run, "role": role, "fitted_north_mps": fn, "fitted_east_mps": fe,
+                         "fitted_speed_mps": float(np.hypot(fn, fe)),
+                         "fitted_towards_deg": float(np.degrees(np.arctan2(fe, fn)) % 360.0),
+                         "logged_north_mps": ln, "logged_east_mps": le,
+                         "logged_vector_speed_mps": float(np.hypot(ln, le)),
+                         "logged_mean_speed_mps": mean_sp, "logged_rms_speed_mps": rms_sp,
+                         "logged_towards_deg": float(np.degrees(np.arctan2(le, ln)) % 360.0),
+                         "direction_error_deg": float(diff),
+                         "speed_ratio": float(np.hypot(fn, fe) / max(np.hypot(ln, le), 1e-9))})
+        if not rows:
+            continue
+        err = np.abs([r["direction_error_deg"] for r in rows])
+        f = np.array([[r["fitted_north_mps"], r["fitted_east_mps"]] for r in rows])
+        lg = np.array([[r["logged_north_mps"], r["logged_east_mps"]] for r in rows])
+        out[name] = {
+            "runs": rows,
+            "median_abs_direction_error_deg": float(np.median(err)),
+            "runs_within_30_deg": int(np.sum(err <= 30.0)),
+            "runs_within_45_deg": int(np.sum(err <= 45.0)), "n_runs": len(rows),
+            "median_speed_ratio": float(np.median([r["speed_ratio"] for r in rows])),
+            "component_correlation": float(np.corrcoef(f.ravel(), lg.ravel())[0, 1])
+            if len(rows) > 1 else float("nan")}
+    if not out:
+        return None
+    text = []
+    for name, c in out.items():
+        text.append(f"Fitted {name} per run against the logged true wind (air velocity "
+                    f"towards; used only here): direction within 30 deg on "
+                    f"{c['runs_within_30_deg']} of {c['n_runs']} runs (45 deg: "
+                    f"{c['runs_within_45_deg']}), median |error| "
+                    f"{c['median_abs_direction_error_deg']:.0f} deg, median speed ratio "
+                    f"{c['median_speed_ratio']:.2g}, correlation of the north and east "
+                    f"components {c['component_correlation']:.2f}.")
+    return {"text": " ".join(text), **out}
 
 
 def self_test(n: int, out: Path | None, seed: int = 0) -> dict[str, Any]:

@@ -15,7 +15,12 @@ Gap shrinkage: ``1 - J_with / J_base``.
 
 Ranking (documented choice): every effect is fitted alone on the training runs and scored on the
 held-out runs by the penalised shrinkage ``1 - (J_with / J_base) (1 + 2 p / n_eff)``, ``p`` the
-effect's parameters and ``n_eff`` the held-out windows times channels (an AIC-like penalty that
+effect's parameters the held-out prediction uses and ``n_eff`` the held-out windows times
+channels. Environmental effects (``current``, ``wind``) are conditions of each run: one vector
+per run, fitted on the training runs with the rest and on each held-out run alone (the other
+parameters fixed as trained), and ``p`` counts two per held-out run. With ``refit``, base
+coefficients are fitted on the training runs jointly with every candidate set, the base
+included (an AIC-like penalty that
 counts one independent error per window and channel, since successive samples of a trajectory
 are strongly correlated). Combinations: forward selection adds, to the best set so far, the
 candidate that lowers the penalised held-out cost most, fitting the whole set jointly, while it
@@ -39,6 +44,7 @@ import numpy as np
 from trafficsim import effects
 from trafficsim.diagnose.data import ANGLES, CHANNELS, PHASES, Dataset
 from trafficsim.identify import output_error
+from trafficsim.identify.parameters import Parametrisation
 from trafficsim.identify.replay import model_rows, simulate
 
 MIN_GAIN = 0.05
@@ -47,7 +53,15 @@ FLOOR_FACTOR = 3.0
 
 @dataclass
 class EffectSet:
-    """Parameters of a set of effects on a base ship (the ``param`` of an output-error fit)."""
+    """Parameters of a set of effects on a base ship (the ``param`` of an output-error fit).
+
+    The parameter vector is, in order: the base ship's coefficients ``refit`` fitted jointly
+    with the effects (ship-file names); the parameters of the effects that are properties of
+    the ship or its instruments (one value for all runs; absent when ``fixed`` gives them);
+    and, for the environmental effects (:data:`trafficsim.effects.PER_RUN`), one value of each
+    parameter per run of ``free_runs`` (laid out effect, key, run). ``run_fixed`` gives the
+    environmental values of other runs (run name -> effect -> values).
+    """
 
     spec: dict[str, Any]
     effects: tuple[str, ...]
@@ -55,13 +69,34 @@ class EffectSet:
     lower: np.ndarray = field(default_factory=lambda: np.zeros(0))
     upper: np.ndarray = field(default_factory=lambda: np.zeros(0))
     start: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    refit: tuple[str, ...] = ()
+    global_effects: tuple[str, ...] = ()
+    fixed: dict[str, dict[str, float]] = field(default_factory=dict)
+    free_runs: tuple[str, ...] = ()
+    run_fixed: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, spec: Mapping[str, Any], names: Sequence[str],
-           start: Mapping[str, Mapping[str, float]] | None = None) -> EffectSet:
+           start: Mapping[str, Mapping[str, float]] | None = None, *,
+           refit: Sequence[str] = (), runs: Sequence[str] = (),
+           run_start: Mapping[str, Mapping[str, Mapping[str, float]]] | None = None,
+           fixed: Mapping[str, Mapping[str, float]] | None = None,
+           run_fixed: Mapping[str, Mapping[str, Mapping[str, float]]] | None = None
+           ) -> EffectSet:
+        """Effects ``names`` on ``spec``; ``start``: values of the global effects (and a
+        common start of the per-run ones); ``runs``: runs whose environment is fitted,
+        ``run_start`` their starts; ``fixed``/``run_fixed``: values held fixed."""
         length = float(spec["particulars"]["length_m"])
+        fixed = {k: dict(v) for k, v in (fixed or {}).items()}
         keys, lo, hi, x0 = [], [], [], []
-        for name in names:
+        if refit:
+            param = Parametrisation.of(spec, refit)
+            keys += [f"base.{n}" for n in param.names]
+            lo.append(param.lower)
+            hi.append(param.upper)
+            x0.append(param.initial())
+        glob = tuple(n for n in names if n not in effects.PER_RUN and n not in fixed)
+        for name in glob:
             a, b, s = effects.bounds(name, length)
             given = (start or {}).get(name)
             if given is not None:
@@ -70,26 +105,83 @@ class EffectSet:
             lo.append(a)
             hi.append(b)
             x0.append(np.clip(s, a, b))
-        return cls(dict(spec), tuple(names), tuple(keys), _cat(lo), _cat(hi), _cat(x0))
+        free_runs = tuple(runs) if any(n in effects.PER_RUN for n in names) else ()
+        for name in (n for n in names if n in effects.PER_RUN):
+            a, b, s = effects.bounds(name, length)
+            for j, key in enumerate(effects.REGISTRY[name].keys):
+                for run in free_runs:
+                    given = ((run_start or {}).get(run, {}).get(name)
+                             or (start or {}).get(name))
+                    keys.append(f"{name}.{key}@{run}")
+                    lo.append(a[j:j + 1])
+                    hi.append(b[j:j + 1])
+                    x0.append(np.clip([given[key] if given else s[j]], a[j], b[j]))
+        return cls(dict(spec), tuple(names), tuple(keys), _cat(lo), _cat(hi), _cat(x0),
+                   tuple(refit), glob, fixed, free_runs,
+                   {r: {k: dict(v) for k, v in e.items()} for r, e in (run_fixed or {}).items()})
 
     @property
     def p(self) -> int:
         return len(self.names)
 
+    @property
+    def per_run(self) -> tuple[str, ...]:
+        return tuple(n for n in self.effects if n in effects.PER_RUN)
+
     def initial(self) -> np.ndarray:
         return self.start.copy()
 
+    @property
+    def n_global(self) -> int:
+        """Parameters that are not per run (base coefficients and global effects)."""
+        return self.p - len(self.free_runs) * sum(len(effects.REGISTRY[n].keys)
+                                                  for n in self.per_run)
+
+    def columns(self) -> list[tuple[np.ndarray, bool]]:
+        """Groups of parameter indices whose forward differences one perturbed model gives,
+        with whether the group is per run: each base coefficient and global parameter alone,
+        and each environmental parameter of all free runs together (a run's environment
+        moves only that run's windows)."""
+        groups = [(np.array([i]), False) for i in range(self.n_global)]
+        nr = len(self.free_runs)
+        for i in range(self.n_global, self.p, max(nr, 1)):
+            groups.append((np.arange(i, i + nr), True))
+        return groups
+
+    def coefficients(self, theta: np.ndarray) -> dict[str, float]:
+        return {n: float(v) for n, v in zip(self.refit, theta[: len(self.refit)], strict=True)}
+
+    def ship(self, theta: np.ndarray) -> dict[str, Any]:
+        """The base ship with the refitted coefficients of ``theta`` (a copy if any)."""
+        if not self.refit:
+            return self.spec
+        spec = dict(self.spec)
+        spec["coefficients"] = {**spec["coefficients"], **self.coefficients(theta)}
+        return spec
+
     def values(self, theta: np.ndarray) -> dict[str, dict[str, float]]:
-        """Effect values (:func:`trafficsim.effects.check` form) of one parameter vector."""
-        out: dict[str, dict[str, float]] = {}
-        i = 0
-        for name in self.effects:
+        """Global effect values (:func:`trafficsim.effects.check` form) of one vector."""
+        out: dict[str, dict[str, float]] = {k: dict(v) for k, v in self.fixed.items()}
+        i = len(self.refit)
+        for name in self.global_effects:
             eff = effects.REGISTRY[name]
             vals = eff.off()
             for key in eff.keys:
                 vals[key] = float(theta[i])
                 i += 1
             out[name] = vals
+        return out
+
+    def run_values(self, theta: np.ndarray) -> dict[str, dict[str, dict[str, float]]]:
+        """Environmental effect values per run (run name -> effect -> values)."""
+        out = {r: {k: dict(v) for k, v in e.items()} for r, e in self.run_fixed.items()}
+        i = self.n_global
+        for name in self.per_run:
+            for key in effects.REGISTRY[name].keys:
+                for run in self.free_runs:
+                    out.setdefault(run, {}).setdefault(name, effects.REGISTRY[name].off())
+                    out[run][name][key] = float(theta[i])
+                    i += 1
         return out
 
 
@@ -114,6 +206,8 @@ class EffectResiduals:
         self._angle = np.array([c in ANGLES for c in self.channels])
         self._weights = 1.0 / np.array([self.scales[c] for c in self.channels])
         self.last_diverged = np.zeros(0, dtype=bool)
+        names = np.array(data.windows.run_names, dtype=object)
+        self._row_run = names[data.windows.run[np.nonzero(mask)[0]]]
         self._smooth = [(run.t_s, np.stack([run.smooth[k] for k in
                                             ("north_m", "east_m", "psi_rad", "u_mps", "v_mps",
                                              "r_radps")])) for run in data.runs]
@@ -156,26 +250,66 @@ class EffectResiduals:
     def m(self) -> int:
         return int(self._mask.sum())
 
+    def env_offsets(self, thetas: np.ndarray) -> np.ndarray:
+        """``(k, W, 4)`` current and air velocity of each window from each run's values."""
+        win = self.data.windows
+        out = np.zeros((thetas.shape[0], win.w, 4))
+        if not self.param.per_run:
+            return out
+        names = win.run_names
+        for i, th in enumerate(thetas):
+            per = self.param.run_values(th)
+            table = np.array([effects.environment_offset(per.get(n, {})) for n in names])
+            out[i] = table[win.run]
+        return out
+
     def errors(self, thetas: np.ndarray) -> np.ndarray:
         """``(k, W, N, c)`` unweighted errors (simulated minus measured, 0 where masked)."""
         thetas = np.atleast_2d(thetas)
         vals = [self.param.values(th) for th in thetas]
-        rows = model_rows([effects.apply_spec(self.param.spec, v) for v in vals])
+        rows = model_rows([effects.apply_spec(self.param.ship(th), v)
+                           for th, v in zip(thetas, vals, strict=True)])
         win = self.data.windows
+        run_env = self.env_offsets(thetas)
         x0 = np.stack([effects.true_start(
-            win.x0, v, ahead=self.ahead(v["ais_latency"]["latency_s"])
-            if "ais_latency" in v else None) for v in vals])
-        env_off = np.stack([effects.environment_offset(v) for v in vals])
+            win.x0, v, (run_env[i, :, 0], run_env[i, :, 1]),
+            ahead=self.ahead(v["ais_latency"]["latency_s"]) if "ais_latency" in v else None)
+            for i, v in enumerate(vals)])
+        env_off = run_env + np.stack([effects.environment_offset(v) for v in vals])[:, None]
         steer = np.array([effects.steering(v) for v in vals], dtype=float).reshape(-1, 2)
         x0[:, 6, :] = self.gear_start(steer)
         out, diverged = simulate(rows, win, x0, env_off, steer)
         self.last_diverged = diverged
-        meas = effects.measure(np.nan_to_num(out), win.dt_s, vals)
+        meas = effects.measure(np.nan_to_num(out), win.dt_s, vals, current_ne=run_env[..., :2])
         meas["cog_psi"] = meas["cog"] - meas["psi"]
         sim = np.stack([meas[c] for c in self.channels], axis=-1)
         err = sim - self._target[None]
         err = np.where(self._angle, np.mod(err + np.pi, 2 * np.pi) - np.pi, err)
         return np.where(self._mask[None], err, 0.0)
+
+    def jacobian(self, x: np.ndarray, r0: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """``(m, p)`` forward differences, one perturbed model per group of
+        :meth:`EffectSet.columns` (all in one replay)."""
+        groups = self.param.columns()
+        thetas = np.repeat(x[None, :], len(groups), axis=0)
+        for g, (idx, _) in enumerate(groups):
+            thetas[g, idx] += h[idx]
+        diff = self(thetas) - r0[None, :]
+        jac = np.zeros((r0.size, x.size))
+        for g, (idx, per_run) in enumerate(groups):
+            if not per_run:
+                jac[:, idx[0]] = diff[g] / h[idx[0]]
+                continue
+            for j, run in zip(idx, self.param.free_runs, strict=True):
+                rows = self._row_run == run
+                jac[rows, j] = diff[g, rows] / h[j]
+        return jac
+
+    def run_costs(self, thetas: np.ndarray) -> dict[str, np.ndarray]:
+        """Per run name, ``(k,)`` cost of each candidate on that run's windows."""
+        r = self(np.atleast_2d(thetas))
+        return {run: 0.5 * np.sum(r[:, self._row_run == run] ** 2, axis=1)
+                for run in np.unique(self._row_run)}
 
     def __call__(self, thetas: np.ndarray) -> np.ndarray:
         err = self.errors(thetas) * self._weights
@@ -233,7 +367,13 @@ def scales(data: Dataset, length_m: float) -> dict[str, float]:
 
 @dataclass
 class Candidate:
-    """A fitted set of effects and its costs."""
+    """A fitted set of effects and its costs.
+
+    ``values``: the global effect values; ``run_values``: the environmental ones per run
+    (training and held-out runs); ``coefficients``: the base coefficients refitted with the
+    effects; ``p``: the effect parameters the held-out prediction uses (global ones plus the
+    per-run ones of every held-out run), the ``p`` of the penalty.
+    """
 
     effects: tuple[str, ...]
     values: dict[str, dict[str, float]]
@@ -242,32 +382,109 @@ class Candidate:
     cost_hold: float
     p: int
     fit: Any = None
+    coefficients: dict[str, float] = field(default_factory=dict)
+    run_values: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
 
     def shrinkage(self, base: Candidate) -> tuple[float, float]:
         return (1.0 - self.cost_train / max(base.cost_train, 1e-300),
                 1.0 - self.cost_hold / max(base.cost_hold, 1e-300))
 
+    def mean_value(self, name: str, runs: Sequence[str]) -> dict[str, float]:
+        """An effect's value: the global one, or the mean over ``runs`` of a per-run one."""
+        if name in self.values:
+            return self.values[name]
+        rows = [self.run_values[r][name] for r in runs if name in self.run_values.get(r, {})]
+        return {k: float(np.mean([row[k] for row in rows]))
+                for k in effects.REGISTRY[name].keys}
+
+
+def _speed(spec: Mapping[str, Any]) -> float:
+    return float(spec["service_speed_kn"]) * 1852.0 / 3600.0
+
+
+def _grid_start(param: EffectSet, res: EffectResiduals, name: str, x: np.ndarray
+                ) -> np.ndarray:
+    """``x`` with effect ``name``'s parameters at the best point of its coarse grid; per run
+    for an environmental effect (every grid point replayed on all runs in one call)."""
+    spec = param.spec
+    grid = effects.start_grid(name, float(spec["particulars"]["length_m"]), _speed(spec))
+    thetas = np.repeat(x[None, :], grid.shape[0], axis=0)
+    if name in effects.PER_RUN:
+        nr = len(param.free_runs)
+        first = param.n_global + nr * sum(len(effects.REGISTRY[n].keys)
+                                          for n in param.per_run[: param.per_run.index(name)])
+        for j in range(grid.shape[1]):
+            thetas[:, first + j * nr: first + (j + 1) * nr] = grid[:, j:j + 1]
+        thetas = np.clip(thetas, param.lower, param.upper)
+        costs = res.run_costs(thetas)
+        out = x.copy()
+        for i, run in enumerate(param.free_runs):
+            if run in costs:
+                best = int(np.argmin(costs[run]))
+                cols = first + np.arange(grid.shape[1]) * nr + i
+                out[cols] = thetas[best, cols]
+        return out
+    first = len(param.refit) + sum(len(effects.REGISTRY[n].keys) for n in
+                                   param.global_effects[: param.global_effects.index(name)])
+    thetas[:, first:first + grid.shape[1]] = grid
+    thetas = np.clip(thetas, param.lower, param.upper)
+    return thetas[int(np.argmin(np.sum(res(thetas) ** 2, axis=1)))]
+
+
+def _runs(data: Dataset) -> tuple[str, ...]:
+    """Names of the runs that have windows in ``data``."""
+    win = data.windows
+    return tuple(win.run_names[i] for i in np.unique(win.run))
+
 
 def fit_set(spec: Mapping[str, Any], names: Sequence[str], train: Dataset, hold: Dataset,
             sc: Mapping[str, float], start: Mapping[str, Mapping[str, float]] | None = None,
-            max_nfev: int = 30) -> Candidate:
-    """Fit the effects ``names`` jointly on ``train``; evaluate on ``hold``."""
-    param = EffectSet.of(spec, names, start)
+            max_nfev: int = 30, refit: Sequence[str] = (),
+            run_start: Mapping[str, Mapping[str, Mapping[str, float]]] | None = None,
+            coefficients: Mapping[str, float] | None = None) -> Candidate:
+    """Fit the effects ``names`` (with the base coefficients ``refit``) jointly on ``train``;
+    evaluate on ``hold``, fitting there only the environment of each held-out run that is not
+    a training run (the ship's and instruments' parameters stay as fitted on ``train``).
+    ``coefficients``: starting values of the refitted coefficients."""
+    base_spec = dict(spec)
+    if coefficients:
+        base_spec["coefficients"] = {**spec["coefficients"], **coefficients}
+    param = EffectSet.of(base_spec, names, start, refit=refit, runs=_runs(train),
+                         run_start=run_start)
     res_t = EffectResiduals(param, train, sc)
-    res_h = EffectResiduals(param, hold, sc)
     if param.p == 0:
+        res_h = EffectResiduals(param, hold, sc)
         return Candidate((), {}, {}, res_t.cost(np.zeros(0)), res_h.cost(np.zeros(0)), 0)
     x_start = param.initial()
-    if len(names) == 1 and start is None:  # best point of a coarse grid, in one replay
-        grid = np.clip(effects.start_grid(names[0], float(spec["particulars"]["length_m"])),
-                       param.lower, param.upper)
-        costs = np.sum(res_t(grid) ** 2, axis=1)
-        x_start = grid[int(np.argmin(costs))]
+    if len(names) == 1 and start is None and run_start is None:
+        x_start = _grid_start(param, res_t, names[0], x_start)
     result = output_error.fit(param, train.windows, x0=x_start, max_nfev=max_nfev,
                               rel_step=1e-4, tol=1e-6, residuals=res_t)
     x = result.x
-    return Candidate(tuple(names), param.values(x), result.table(), result.cost,
-                     res_h.cost(x), param.p, result)
+    glob, runs_fit = param.values(x), param.run_values(x)
+    coeffs = param.coefficients(x)
+    table = result.table()
+    hold_runs = _runs(hold)
+    new_runs = tuple(r for r in hold_runs if r not in runs_fit) if param.per_run else ()
+    param_h = EffectSet.of(param.ship(x), names, fixed=glob, runs=new_runs,
+                           run_start=run_start, run_fixed=runs_fit)
+    res_h = EffectResiduals(param_h, hold, sc)
+    if param_h.p:
+        xh = param_h.initial()
+        for name in param_h.per_run:
+            if not all(name in (run_start or {}).get(r, {}) for r in new_runs):
+                xh = _grid_start(param_h, res_h, name, xh)
+        fit_h = output_error.fit(param_h, hold.windows, x0=xh, max_nfev=max_nfev,
+                                 rel_step=1e-4, tol=1e-6, residuals=res_h)
+        cost_hold = fit_h.cost
+        runs_fit = param_h.run_values(fit_h.x)
+        table.update(fit_h.table())
+    else:
+        cost_hold = res_h.cost(np.zeros(0))
+    p = sum(len(effects.REGISTRY[n].keys) for n in param.global_effects)
+    p += len(hold_runs) * sum(len(effects.REGISTRY[n].keys) for n in param.per_run)
+    return Candidate(tuple(names), glob, table, result.cost, cost_hold, int(p), result,
+                     coeffs, runs_fit)
 
 
 def penalised(cost: float, p: int, n_eff: int) -> float:
@@ -289,21 +506,28 @@ class Diagnosis:
     verdict: str
     elapsed_s: float
     residuals: dict[str, Any]
+    refit: tuple[str, ...] = ()
 
 
 def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
              candidates: Sequence[str] = effects.NAMES, forward_steps: int = 3,
-             max_nfev: int = 30) -> Diagnosis:
-    """Single-effect fits, ranking, forward selection and the noise-floor verdict."""
+             max_nfev: int = 30, refit: Sequence[str] = ()) -> Diagnosis:
+    """Single-effect fits, ranking, forward selection and the noise-floor verdict.
+
+    ``refit``: base coefficients fitted jointly with every candidate set, the base included
+    (the base without effects is then the base refitted on the training runs)."""
     t0 = time.perf_counter()
     length = float(spec["particulars"]["length_m"])
     sc = scales(train, length)
-    base = fit_set(spec, (), train, hold, sc)
+    refit = tuple(refit)
+    base = fit_set(spec, (), train, hold, sc, refit=refit, max_nfev=max_nfev)
+    start_coeffs = base.coefficients or None
     res_h = EffectResiduals(EffectSet.of(spec, ()), hold, sc)
     n_eff = hold.windows.w * len(res_h.channels)
     floor_t = EffectResiduals(EffectSet.of(spec, ()), train, sc).floor()
     floor_h = res_h.floor()
-    singles = [fit_set(spec, (name,), train, hold, sc, max_nfev=max_nfev) for name in candidates]
+    singles = [fit_set(spec, (name,), train, hold, sc, max_nfev=max_nfev, refit=refit,
+                       coefficients=start_coeffs) for name in candidates]
     score = {c.effects[0]: 1.0 - penalised(c.cost_hold, c.p, n_eff) / base.cost_hold
              for c in singles}
     singles.sort(key=lambda c: -score[c.effects[0]])
@@ -317,9 +541,12 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
             if name in chosen.effects:
                 continue
             names = (*chosen.effects, name)
-            start = {**chosen.values, name: single.values[name]}
-            cand = single if not chosen.effects else fit_set(spec, names, train, hold, sc,
-                                                             start, max_nfev)
+            start = {**chosen.values, **single.values}
+            run_start = {r: {**chosen.run_values.get(r, {}), **single.run_values.get(r, {})}
+                         for r in {*chosen.run_values, *single.run_values}}
+            cand = single if not chosen.effects else fit_set(
+                spec, names, train, hold, sc, start, max_nfev, refit, run_start or None,
+                chosen.coefficients or start_coeffs)
             pen = penalised(cand.cost_hold, cand.p, n_eff)
             if pen < best_pen:
                 best, best_pen = cand, pen
@@ -344,37 +571,48 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
         verdict = (f"{' + '.join(chosen.effects)}: held-out gap {100 * sh:.0f} % smaller "
                    f"({gap_ratio:.1f} times the noise floor before)")
     diag = Diagnosis(base, singles, chosen, steps, floor_t, floor_h, n_eff, attributable,
-                     verdict, 0.0, {})
+                     verdict, 0.0, {}, refit)
     diag.residuals = residual_summary(spec, diag, train, hold, sc)
     diag.elapsed_s = time.perf_counter() - t0
     return diag
+
+
+def evaluation(spec: Mapping[str, Any], cand: Candidate, data: Dataset,
+               sc: Mapping[str, float]) -> EffectResiduals:
+    """Residuals of a fitted candidate on ``data`` (no free parameter: evaluate at
+    ``np.zeros(0)``)."""
+    ship = dict(spec)
+    if cand.coefficients:
+        ship["coefficients"] = {**spec["coefficients"], **cand.coefficients}
+    return EffectResiduals(EffectSet.of(ship, cand.effects, fixed=cand.values,
+                                        run_fixed=cand.run_values), data, sc)
 
 
 def residual_summary(spec: Mapping[str, Any], diag: Diagnosis, train: Dataset, hold: Dataset,
                      sc: Mapping[str, float]) -> dict[str, Any]:
     """Per phase and channel, before and after the chosen effects, on both datasets."""
     out: dict[str, Any] = {}
+    x = np.zeros(0)
     for label, data in (("train", train), ("holdout", hold)):
-        base = EffectResiduals(EffectSet.of(spec, ()), data, sc)
-        after = EffectResiduals(EffectSet.of(spec, diag.chosen.effects, diag.chosen.values),
-                                data, sc)
-        x_after = after.param.initial()
+        base = evaluation(spec, diag.base, data, sc)
+        after = evaluation(spec, diag.chosen, data, sc)
         out[label] = {
-            "before": {"by_phase": base.by_phase(np.zeros(0)),
-                       "by_channel": base.by_channel(np.zeros(0))},
-            "after": {"by_phase": after.by_phase(x_after),
-                      "by_channel": after.by_channel(x_after)},
+            "before": {"by_phase": base.by_phase(x), "by_channel": base.by_channel(x)},
+            "after": {"by_phase": after.by_phase(x), "by_channel": after.by_channel(x)},
         }
     return out
 
 
 def phase_shrinkage(spec: Mapping[str, Any], cand: Candidate, data: Dataset,
-                    sc: Mapping[str, float]) -> dict[str, float]:
-    """Held-out cost shrinkage per phase of one candidate."""
-    base = EffectResiduals(EffectSet.of(spec, ()), data, sc)
-    withe = EffectResiduals(EffectSet.of(spec, cand.effects, cand.values), data, sc)
+                    sc: Mapping[str, float], base_cand: Candidate | None = None
+                    ) -> dict[str, float]:
+    """Held-out cost shrinkage per phase of one candidate (against ``base_cand``, default
+    the unchanged base ship)."""
+    base = evaluation(spec, base_cand, data, sc) if base_cand is not None else \
+        EffectResiduals(EffectSet.of(spec, ()), data, sc)
+    withe = evaluation(spec, cand, data, sc)
     eb = base.errors(np.zeros(0))[0] * base._weights
-    ew = withe.errors(withe.param.initial())[0] * withe._weights
+    ew = withe.errors(np.zeros(0))[0] * withe._weights
     out = {}
     for k, name in enumerate(PHASES):
         sel = (data.phase == k)[..., None] & base._mask

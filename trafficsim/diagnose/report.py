@@ -37,7 +37,7 @@ def summary(spec: Mapping[str, Any], diag: Diagnosis, train: Dataset, hold: Data
             "shrinkage_train": sh_t, "shrinkage_holdout": sh_h,
             "penalised_score": 1.0 - penalised(c.cost_hold, c.p, diag.n_eff)
             / diag.base.cost_hold,
-            "per_phase": phase_shrinkage(spec, c, hold, sc)})
+            "per_phase": phase_shrinkage(spec, c, hold, sc, diag.base)})
     chosen = diag.chosen
     sh = chosen.shrinkage(diag.base) if chosen.effects else (0.0, 0.0)
     before = diag.residuals["holdout"]["before"]["by_phase"]
@@ -49,7 +49,7 @@ def summary(spec: Mapping[str, Any], diag: Diagnosis, train: Dataset, hold: Data
         "ranking": ranking,
         "chosen": {"effects": list(chosen.effects), "parameters": chosen.table,
                    "shrinkage_train": sh[0], "shrinkage_holdout": sh[1],
-                   "per_phase": phase_shrinkage(spec, chosen, hold, sc) if chosen.effects
+                   "per_phase": phase_shrinkage(spec, chosen, hold, sc, diag.base) if chosen.effects
                    else {}, "steps": diag.steps},
         "gap": {"cost_train_before": diag.base.cost_train, "cost_holdout_before":
                 diag.base.cost_hold, "cost_train_after": chosen.cost_train,
@@ -121,9 +121,7 @@ def markdown(rep: Mapping[str, Any]) -> str:
               "| rank | effect | parameters (95 % nominal) | shrinkage train | shrinkage held-out "
               "| penalised score |", "|---|---|---|---|---|---|"]
     for i, r in enumerate(rep["ranking"], 1):
-        par = "; ".join(
-            f"{k.split('.', 1)[1]} {v['value']:.4g} +- {v['ci95_high'] - v['value']:.2g}"
-            for k, v in r["parameters"].items())
+        par = parameter_text(r["parameters"])
         lines.append(f"| {i} | {r['effect']} | {par} | {100 * r['shrinkage_train']:.0f} % | "
                      f"{100 * r['shrinkage_holdout']:.0f} % | {100 * r['penalised_score']:.0f} % |")
     ch = rep["chosen"]
@@ -137,10 +135,42 @@ def markdown(rep: Mapping[str, Any]) -> str:
         lines.append("Held-out shrinkage per phase: " + ", ".join(
             f"{p} {100 * v:.0f} %" for p, v in ch["per_phase"].items()) + ".")
     lines += ["", "![residuals by phase](residuals_by_phase.png)", ""]
-    for key in ("confirmation", "notes"):
-        if key in rep:
-            lines += [f"## {key.capitalize()}", "", str(rep[key]), ""]
+    if "confirmation" in rep:
+        lines += confirmation_lines(rep["confirmation"])
+    if "notes" in rep:
+        lines += ["## Notes", "", str(rep["notes"]), ""]
     return "\n".join(lines)
+
+
+def parameter_text(table: Mapping[str, Mapping[str, float]]) -> str:
+    """Fitted parameters in one line: global ones with their 95 % half-width; per-run ones
+    (``effect.key@run``) and refitted base coefficients (``base.*``) counted only."""
+    glob = [f"{k.split('.', 1)[1]} {v['value']:.4g} +- {v['ci95_high'] - v['value']:.2g}"
+            for k, v in table.items() if "@" not in k and not k.startswith("base.")]
+    runs = {k.split("@", 1)[1] for k in table if "@" in k}
+    if runs:
+        glob.append(f"one value per run ({len(runs)} runs, report.json)")
+    return "; ".join(glob)
+
+
+def confirmation_lines(conf: Mapping[str, Any]) -> list[str]:
+    """The confirmation with the logged wind: summary and a table per run."""
+    lines = ["## Confirmation (logged wind, not used by the diagnosis)", "", str(conf["text"]),
+             ""]
+    for name, c in conf.items():
+        if name == "text":
+            continue
+        lines += [f"Fitted `{name}` per run (air or water velocity towards):", "",
+                  "| run | role | fitted m/s | fitted towards deg | logged m/s (vector mean / "
+                  "mean speed) | logged towards deg | direction error deg |",
+                  "|---|---|---|---|---|---|---|"]
+        for r in c["runs"]:
+            lines.append(f"| {r['run']} | {r['role']} | {r['fitted_speed_mps']:.3g} | "
+                         f"{r['fitted_towards_deg']:.0f} | {r['logged_vector_speed_mps']:.2f} / "
+                         f"{r['logged_mean_speed_mps']:.2f} | {r['logged_towards_deg']:.0f} | "
+                         f"{r['direction_error_deg']:+.0f} |")
+        lines.append("")
+    return lines
 
 
 def write(out_dir: Path, rep: Mapping[str, Any]) -> None:

@@ -18,7 +18,7 @@ is compared with the hidden one.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -152,16 +152,25 @@ def measured_run(name: str, track: Mapping[str, np.ndarray], hidden: Mapping[str
 def simulate_trial(spec: Mapping[str, Any], hidden: Mapping[str, Mapping[str, float]],
                    rng: np.random.Generator) -> tuple[list[TrialData], list[TrialData]]:
     """Measured training and held-out runs of ``spec`` with the ``hidden`` effects on."""
-    ship = effects.apply_spec(spec, hidden)
-    off = effects.environment_offset(hidden)
-    ws, wf = effects.add_wind(np.zeros(1), np.zeros(1), off[2:3], off[3:4])
-    env = Env(current_north_mps=off[0], current_east_mps=off[1],
-              wind_speed_mps=float(ws[0]) if off[2] or off[3] else 0.0,
-              wind_from_rad=float(wf[0]))
+    return simulate_runs(spec, [hidden] * len(TRAIN_RUNS), [hidden] * len(HOLD_RUNS), rng)
+
+
+def simulate_runs(spec: Mapping[str, Any],
+                  hidden_train: Sequence[Mapping[str, Mapping[str, float]]],
+                  hidden_hold: Sequence[Mapping[str, Mapping[str, float]]],
+                  rng: np.random.Generator) -> tuple[list[TrialData], list[TrialData]]:
+    """Measured :data:`TRAIN_RUNS` and :data:`HOLD_RUNS` with the hidden effects of each run
+    (e.g. a different wind on every run)."""
     out = []
-    for runs in (TRAIN_RUNS, HOLD_RUNS):
+    for runs, hiddens in ((TRAIN_RUNS, hidden_train), (HOLD_RUNS, hidden_hold)):
         trials = []
-        for kind, rud, head, side in runs:
+        for (kind, rud, head, side), hidden in zip(runs, hiddens, strict=True):
+            ship = effects.apply_spec(spec, hidden)
+            off = effects.environment_offset(hidden)
+            ws, wf = effects.add_wind(np.zeros(1), np.zeros(1), off[2:3], off[3:4])
+            env = Env(current_north_mps=off[0], current_east_mps=off[1],
+                      wind_speed_mps=float(ws[0]) if off[2] or off[3] else 0.0,
+                      wind_from_rad=float(wf[0]))
             track = _manoeuvre(ship, env, kind, rud, head, side)
             trials.append(measured_run(f"{kind}_{rud:g}_{'s' if side > 0 else 'p'}", track,
                                        hidden, rng))
@@ -201,11 +210,12 @@ def run(n_trials: int, seed: int = 0, candidates: tuple[str, ...] = effects.NAME
         first = top.effects[0] if diag.attributable else "not attributable"
         true_mag = effects.REGISTRY[name].magnitude(hidden[name])
         fitted = next(c for c in diag.singles if c.effects[0] == name)
-        fit_mag = effects.REGISTRY[name].magnitude(fitted.values[name])
+        fitted_values = fitted.mean_value(name, dtrain.windows.run_names)
+        fit_mag = effects.REGISTRY[name].magnitude(fitted_values)
         rel = (fit_mag - true_mag) / true_mag
         confusion[candidates.index(name), labels.index(first)] += 1
         trials.append({"hidden": name, "hidden_values": hidden[name], "first_ranked": first,
-                       "fitted_values": fitted.values[name], "magnitude_true": true_mag,
+                       "fitted_values": fitted_values, "magnitude_true": true_mag,
                        "magnitude_fitted": fit_mag, "magnitude_rel_error": rel,
                        "shrinkage_holdout": fitted.shrinkage(diag.base)[1],
                        "gap_over_floor": diag.base.cost_hold / max(diag.floor_hold, 1e-300),

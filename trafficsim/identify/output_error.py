@@ -191,7 +191,9 @@ def fit(param: Parametrisation, windows: Windows, x0: np.ndarray | None = None,
         residuals: another residual function of the same interface as :class:`Residuals`
             (``(k, p)`` candidates -> ``(k, m)`` weighted residuals in one replay, with
             ``channels``, ``scales``, ``last_diverged``), e.g. the effect models of
-            :mod:`trafficsim.diagnose`; ``param`` then only gives names, bounds and start.
+            :mod:`trafficsim.diagnose`; ``param`` then only gives names, bounds and start. If
+            it has a ``jacobian(x, r0, h)`` method, that computes the forward differences
+            (e.g. several columns of a sparse Jacobian from one perturbed model).
     """
     from scipy.optimize import least_squares
 
@@ -217,7 +219,10 @@ def fit(param: Parametrisation, windows: Windows, x0: np.ndarray | None = None,
     def jac(x: np.ndarray) -> np.ndarray:
         nonlocal njev
         njev += 1
-        return jacobian(res, x, fun(x), fd_steps(x, x_start, lo, hi, rel_step))
+        steps = fd_steps(x, x_start, lo, hi, rel_step)
+        if hasattr(res, "jacobian"):
+            return res.jacobian(x, fun(x), steps)
+        return jacobian(res, x, fun(x), steps)
 
     r_start = fun(x_start)
     sol = least_squares(fun, x_start, jac=jac, bounds=(lo, hi), x_scale="jac", method="trf",

@@ -137,8 +137,8 @@ def simulate(models: ModelRows, windows: Windows, x0: np.ndarray | None = None,
             latency) moves the true start away from the measured one.
         env_offset: ``(k, 4)`` per-model environment added to the windows' (current north,
             current east, air velocity north, air velocity east over ground, all m/s, the
-            air velocity "towards"); default none. A zero air velocity leaves the windows' wind
-            as it is.
+            air velocity "towards"), or ``(k, W, 4)`` per model and window (e.g. a wind of each
+            run); default none. A zero air velocity leaves the windows' wind as it is.
         steering: ``(k, 2)`` steering gear between the measured rudder angle and the hull:
             first-order lag ``tau_s`` (s) and rate limit (rad/s); ``tau_s <= 0`` (default)
             means the hull feels the measured angle. The gear's angle at each window's start is
@@ -155,6 +155,9 @@ def simulate(models: ModelRows, windows: Windows, x0: np.ndarray | None = None,
         x0[:, 6, :] = windows.inputs[:, 0, 0]  # a steering gear starts at the measured angle
     if env_offset is None:
         env_offset = np.zeros((models.k, 4))
+    env_offset = np.asarray(env_offset, dtype=float)
+    if env_offset.ndim == 2:
+        env_offset = np.repeat(env_offset[:, None, :], windows.w, axis=1)
     if steering is None:
         steering = np.zeros((models.k, 2))
     _replay(models.codes, np.ascontiguousarray(models.params),
@@ -222,7 +225,7 @@ def _replay(codes: np.ndarray, P: np.ndarray, sub: np.ndarray, X0: np.ndarray,
     Args:
         codes ``(k,)``, P ``(k, c)``, sub ``(k, W)`` sub-steps per interval; X0 ``(k, 8, W)``;
         U_in ``(W, N, 2)`` rudder rad, rps; E ``(W, N, 4)`` environment per sample;
-        dt ``(W,)`` s; n_samples ``(W,)``; E_off ``(k, 4)`` environment offsets; steer
+        dt ``(W,)`` s; n_samples ``(W,)``; E_off ``(k, W, 4)`` environment offsets; steer
         ``(k, 2)`` steering lag (s) and rate (rad/s); out ``(k, W, N, 6)`` (written);
         diverged ``(k, W)``.
     """
@@ -237,10 +240,10 @@ def _replay(codes: np.ndarray, P: np.ndarray, sub: np.ndarray, X0: np.ndarray,
     k4 = np.empty(7)
     env = np.empty(4)
     for m in range(n_models):
-        code, p, off, st = codes[m], P[m], E_off[m], steer[m]
+        code, p, st = codes[m], P[m], steer[m]
         lag = st[0] > 0.0
         for w in range(n_win):
-            u_in, env_w = U_in[w], E[w]
+            u_in, env_w, off = U_in[w], E[w], E_off[m, w]
             for j in range(8):
                 x[j] = X0[m, j, w]
             for j in range(6):
