@@ -581,8 +581,18 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
         keep = kept[p] * (1.0 + RESUME_MARGIN)
         near = (math.hypot(pn[p], pe[p])
                 < arbitration.ALONGSIDE_RANGE_FACTOR * kept[p] * (1.0 + RESUME_MARGIN))
+        alongside_prev = False
         for row in range(n_rows):
+            steered = leads = math.inf
             for step in range(k):
+                # turns clipped at the target course repeat the previous candidate
+                if (step >= 2 and c1[i, row, step] == c1[i, row, step - 1]
+                        and s1[i, row, step] == s1[i, row, step - 1]
+                        and meet_m[i, row, step] == meet_m[i, row, step - 1]):
+                    worst[i, row, step] = min(worst[i, row, step], min(steered, leads) - keep)
+                    passing[i, row, step] = min(passing[i, row, step], steered - kept[p])
+                    alongside[i, row, step] |= alongside_prev
+                    continue
                 steered = leads = math.inf
                 for variant in range(2):
                     if variant == 1 and step == 0:
@@ -600,9 +610,10 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
                     steered, leads = min(steered, straight), min(leads, line)
                 worst[i, row, step] = min(worst[i, row, step], min(steered, leads) - keep)
                 passing[i, row, step] = min(passing[i, row, step], steered - kept[p])
+                alongside_prev = False
                 if near:
                     sp = speed[i, row]
                     dvn = wn[p] - sp * c1[i, row, step]
                     dve = we[p] - sp * s1[i, row, step]
                     if dvn * dvn + dve * dve < arbitration.ALONGSIDE_SPEED_MPS**2:
-                        alongside[i, row, step] = True
+                        alongside[i, row, step] = alongside_prev = True
