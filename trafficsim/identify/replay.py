@@ -174,13 +174,7 @@ def _derivative(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray,
                 out: np.ndarray) -> None:
     """Time derivative of the 6 motion states (rudder, rps rows of ``x`` are inputs)."""
     du, dv, dr = kernels.accel(code, p, x, env)
-    c, s = math.cos(x[2]), math.sin(x[2])
-    out[0] = x[3] * c - x[4] * s + env[0]
-    out[1] = x[3] * s + x[4] * c + env[1]
-    out[2] = x[5]
-    out[3] = du
-    out[4] = dv
-    out[5] = dr
+    kernels.motion_rates(du, dv, dr, x, env, out)
 
 
 @kernel

@@ -43,9 +43,10 @@ def accel(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[flo
 
 
 @inline_kernel
-def _derivative(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: np.ndarray,
-                rudder_cmd: float, rps_cmd: float, env: np.ndarray, out: np.ndarray) -> None:
-    du, dv, dr = accel_fn(p, x, env)
+def motion_rates(du: float, dv: float, dr: float, x: np.ndarray, env: np.ndarray,
+                 out: np.ndarray) -> None:
+    """Rates of the six motion states: position and heading from the velocities through the
+    water turned to the earth frame plus the current, and the family's accelerations."""
     c, s = math.cos(x[2]), math.sin(x[2])
     out[0] = x[3] * c - x[4] * s + env[0]
     out[1] = x[3] * s + x[4] * c + env[1]
@@ -53,6 +54,13 @@ def _derivative(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: np.ndarray,
     out[3] = du
     out[4] = dv
     out[5] = dr
+
+
+@inline_kernel
+def _derivative(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: np.ndarray,
+                rudder_cmd: float, rps_cmd: float, env: np.ndarray, out: np.ndarray) -> None:
+    du, dv, dr = accel_fn(p, x, env)
+    motion_rates(du, dv, dr, x, env, out)
     target = min(max(rudder_cmd, -a[RUDDER_MAX]), a[RUDDER_MAX])
     rate = (target - x[6]) / a[RUDDER_TAU]
     out[6] = min(max(rate, -a[RUDDER_RATE]), a[RUDDER_RATE])
