@@ -23,8 +23,7 @@ from trafficsim.diagnose import data as ddata
 from trafficsim.diagnose import fit, report
 from trafficsim.errors import InputError
 from trafficsim.identify import preprocess
-from trafficsim.identify.command import expand_paths
-from trafficsim.io.trialdata import read_trial
+from trafficsim.identify.command import read_runs, working_interval_s
 from trafficsim.ships.library import load_ship
 
 KNOT = 1852.0 / 3600.0
@@ -81,15 +80,8 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
     refit_names = _refit(spec, refit)
     length = float(spec["particulars"]["length_m"])
     u_service = float(spec["service_speed_kn"]) * KNOT
-    train_files = expand_paths(data, "--data")
-    hold_files = expand_paths(holdout, "--holdout")
-    files = [*train_files, *hold_files]
-    stems = [p.stem for p in files]
-    trials = [read_trial(p, p.stem if stems.count(p.stem) == 1 else f"{p.parent.name}/{p.stem}")
-              for p in files]
-    native = min(t.dt_s for t in trials)
-    work_dt = dt_s if dt_s is not None else native * max(
-        1, int(np.floor(length / (20.0 * u_service) / native + 1e-9)))
+    train_files, hold_files, trials = read_runs(data, holdout)
+    work_dt = working_interval_s(trials, length, u_service, dt_s)
     kin = preprocess.smooth_runs(trials, length, u_service, dt_s=work_dt)
     horizon = horizon_s if horizon_s is not None else 3.0 * length / u_service
     if hold_files:

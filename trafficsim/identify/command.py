@@ -66,6 +66,30 @@ def expand_paths(paths: Sequence[Path], flag: str) -> list[Path]:
     return out
 
 
+def read_runs(data: Sequence[Path], holdout: Sequence[Path],
+              columns: Mapping[str, str] | None = None
+              ) -> tuple[list[Path], list[Path], list[TrialData]]:
+    """Training and held-out files (folders expanded) and their runs, training first; a run is
+    named by its file's stem, with its folder where stems repeat."""
+    train_files = expand_paths(data, "--data")
+    hold_files = expand_paths(holdout, "--holdout")
+    files = [*train_files, *hold_files]
+    stems = [p.stem for p in files]
+    trials = [read_trial(p, p.stem if stems.count(p.stem) == 1 else f"{p.parent.name}/{p.stem}",
+                         columns)
+              for p in files]
+    return train_files, hold_files, trials
+
+
+def working_interval_s(trials: Sequence[TrialData], length_m: float, u_service_mps: float,
+                       dt_s: float | None) -> float:
+    """``dt_s`` if given, else the data's sampling thinned to at most ``L / (20 U)``."""
+    if dt_s is not None:
+        return dt_s
+    native = min(t.dt_s for t in trials)
+    return native * max(1, int(np.floor(length_m / (20.0 * u_service_mps) / native + 1e-9)))
+
+
 def starting_spec(model: str, base: Mapping[str, Any], runs: Sequence[preprocess.Kinematics]
                   ) -> dict[str, Any]:
     """The base ship turned into a ship of family ``model`` with starting coefficients."""
@@ -135,17 +159,8 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     base_spec = load_ship(base)
     length = float(base_spec["particulars"]["length_m"])
     u_service = float(base_spec["service_speed_kn"]) * KNOT
-    train_files = expand_paths(data, "--data")
-    hold_files = expand_paths(holdout, "--holdout")
-    files = [*train_files, *hold_files]
-    stems = [p.stem for p in files]
-    trials: list[TrialData] = [
-        read_trial(p, p.stem if stems.count(p.stem) == 1 else f"{p.parent.name}/{p.stem}",
-                   columns)
-        for p in files]
-    native = min(t.dt_s for t in trials)
-    work_dt = dt_s if dt_s is not None else native * max(
-        1, int(np.floor(length / (20.0 * u_service) / native + 1e-9)))
+    train_files, hold_files, trials = read_runs(data, holdout, columns)
+    work_dt = working_interval_s(trials, length, u_service, dt_s)
     kin = preprocess.smooth_runs(trials, length, u_service,
                                  smoother or preprocess.SmootherSettings(), dt_s=work_dt)
     train, hold = kin[: len(train_files)], kin[len(train_files):]
