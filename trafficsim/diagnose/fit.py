@@ -16,15 +16,26 @@ Gap shrinkage: ``1 - J_with / J_base``.
 Ranking (documented choice): every effect is fitted alone on the training runs and scored on the
 held-out runs by the penalised shrinkage ``1 - (J_with / J_base) (1 + 2 p / n_eff)``, ``p`` the
 effect's parameters the held-out prediction uses and ``n_eff`` the held-out windows times
-channels. Environmental effects (``current``, ``wind``) are conditions of each run: one vector
-per run, fitted on the training runs with the rest and on each held-out run alone (the other
-parameters fixed as trained), and ``p`` counts two per held-out run. With ``refit``, base
-coefficients are fitted on the training runs jointly with every candidate set, the base
-included (an AIC-like penalty that
-counts one independent error per window and channel, since successive samples of a trajectory
-are strongly correlated). Combinations: forward selection adds, to the best set so far, the
-candidate that lowers the penalised held-out cost most, fitting the whole set jointly, while it
-lowers it by at least ``MIN_GAIN`` (5 %).
+channels (an AIC-like penalty that counts one independent error per window and channel, since
+successive samples of a trajectory are strongly correlated). With ``refit``, base coefficients
+are fitted on the training runs jointly with every candidate set, the base included.
+Combinations: forward selection adds, to the best set so far, the candidate that lowers the
+penalised held-out cost most, fitting the whole set jointly, while it lowers it by at least
+``MIN_GAIN`` (5 %).
+
+Environmental effects (``current``, ``wind``) are conditions of each run: one vector per run,
+fitted on the training runs with the rest, and on each held-out run alone (the other
+parameters fixed as trained) by two-fold cross-fitting (:func:`alternate`): the run's vector
+is fitted on its even windows and scores its odd ones, and vice versa, so every held-out window
+is scored with a vector fitted without it (a run with windows in one fold only is scored there
+with the environment off). The held-out cost ``cost_hold`` is this cross-fitted one; the cost
+with the vector fitted on all of a run's windows (``cost_hold_insample``) is kept for
+comparison, and that full-run fit gives the reported per-run values. ``p`` still counts two
+parameters per held-out run and environmental effect (documented choice): the global
+parameters are scored out of sample too and counted, so the penalty is one parsimony rule for
+every parameter the held-out prediction uses; and adjacent windows of a run share slowly
+varying conditions (gusts, the smoothed start states), so the alternating folds are not fully
+independent and part of the fit's optimism remains.
 
 Noise floor: ``J_floor = 1/2 sum_channels m_c (sigma_c / s_c)^2`` with ``sigma_c`` each measured
 channel's white noise; a gap below ``FLOOR_FACTOR`` (3) times its floor is "not attributable"
@@ -372,7 +383,11 @@ class Candidate:
     ``values``: the global effect values; ``run_values``: the environmental ones per run
     (training and held-out runs); ``coefficients``: the base coefficients refitted with the
     effects; ``p``: the effect parameters the held-out prediction uses (global ones plus the
-    per-run ones of every held-out run), the ``p`` of the penalty.
+    per-run ones of every held-out run), the ``p`` of the penalty. ``cost_hold``: held-out cost,
+    cross-fitted for the environments of held-out runs (module doc); ``cost_hold_insample``:
+    with each held-out run's environment fitted on all its windows (``None``: no such fit, the
+    same as ``cost_hold``); ``fold_run_values``: the environments fitted on the first and on
+    the second fold of :func:`alternate` (empty without such a fit).
     """
 
     effects: tuple[str, ...]
@@ -384,10 +399,18 @@ class Candidate:
     fit: Any = None
     coefficients: dict[str, float] = field(default_factory=dict)
     run_values: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
+    cost_hold_insample: float | None = None
+    fold_run_values: tuple[dict[str, dict[str, dict[str, float]]], ...] = ()
 
     def shrinkage(self, base: Candidate) -> tuple[float, float]:
         return (1.0 - self.cost_train / max(base.cost_train, 1e-300),
                 1.0 - self.cost_hold / max(base.cost_hold, 1e-300))
+
+    def shrinkage_insample(self, base: Candidate) -> float:
+        """Held-out shrinkage with each held-out run's environment fitted on all its windows
+        (partly in sample; the same as the held-out one without per-run environments)."""
+        cost = self.cost_hold if self.cost_hold_insample is None else self.cost_hold_insample
+        return 1.0 - cost / max(base.cost_hold, 1e-300)
 
     def mean_value(self, name: str, runs: Sequence[str]) -> dict[str, float]:
         """An effect's value: the global one, or the mean over ``runs`` of a per-run one."""
@@ -437,15 +460,85 @@ def _runs(data: Dataset) -> tuple[str, ...]:
     return tuple(win.run_names[i] for i in np.unique(win.run))
 
 
+def alternate(data: Dataset) -> np.ndarray:
+    """``(W,)`` first fold of the held-out cross-fitting: the even windows of each run (the
+    windows of a run follow each other in time, so both folds cover the whole run)."""
+    run = data.windows.run
+    index = np.zeros(run.size, dtype=np.int64)
+    for r in np.unique(run):
+        at = np.flatnonzero(run == r)
+        index[at[np.argsort(data.windows.t0_s[at], kind="stable")]] = np.arange(at.size)
+    return index % 2 == 0
+
+
+class CrossFitted(EffectResiduals):
+    """Residuals on held-out data where each window's environment is the one fitted on the
+    other fold: ``params[0]`` (fitted on the windows ``first``) scores the other windows,
+    ``params[1]`` (fitted on the others) scores ``first``."""
+
+    def __init__(self, params: tuple[EffectSet, EffectSet], data: Dataset,
+                 scales: Mapping[str, float], first: np.ndarray) -> None:
+        super().__init__(params[0], data, scales)
+        self._other = EffectResiduals(params[1], data, scales)
+        self._first = np.asarray(first, dtype=bool)
+
+    def errors(self, thetas: np.ndarray) -> np.ndarray:
+        a = super().errors(thetas)
+        b = self._other.errors(thetas)
+        return np.where(self._first[None, :, None, None], b, a)
+
+
+def _fit_environments(ship: Mapping[str, Any], names: Sequence[str],
+                      glob: Mapping[str, Mapping[str, float]],
+                      known: Mapping[str, Mapping[str, Mapping[str, float]]], data: Dataset,
+                      sc: Mapping[str, float], max_nfev: int,
+                      start: Mapping[str, Mapping[str, Mapping[str, float]]] | None = None
+                      ) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, Any], float]:
+    """Fit the environment of every run of ``data`` not in ``known``, the rest fixed (global
+    values ``glob``, ``known`` runs' environments); ``start``: starting values per run (a
+    coarse grid for an effect without). Returns the environments of all runs, the fit's table
+    and its cost on ``data``."""
+    if data.windows.w == 0:
+        return {r: {k: dict(v) for k, v in e.items()} for r, e in known.items()}, {}, 0.0
+    runs = tuple(r for r in _runs(data) if r not in known)
+    param = EffectSet.of(ship, names, fixed=glob, runs=runs, run_start=start, run_fixed=known)
+    res = EffectResiduals(param, data, sc)
+    if not param.p:
+        return param.run_values(np.zeros(0)), {}, res.cost(np.zeros(0))
+    x = param.initial()
+    for name in param.per_run:
+        if not all(name in (start or {}).get(r, {}) for r in runs):
+            x = _grid_start(param, res, name, x)
+    fitted = output_error.fit(param, data.windows, x0=x, max_nfev=max_nfev, rel_step=1e-4,
+                              tol=1e-6, residuals=res)
+    return param.run_values(fitted.x), fitted.table(), float(fitted.cost)
+
+
+def _mean_start(folds: Sequence[Mapping[str, Mapping[str, Mapping[str, float]]]],
+                runs: Sequence[str]) -> dict[str, dict[str, dict[str, float]]]:
+    """Per run and effect, the mean of the folds' fitted values (where a fold has the run)."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for run in runs:
+        have = [f[run] for f in folds if run in f]
+        for name in {n for h in have for n in h}:
+            rows = [h[name] for h in have if name in h]
+            out.setdefault(run, {})[name] = {k: float(np.mean([row[k] for row in rows]))
+                                             for k in rows[0]}
+    return out
+
+
 def fit_set(spec: Mapping[str, Any], names: Sequence[str], train: Dataset, hold: Dataset,
             sc: Mapping[str, float], start: Mapping[str, Mapping[str, float]] | None = None,
             max_nfev: int = 30, refit: Sequence[str] = (),
             run_start: Mapping[str, Mapping[str, Mapping[str, float]]] | None = None,
-            coefficients: Mapping[str, float] | None = None) -> Candidate:
+            coefficients: Mapping[str, float] | None = None,
+            fold_start: Sequence[Mapping[str, Mapping[str, Mapping[str, float]]]] = ()
+            ) -> Candidate:
     """Fit the effects ``names`` (with the base coefficients ``refit``) jointly on ``train``;
-    evaluate on ``hold``, fitting there only the environment of each held-out run that is not
-    a training run (the ship's and instruments' parameters stay as fitted on ``train``).
-    ``coefficients``: starting values of the refitted coefficients."""
+    evaluate on ``hold`` (the ship's and instruments' parameters as fitted on ``train``),
+    cross-fitting there the environment of each held-out run that is not a training run
+    (module doc). ``coefficients``: starting values of the refitted coefficients;
+    ``fold_start``: starting environments of the two folds' fits (fitted on the same folds)."""
     base_spec = dict(spec)
     if coefficients:
         base_spec["coefficients"] = {**spec["coefficients"], **coefficients}
@@ -464,27 +557,28 @@ def fit_set(spec: Mapping[str, Any], names: Sequence[str], train: Dataset, hold:
     glob, runs_fit = param.values(x), param.run_values(x)
     coeffs = param.coefficients(x)
     table = result.table()
+    ship = param.ship(x)
     hold_runs = _runs(hold)
     new_runs = tuple(r for r in hold_runs if r not in runs_fit) if param.per_run else ()
-    param_h = EffectSet.of(param.ship(x), names, fixed=glob, runs=new_runs,
-                           run_start=run_start, run_fixed=runs_fit)
-    res_h = EffectResiduals(param_h, hold, sc)
-    if param_h.p:
-        xh = param_h.initial()
-        for name in param_h.per_run:
-            if not all(name in (run_start or {}).get(r, {}) for r in new_runs):
-                xh = _grid_start(param_h, res_h, name, xh)
-        fit_h = output_error.fit(param_h, hold.windows, x0=xh, max_nfev=max_nfev,
-                                 rel_step=1e-4, tol=1e-6, residuals=res_h)
-        cost_hold = fit_h.cost
-        runs_fit = param_h.run_values(fit_h.x)
-        table.update(fit_h.table())
+    cost_in, folds = None, ()
+    if new_runs:
+        first = alternate(hold)
+        folds = tuple(_fit_environments(ship, names, glob, runs_fit, hold.subset(sel), sc,
+                                        max_nfev, fold_start[k] if fold_start else None)[0]
+                      for k, sel in enumerate((first, ~first)))
+        cross = CrossFitted(tuple(EffectSet.of(ship, names, fixed=glob, run_fixed=f)
+                                  for f in folds), hold, sc, first)
+        cost_hold = cross.cost(np.zeros(0))
+        runs_fit, table_h, cost_in = _fit_environments(ship, names, glob, runs_fit, hold, sc,
+                                                       max_nfev, _mean_start(folds, new_runs))
+        table.update(table_h)
     else:
-        cost_hold = res_h.cost(np.zeros(0))
+        cost_hold = EffectResiduals(EffectSet.of(ship, names, fixed=glob, run_fixed=runs_fit),
+                                    hold, sc).cost(np.zeros(0))
     p = sum(len(effects.REGISTRY[n].keys) for n in param.global_effects)
     p += len(hold_runs) * sum(len(effects.REGISTRY[n].keys) for n in param.per_run)
     return Candidate(tuple(names), glob, table, result.cost, cost_hold, int(p), result,
-                     coeffs, runs_fit)
+                     coeffs, runs_fit, cost_in, folds)
 
 
 def penalised(cost: float, p: int, n_eff: int) -> float:
@@ -544,9 +638,13 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
             start = {**chosen.values, **single.values}
             run_start = {r: {**chosen.run_values.get(r, {}), **single.run_values.get(r, {})}
                          for r in {*chosen.run_values, *single.run_values}}
+            folds = tuple({r: {**a.get(r, {}), **b.get(r, {})} for r in {*a, *b}}
+                          for a, b in zip(chosen.fold_run_values or ({}, {}),
+                                          single.fold_run_values or ({}, {}), strict=True)
+                          ) if chosen.fold_run_values or single.fold_run_values else ()
             cand = single if not chosen.effects else fit_set(
                 spec, names, train, hold, sc, start, max_nfev, refit, run_start or None,
-                chosen.coefficients or start_coeffs)
+                chosen.coefficients or start_coeffs, folds)
             pen = penalised(cand.cost_hold, cand.p, n_eff)
             if pen < best_pen:
                 best, best_pen = cand, pen
@@ -578,12 +676,17 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
 
 
 def evaluation(spec: Mapping[str, Any], cand: Candidate, data: Dataset,
-               sc: Mapping[str, float]) -> EffectResiduals:
+               sc: Mapping[str, float], held_out: bool = False) -> EffectResiduals:
     """Residuals of a fitted candidate on ``data`` (no free parameter: evaluate at
-    ``np.zeros(0)``)."""
+    ``np.zeros(0)``); ``held_out``: ``data`` are the held-out windows, scored cross-fitted
+    when the candidate has fold environments (module doc)."""
     ship = dict(spec)
     if cand.coefficients:
         ship["coefficients"] = {**spec["coefficients"], **cand.coefficients}
+    if held_out and cand.fold_run_values:
+        return CrossFitted(tuple(EffectSet.of(ship, cand.effects, fixed=cand.values,
+                                              run_fixed=f) for f in cand.fold_run_values),
+                           data, sc, alternate(data))
     return EffectResiduals(EffectSet.of(ship, cand.effects, fixed=cand.values,
                                         run_fixed=cand.run_values), data, sc)
 
@@ -595,7 +698,7 @@ def residual_summary(spec: Mapping[str, Any], diag: Diagnosis, train: Dataset, h
     x = np.zeros(0)
     for label, data in (("train", train), ("holdout", hold)):
         base = evaluation(spec, diag.base, data, sc)
-        after = evaluation(spec, diag.chosen, data, sc)
+        after = evaluation(spec, diag.chosen, data, sc, held_out=label == "holdout")
         out[label] = {
             "before": {"by_phase": base.by_phase(x), "by_channel": base.by_channel(x)},
             "after": {"by_phase": after.by_phase(x), "by_channel": after.by_channel(x)},
@@ -607,10 +710,10 @@ def phase_shrinkage(spec: Mapping[str, Any], cand: Candidate, data: Dataset,
                     sc: Mapping[str, float], base_cand: Candidate | None = None
                     ) -> dict[str, float]:
     """Held-out cost shrinkage per phase of one candidate (against ``base_cand``, default
-    the unchanged base ship)."""
-    base = evaluation(spec, base_cand, data, sc) if base_cand is not None else \
-        EffectResiduals(EffectSet.of(spec, ()), data, sc)
-    withe = evaluation(spec, cand, data, sc)
+    the unchanged base ship), cross-fitted like the held-out cost."""
+    base = evaluation(spec, base_cand, data, sc, held_out=True) if base_cand is not None \
+        else EffectResiduals(EffectSet.of(spec, ()), data, sc)
+    withe = evaluation(spec, cand, data, sc, held_out=True)
     eb = base.errors(np.zeros(0))[0] * base._weights
     ew = withe.errors(np.zeros(0))[0] * withe._weights
     out = {}

@@ -1,7 +1,9 @@
 """Reports of a diagnosis: ``report.json``, a one-page ``report.md`` and the residual plots.
 
 ``report.json``: ``ranking`` (best first: ``effect``, fitted ``parameters`` with nominal 95 %
-intervals, ``shrinkage_train``, ``shrinkage_holdout``, ``per_phase`` held-out shrinkage,
+intervals, ``shrinkage_train``, ``shrinkage_holdout`` (cross-fitted for per-run environments,
+:mod:`trafficsim.diagnose.fit`), ``shrinkage_holdout_insample`` (the held-out runs'
+environments fitted on all their windows), ``per_phase`` held-out shrinkage (cross-fitted),
 ``penalised_score``), ``chosen`` (forward selection), ``verdict``, ``gap`` (costs before and
 after, noise floors) and ``residuals`` (RMS per phase and channel, before and after, on training
 and held-out data). ``residuals_by_phase.png``: held-out RMS per phase and channel before and
@@ -35,6 +37,7 @@ def summary(spec: Mapping[str, Any], diag: Diagnosis, train: Dataset, hold: Data
         ranking.append({
             "effect": c.effects[0], "parameters": c.table,
             "shrinkage_train": sh_t, "shrinkage_holdout": sh_h,
+            "shrinkage_holdout_insample": c.shrinkage_insample(diag.base),
             "penalised_score": 1.0 - penalised(c.cost_hold, c.p, diag.n_eff)
             / diag.base.cost_hold,
             "per_phase": phase_shrinkage(spec, c, hold, sc, diag.base)})
@@ -49,6 +52,8 @@ def summary(spec: Mapping[str, Any], diag: Diagnosis, train: Dataset, hold: Data
         "ranking": ranking,
         "chosen": {"effects": list(chosen.effects), "parameters": chosen.table,
                    "shrinkage_train": sh[0], "shrinkage_holdout": sh[1],
+                   "shrinkage_holdout_insample": chosen.shrinkage_insample(diag.base)
+                   if chosen.effects else 0.0,
                    "per_phase": phase_shrinkage(spec, chosen, hold, sc, diag.base) if chosen.effects
                    else {}, "steps": diag.steps},
         "gap": {"cost_train_before": diag.base.cost_train, "cost_holdout_before":
@@ -119,11 +124,14 @@ def markdown(rep: Mapping[str, Any]) -> str:
         lines.append(f"| {p} | {b['samples']} | " + " | ".join(cells) + " |")
     lines += ["", "## Which", "",
               "| rank | effect | parameters (95 % nominal) | shrinkage train | shrinkage held-out "
-              "| penalised score |", "|---|---|---|---|---|---|"]
+              "(cross-fitted) | held-out, run environments in sample | penalised score |",
+              "|---|---|---|---|---|---|---|"]
     for i, r in enumerate(rep["ranking"], 1):
         par = parameter_text(r["parameters"])
         lines.append(f"| {i} | {r['effect']} | {par} | {100 * r['shrinkage_train']:.0f} % | "
-                     f"{100 * r['shrinkage_holdout']:.0f} % | {100 * r['penalised_score']:.0f} % |")
+                     f"{100 * r['shrinkage_holdout']:.0f} % | "
+                     f"{100 * r['shrinkage_holdout_insample']:.0f} % | "
+                     f"{100 * r['penalised_score']:.0f} % |")
     ch = rep["chosen"]
     lines += ["", "## How far", "",
               f"Chosen (forward selection): {' + '.join(ch['effects']) or 'nothing'}. "
