@@ -116,6 +116,19 @@ def kvlcc2_turn() -> dict[str, np.ndarray]:
     return {k: v[::2] for k, v in track.items()}
 
 
+def _noisy_body_velocities(tr: dict[str, np.ndarray], k: int, seed: int
+                           ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """``body_velocities`` of ``k`` noise realisations of the turn (fixes sigma 1 m per axis,
+    compass sigma 0.2 deg) and the true ``u, v, r``."""
+    rng = np.random.default_rng(seed)
+    n = tr["t_s"].size
+    north = tr["north_m"] + rng.normal(0.0, 1.0, (k, n))
+    east = tr["east_m"] + rng.normal(0.0, 1.0, (k, n))
+    psi = np.radians(tr["heading_deg"]) + rng.normal(0.0, np.radians(0.2), (k, n))
+    truth = {"u_mps": tr["u_mps"], "v_mps": tr["v_mps"], "r_radps": np.radians(tr["r_degps"])}
+    return smoother.body_velocities(north, east, psi, T), truth
+
+
 def test_body_velocities_recover_turning_circle(kvlcc2_turn: dict[str, np.ndarray]) -> None:
     """From position fixes (sigma 1 m per axis) and compass (sigma 0.2 deg) every 2 s, 50 noise
     realisations at once: over the turn (first and last 10 s left out) the RMS errors are below
@@ -123,14 +136,9 @@ def test_body_velocities_recover_turning_circle(kvlcc2_turn: dict[str, np.ndarra
     (truth up to 0.011 rad/s), and the mean over realisations (bias, the smoother's lag on the
     rudder step) below 0.03 m/s and 2.5e-4 rad/s."""
     tr = kvlcc2_turn
-    rng = np.random.default_rng(8)
     k, n = 50, tr["t_s"].size
-    north = tr["north_m"] + rng.normal(0.0, 1.0, (k, n))
-    east = tr["east_m"] + rng.normal(0.0, 1.0, (k, n))
-    psi = np.radians(tr["heading_deg"]) + rng.normal(0.0, np.radians(0.2), (k, n))
-    out = smoother.body_velocities(north, east, psi, T)
+    out, truth = _noisy_body_velocities(tr, k, seed=8)
     inner = slice(5, -5)
-    truth = {"u_mps": tr["u_mps"], "v_mps": tr["v_mps"], "r_radps": np.radians(tr["r_degps"])}
     rms_tol = {"u_mps": 0.06, "v_mps": 0.06, "r_radps": 5e-4}
     bias_tol = {"u_mps": 0.03, "v_mps": 0.03, "r_radps": 2.5e-4}
     for key, true in truth.items():
@@ -160,15 +168,8 @@ def test_body_velocities_subtract_current() -> None:
 def test_body_velocity_uncertainty_is_honest(kvlcc2_turn: dict[str, np.ndarray]) -> None:
     """The reported standard deviations of u, v, r match the spread of the errors over 200
     noise realisations to within a factor 1.6 over the turn (ends left out)."""
-    tr = kvlcc2_turn
-    rng = np.random.default_rng(21)
-    k, n = 200, tr["t_s"].size
-    north = tr["north_m"] + rng.normal(0.0, 1.0, (k, n))
-    east = tr["east_m"] + rng.normal(0.0, 1.0, (k, n))
-    psi = np.radians(tr["heading_deg"]) + rng.normal(0.0, np.radians(0.2), (k, n))
-    out = smoother.body_velocities(north, east, psi, T)
+    out, truth = _noisy_body_velocities(kvlcc2_turn, 200, seed=21)
     inner = slice(5, -5)
-    truth = {"u_mps": tr["u_mps"], "v_mps": tr["v_mps"], "r_radps": np.radians(tr["r_degps"])}
     for key, true in truth.items():
         spread = np.sqrt(np.mean((out[key] - true) ** 2, axis=0))[inner]
         sigma = np.mean(out["sigma_" + key], axis=0)[inner]

@@ -52,26 +52,6 @@ def candidate_reduced(k: np.ndarray) -> np.ndarray:
     return _REDUCED[k]
 
 
-def closest_approach_m(rel_north_m: np.ndarray, rel_east_m: np.ndarray, rel_vn_mps: np.ndarray,
-                       rel_ve_mps: np.ndarray, span_s: np.ndarray | float) -> np.ndarray:
-    """Closest range over the next ``span_s`` on straight lines, where the range closes now.
-
-    ``rel_*``: the other ship's position and velocity relative to the own ship (any shape,
-    broadcast). A later CPA counts by the range at the end of the span (a slowly closing ship on
-    a nearly parallel course counts by where it will be then, not at its late CPA); no relative
-    motion keeps the present range (it counts: it is not past the CPA); a pair already past its
-    CPA (range opening) gives +inf: it constrains nothing. The closed-form DCPA/TCPA of straight
-    tracks [colregs.md section 4].
-    """
-    v2 = rel_vn_mps * rel_vn_mps + rel_ve_mps * rel_ve_mps
-    dot = rel_north_m * rel_vn_mps + rel_east_m * rel_ve_mps
-    tcpa = np.where(v2 > 1e-12, -dot / np.maximum(v2, 1e-12), 0.0)
-    t = np.clip(tcpa, 0.0, span_s)
-    closest = np.hypot(rel_north_m + rel_vn_mps * t, rel_east_m + rel_ve_mps * t)
-    # closing by the sign of the product itself: -dot / v2 can underflow to 0 at a tiny range
-    return np.where((dot < 0.0) | (v2 <= 1e-12), closest, math.inf)
-
-
 def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_factor: np.ndarray,
            side: np.ndarray, least_change_rad: np.ndarray, reduce_asked: np.ndarray,
            current: np.ndarray, pair_ship: np.ndarray, rel_north_m: np.ndarray,
@@ -116,7 +96,16 @@ _OFF_DEG, _COS_OFF, _SIN_OFF = np.degrees(_OFF), np.cos(_OFF), np.sin(_OFF)
 
 @kernel
 def closest_m(pn: float, pe: float, dvn: float, dve: float, span_s: float) -> float:
-    """:func:`closest_approach_m` of one relative position and velocity (compiled loops)."""
+    """Closest range over the next ``span_s`` on straight lines, where the range closes now.
+
+    ``pn, pe``, ``dvn, dve``: the other ship's position and velocity relative to the own ship.
+    A later CPA counts by the range at the end of the span (a slowly closing ship on a nearly
+    parallel course counts by where it will be then, not at its late CPA); no relative motion
+    keeps the present range (it counts: it is not past the CPA); a pair already past its CPA
+    (range opening) gives +inf: it constrains nothing. The closed-form DCPA/TCPA of straight
+    tracks [colregs.md section 4]; closing is told by the sign of the product itself (``-dot /
+    v2`` can underflow to 0 at a tiny range).
+    """
     v2 = dvn * dvn + dve * dve
     dot = pn * dvn + pe * dve
     if not (dot < 0.0 or v2 <= 1e-12):

@@ -440,13 +440,14 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
         still = cn == 0.0 and ce == 0.0  # speed over ground = speed through the water
         turning, anchor = abs(x_true[R, i]) > turn_rate[i], anchored[i]
         vn = ve = 0.0
+        ground = False  # ground velocity worked out
         if still:
             interval = _interval(u, v, turning, anchor)
         else:
             interval = _interval_in_current(u, v, cn, ce, turning, anchor)
             if interval < 0.0:  # near a bin boundary: the ground velocity decides
                 c, s = math.cos(psi), math.sin(psi)
-                vn, ve = u * c - v * s + cn, u * s + v * c + ce
+                vn, ve, ground = u * c - v * s + cn, u * s + v * c + ce, True
                 interval = _interval(vn, ve, turning, anchor)
         # a shorter required interval pulls the pending report forward
         pending = next_tx[i]
@@ -459,7 +460,7 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
         nxt = pending + interval
         next_tx[i] = t_s + interval if nxt <= t_s + 1e-9 else nxt
         last_tx[i] = pending
-        if vn == 0.0 and ve == 0.0:  # not worked out yet
+        if not ground:
             c, s = math.cos(psi), math.sin(psi)
             vn, ve = u * c - v * s + cn, u * s + v * c + ce
         z_n, z_e = normal_from(streams, i), normal_from(streams, i)
