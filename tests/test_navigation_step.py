@@ -1,6 +1,7 @@
 """The compiled own-ship step of :class:`trafficsim.navigation.Navigation` against the vectorised
-numpy formulation it replaced (kept below as the reference), step by step: same draws, same
-readings, same filter states and estimates to floating-point round-off."""
+numpy formulation it replaced (kept below as the reference, fed by the at-need draw rule), step
+by step: same draws, same readings, same filter states and estimates to floating-point
+round-off."""
 
 from dataclasses import replace
 
@@ -9,25 +10,62 @@ import pytest
 
 from trafficsim.estimation import gating, pv
 from trafficsim.navigation import N_EST, Navigation
+from trafficsim.noise import normal_from, uniform_from
 from trafficsim.sensors import actuators, compass, gnss, speed_log, waves, wrap_pi
 from trafficsim.ships.base import EAST, NORTH, PSI, Env, R, U, V
 from trafficsim.ships.library import load_ship
+
+
+def draws_at_need(nav: Navigation) -> dict[str, np.ndarray]:
+    """This step's numbers for the modules' ``step`` functions, drawn one by one from the
+    navigation's streams by the at-need rule of :func:`trafficsim.navigation._sense`; a number
+    not drawn gets a value that leaves the module's result as the skipped term would (zero
+    noise, a clean fix, the receiver kept up)."""
+    n = nav.gnss_p.sigma_m.shape[0]
+    g, c, w = nav.gnss_p, nav.compass_p, nav.waves_p
+    st = {k: nav.banks[k].state for k in ("waves", "gnss", "gnss_gross", "compass")}
+    wave = np.zeros((n, waves.WAVE_NORMAL_DIMS))
+    normals = np.zeros((n, gnss.GNSS_NORMAL_DIMS))
+    uniforms = np.tile([1.0, 0.0, 0.5], (n, 1))  # no gross error, any direction, stays up
+    comp = np.zeros((n, compass.COMPASS_NORMAL_DIMS))
+    for i in range(n):
+        if nav.has_waves and (w.l11[i] != 0 or w.l21[i] != 0 or w.l22[i] != 0):
+            wave[i] = [normal_from(st["waves"], i) for _ in range(waves.WAVE_NORMAL_DIMS)]
+        if not nav.gnss_s.up[i] or g.p_start[i] > 0:
+            uniforms[i, 2] = uniform_from(st["gnss_gross"], i)
+        up = (uniforms[i, 2] >= g.p_start[i]) if nav.gnss_s.up[i] else (
+            uniforms[i, 2] < g.p_end[i])
+        valid = nav.gnss_s.counter[i] == 0 and up
+        if g.gm_q[i] != 0:
+            normals[i, 2:] = normal_from(st["gnss"], i), normal_from(st["gnss"], i)
+        if valid and g.sigma_m[i] != 0:
+            normals[i, :2] = normal_from(st["gnss"], i), normal_from(st["gnss"], i)
+        if valid and g.gross_prob[i] > 0:
+            uniforms[i, 0] = uniform_from(st["gnss_gross"], i)
+            if uniforms[i, 0] < g.gross_prob[i]:
+                uniforms[i, 1] = uniform_from(st["gnss_gross"], i)
+        if np.reshape(c.drift_q, n)[i] != 0:
+            comp[i, 1] = normal_from(st["compass"], i)
+        if np.reshape(c.sigma_rad, n)[i] != 0:
+            comp[i, 0] = normal_from(st["compass"], i)
+    return {"waves": wave, "gnss": normals, "gnss_gross": uniforms, "compass": comp}
 
 
 def reference_update(nav: Navigation, x: np.ndarray, env: Env) -> gating.GateResult:
     """The numpy formulation of :meth:`Navigation.update` (dozens of array operations); returns
     the pv filter's gate outcome (the estimate is ``nav.est``)."""
     wave_psi = wave_ne = None
+    draws = draws_at_need(nav)
     if nav.has_waves:
-        nav.waves_s = waves.step(nav.waves_p, nav.waves_s, nav.banks["waves"].next())
+        nav.waves_s = waves.step(nav.waves_p, nav.waves_s, draws["waves"])
         wave_psi = waves.heading_offset(nav.waves_p, nav.waves_s)
         wave_ne = waves.position_offset(nav.waves_p, nav.waves_s, x[PSI])
-    nav.gnss_s, nav.fix = gnss.step(nav.gnss_p, nav.gnss_s, x, nav.banks["gnss"].next(),
-                                    nav.banks["gnss_gross"].next(), wave_ne, wave_psi)
+    nav.gnss_s, nav.fix = gnss.step(nav.gnss_p, nav.gnss_s, x, draws["gnss"],
+                                    draws["gnss_gross"], wave_ne, wave_psi)
     if nav.extra:
         nav._measure_extra_receivers(x, wave_ne, wave_psi)
     nav.compass_s, nav.heading_meas = compass.step(
-        nav.compass_p, nav.compass_s, x[PSI], nav.banks["compass"].next(), wave_psi)
+        nav.compass_p, nav.compass_s, x[PSI], draws["compass"], wave_psi)
     if nav.has_log:
         nav.log_meas = speed_log.measure(nav.log_p, x, env, nav.banks["log"].next())
     if nav.has_actuator_sensors:

@@ -66,14 +66,16 @@ import numpy as np
 from trafficsim.errors import InputError
 from trafficsim.estimation import adaptive, ekf, fusion, gating, pv
 from trafficsim.jit import kernel
-from trafficsim.noise import NoiseBank
+from trafficsim.noise import NoiseBank, normal_from, uniform_from
 from trafficsim.sensors import (
     actuators,
     compass,
     gnss,
+    mod_2pi_scalar,
     rotate_body_to_earth,
     speed_log,
     waves,
+    wrap_2pi_scalar,
 )
 from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Env, R, U, V
 
@@ -239,7 +241,7 @@ class Navigation:
         }
         init_draws = NoiseBank(seed, encounter, ship_in_encounter, "initial",
                                gnss.GNSS_NORMAL_DIMS + compass.COMPASS_NORMAL_DIMS
-                               + waves.WAVE_NORMAL_DIMS).next()
+                               + waves.WAVE_NORMAL_DIMS, block_steps=1).next()
         a, b = gnss.GNSS_NORMAL_DIMS, gnss.GNSS_NORMAL_DIMS + compass.COMPASS_NORMAL_DIMS
         multi = _Receivers.build(configs, gnss_p, dt, seed, encounter, ship_in_encounter)
         pv_sigma = gnss_p.sigma_m
@@ -324,18 +326,18 @@ class Navigation:
         """
         t = self._step_tables()
         n = x.shape[1]
-        wave_draws, wave_psi, wave_ne = _NO_DRAWS, _NO_ROW, _NO_ROWS
+        wave_streams, wave_psi, wave_ne = _NO_STREAMS, _NO_ROW, _NO_ROWS
         if self.has_waves:
-            wave_draws, wave_psi, wave_ne = self.banks["waves"].next(), t.wave_psi, t.wave_ne
+            wave_streams, wave_psi, wave_ne = self.banks["waves"].state, t.wave_psi, t.wave_ne
         gs, ws, heading = self.gnss_s, self.waves_s, self.heading_est
         valid, gross = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
         fix_n, fix_e, heading_meas = np.empty(n), np.empty(n), np.empty(n)
         drift = self.compass_s.drift_rad
         _sense(x, self.dt, self.has_waves, self.gnss_p.has_lever_arm,
                self.compass_p.has_deviation, t.wave, t.gnss, t.arm, t.compass, t.deviation,
-               t.every, t.bandpass, ws.z1, ws.z2, wave_draws, gs.counter, gs.up, gs.gm_m,
-               gs.last_m, self.banks["gnss"].next(), self.banks["gnss_gross"].next(), drift,
-               self.banks["compass"].next(), heading,
+               t.every, t.bandpass, ws.z1, ws.z2, wave_streams, gs.counter, gs.up, gs.gm_m,
+               gs.last_m, self.banks["gnss"].state, self.banks["gnss_gross"].state, drift,
+               self.banks["compass"].state, heading,
                ws.z1, ws.z2, wave_psi, wave_ne, gs.counter, gs.up, gs.gm_m, gs.last_m, fix_n,
                fix_e, valid, gross, drift, heading_meas, heading)
         self.fix = gnss.GnssFix(north_m=fix_n, east_m=fix_e, valid=valid, gross=gross)
@@ -558,7 +560,7 @@ _G_SIGMA, _G_GM_A, _G_GM_Q, _G_GROSS_P, _G_GROSS_M, _G_P_START, _G_P_END = range
 _C_SIGMA, _C_BIAS, _C_DRIFT_A, _C_DRIFT_Q, _H_ALPHA, _H_BETA = range(6)
 _F_SIGMA, _F_SP, _F_DT, _F_THRESHOLD, _F_REOPEN = range(5)
 # stand-ins for the arrays of an absent part (never indexed)
-_NO_DRAWS = np.zeros((0, waves.WAVE_NORMAL_DIMS))
+_NO_STREAMS = np.zeros((0, 4), dtype=np.uint64)
 _NO_ROW = np.zeros(0)
 _NO_ROWS = np.zeros((2, 0))
 _NO_FLAGS = np.zeros(0, dtype=bool)
@@ -612,31 +614,13 @@ class _StepTables:
 
 
 @kernel
-def _mod_2pi(angle: float) -> float:
-    """``np.mod(angle, 2 pi)`` of one angle, bit for bit; the division only outside
-    ``(-2 pi, 2 pi)`` (within it ``fmod`` is exact and the result is ``angle`` or
-    ``angle + 2 pi``)."""
-    if 0.0 <= angle < _TWO_PI:
-        return angle
-    if -_TWO_PI < angle < 0.0:
-        return angle + _TWO_PI
-    return angle % _TWO_PI
-
-
-@kernel
-def _wrap_2pi(angle: float) -> float:
-    """:func:`trafficsim.sensors.wrap_2pi` of one angle."""
-    out = _mod_2pi(angle)
-    return 0.0 if out >= _TWO_PI else out
-
-
-@kernel
 def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bool,
            wtab: np.ndarray, gtab: np.ndarray, arm: np.ndarray, ctab: np.ndarray,
            dev: np.ndarray, every: np.ndarray, bandpass: np.ndarray, z1: np.ndarray,
-           z2: np.ndarray, wave_draws: np.ndarray, counter0: np.ndarray, up0: np.ndarray,
-           gm0: np.ndarray, last0: np.ndarray, gnss_draws: np.ndarray, gross_draws: np.ndarray,
-           drift0: np.ndarray, compass_draws: np.ndarray, heading0: np.ndarray,
+           z2: np.ndarray, wave_streams: np.ndarray, counter0: np.ndarray, up0: np.ndarray,
+           gm0: np.ndarray, last0: np.ndarray, gnss_streams: np.ndarray,
+           gross_streams: np.ndarray, drift0: np.ndarray, compass_streams: np.ndarray,
+           heading0: np.ndarray,
            z1_out: np.ndarray, z2_out: np.ndarray, wave_psi: np.ndarray, wave_ne: np.ndarray,
            counter: np.ndarray, up: np.ndarray, gm: np.ndarray, last: np.ndarray,
            fix_n: np.ndarray, fix_e: np.ndarray, valid: np.ndarray, gross: np.ndarray,
@@ -652,13 +636,25 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
     :class:`_StepTables`; state
     arrays ``*0`` in, the new ones and the readings out (shapes of the modules' states);
     ``heading0``/``heading`` ``(2, n)`` heading (rad) and yaw rate (rad/s) estimates.
+
+    Draws, at need, straight from each ship's streams (``*_streams`` ``(n, 4)``, advanced in
+    place): ``waves`` two normals per channel where the
+    ship's sea is on; ``gnss_gross`` a uniform for the outage chain (where outages start or one
+    is on), one for the gross-error test (valid fixes, ``gross_prob > 0``) and one for a gross
+    error's direction; ``gnss`` the Gauss-Markov error's two normals (where it is on), then the
+    white noise's two (valid fixes); ``compass`` the drift's normal (where on), then the white
+    noise's.
     """
     for i in range(x.shape[1]):
         psi = x[PSI, i]
         wpsi = wn = we = 0.0
         if has_waves:  # z <- Phi z + L e per channel, then the outputs [seed 004, eqs 16-17]
+            driven = wtab[i, _WL11] != 0.0 or wtab[i, _WL21] != 0.0 or wtab[i, _WL22] != 0.0
             for j in range(waves.N_CHANNELS):
-                e1, e2 = wave_draws[i, 2 * j], wave_draws[i, 2 * j + 1]
+                e1 = e2 = 0.0
+                if driven:
+                    e1 = normal_from(wave_streams, i)
+                    e2 = normal_from(wave_streams, i)
                 a1, a2 = z1[i, j], z2[i, j]
                 z1_out[i, j] = wtab[i, _W11] * a1 + wtab[i, _W12] * a2 + wtab[i, _WL11] * e1
                 z2_out[i, j] = (wtab[i, _W21] * a1 + wtab[i, _W22] * a2 + wtab[i, _WL21] * e1
@@ -676,12 +672,24 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
             c_hull, s_hull = math.cos(hull), math.sin(hull)
 
         # GNSS: outage chain, Gauss-Markov error, gross error, antenna with its lever arm
-        u_out = gross_draws[i, 2]
-        up_i = u_out >= gtab[i, _G_P_START] if up0[i] else u_out < gtab[i, _G_P_END]
+        if up0[i]:  # the outage chain moves only where outages start (or one is on)
+            up_i = gtab[i, _G_P_START] <= 0.0 or uniform_from(gross_streams, i) >= gtab[
+                i, _G_P_START]
+        else:
+            up_i = uniform_from(gross_streams, i) < gtab[i, _G_P_END]
         valid_i = counter0[i] == 0 and up_i
-        gm_n = gtab[i, _G_GM_A] * gm0[i, 0] + gtab[i, _G_GM_Q] * gnss_draws[i, 2]
-        gm_e = gtab[i, _G_GM_A] * gm0[i, 1] + gtab[i, _G_GM_Q] * gnss_draws[i, 3]
-        gross_i = valid_i and gross_draws[i, 0] < gtab[i, _G_GROSS_P]
+        gm_q = gtab[i, _G_GM_Q]
+        gm_n, gm_e = gtab[i, _G_GM_A] * gm0[i, 0], gtab[i, _G_GM_A] * gm0[i, 1]
+        if gm_q != 0.0:
+            gm_n = gm_n + gm_q * normal_from(gnss_streams, i)
+            gm_e = gm_e + gm_q * normal_from(gnss_streams, i)
+        sigma = gtab[i, _G_SIGMA]
+        white_n = white_e = 0.0
+        if valid_i and sigma != 0.0:
+            white_n = sigma * normal_from(gnss_streams, i)
+            white_e = sigma * normal_from(gnss_streams, i)
+        gross_i = (valid_i and gtab[i, _G_GROSS_P] > 0.0
+                   and uniform_from(gross_streams, i) < gtab[i, _G_GROSS_P])
         jump = gtab[i, _G_GROSS_M] if gross_i else 0.0
         north, east = x[NORTH, i], x[EAST, i]
         if lever:  # p + R(psi) r_a [seed 003, eq 5]
@@ -690,11 +698,10 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
             east = east + (ax * s_hull + ay * c_hull)
         if has_waves:
             north, east = north + wn, east + we
-        sigma = gtab[i, _G_SIGMA]
-        north = north + sigma * gnss_draws[i, 0] + gm_n
-        east = east + sigma * gnss_draws[i, 1] + gm_e
-        if jump != 0.0:  # (adding the zero jump of a clean fix changes nothing)
-            direction = _TWO_PI * gross_draws[i, 1]
+        north = north + white_n + gm_n
+        east = east + white_e + gm_e
+        if gross_i:
+            direction = _TWO_PI * uniform_from(gross_streams, i)
             north, east = north + jump * math.cos(direction), east + jump * math.sin(direction)
         if valid_i:
             last[i, 0], last[i, 1] = north, east
@@ -706,20 +713,24 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
         gm[i, 0], gm[i, 1] = gm_n, gm_e
 
         # compass: bias, Gauss-Markov drift, white noise, deviation curve
-        d = ctab[i, _C_DRIFT_A] * drift0[i] + ctab[i, _C_DRIFT_Q] * compass_draws[i, 1]
-        reading = hull + ctab[i, _C_BIAS] + d + ctab[i, _C_SIGMA] * compass_draws[i, 0]
+        d = ctab[i, _C_DRIFT_A] * drift0[i]
+        if ctab[i, _C_DRIFT_Q] != 0.0:
+            d = d + ctab[i, _C_DRIFT_Q] * normal_from(compass_streams, i)
+        reading = hull + ctab[i, _C_BIAS] + d
+        if ctab[i, _C_SIGMA] != 0.0:
+            reading = reading + ctab[i, _C_SIGMA] * normal_from(compass_streams, i)
         if deviation:
             s, c = s_hull, c_hull
             s2, c2 = 2.0 * s * c, c * c - s * s
             reading = reading + (dev[i, 0] + dev[i, 1] * s + dev[i, 2] * c
                                  + dev[i, 3] * s2 + dev[i, 4] * c2)
-        reading = _wrap_2pi(reading)
+        reading = wrap_2pi_scalar(reading)
         drift[i], heading_meas[i] = d, reading
 
         # heading: steady-state alpha-beta filter on the compass
         psi_pred = heading0[0, i] + heading0[1, i] * dt
-        innov = _wrap_2pi(reading - psi_pred + math.pi) - math.pi
-        heading[0, i] = _mod_2pi(psi_pred + ctab[i, _H_ALPHA] * innov)
+        innov = wrap_2pi_scalar(reading - psi_pred + math.pi) - math.pi
+        heading[0, i] = mod_2pi_scalar(psi_pred + ctab[i, _H_ALPHA] * innov)
         heading[1, i] = heading0[1, i] + ctab[i, _H_BETA] * innov
 
 

@@ -227,6 +227,12 @@ def normal_from(streams: np.ndarray, row: int) -> float:
     return _normal(streams[row], _K, _W, _F)
 
 
+@inline_kernel
+def uniform_from(streams: np.ndarray, row: int) -> float:
+    """Next uniform on [0, 1) of stream ``row`` of ``streams (n, 4)`` (advanced in place)."""
+    return _uniform(streams[row])
+
+
 @kernel
 def _normals(state: np.ndarray, out: np.ndarray) -> None:
     for j in range(out.shape[0]):

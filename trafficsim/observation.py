@@ -89,9 +89,10 @@ class Observation:
         place; radar and AIS draw their noise at need, only for scans and reports."""
         plots = reports = None
         if self.has_radar:
-            self.radar_s, plots = radar.step(
-                self.radar_p, self.radar_s, t_s, self.obs, self.tgt, x, est[NORTH], est[EAST],
-                est[PSI], self.banks["radar"].state)
+            self.radar_s, due = radar.scan_due(self.radar_p, self.radar_s, t_s)
+            if due.any():  # (between scans there are no plots: the tracker skips radar)
+                plots = radar.measure(self.radar_p, due, self.obs, self.tgt, x, est[NORTH],
+                                      est[EAST], est[PSI], self.banks["radar"].state, t_s)
         if self.has_ais:
             self.ais_s, reports = ais.step(
                 self.ais_p, self.ais_s, t_s, self.obs, self.tgt, x, current_ne,

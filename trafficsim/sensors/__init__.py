@@ -31,6 +31,7 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 
 from trafficsim.errors import InputError
+from trafficsim.jit import inline_kernel
 
 TWO_PI = 2.0 * math.pi
 KNOT_MPS = 1852.0 / 3600.0
@@ -106,6 +107,25 @@ def wrap_2pi(angle: np.ndarray) -> np.ndarray:
     """Angle wrapped to [0, 2 pi), rad (exactly: ``np.mod`` alone can return 2 pi)."""
     out = np.mod(angle, TWO_PI)
     return np.where(out >= TWO_PI, 0.0, out)
+
+
+@inline_kernel
+def mod_2pi_scalar(angle: float) -> float:
+    """``np.mod(angle, 2 pi)`` of one angle in a compiled loop, bit for bit; the division only
+    outside ``(-2 pi, 2 pi)`` (within it ``fmod`` is exact and the result is ``angle`` or
+    ``angle + 2 pi``; the division costs more than the rest of a typical caller)."""
+    if 0.0 <= angle < TWO_PI:
+        return angle
+    if -TWO_PI < angle < 0.0:
+        return angle + TWO_PI
+    return angle % TWO_PI
+
+
+@inline_kernel
+def wrap_2pi_scalar(angle: float) -> float:
+    """:func:`wrap_2pi` of one angle in a compiled loop, bit for bit."""
+    out = mod_2pi_scalar(angle)
+    return 0.0 if out >= TWO_PI else out
 
 
 def wrap_pi(angle: np.ndarray) -> np.ndarray:

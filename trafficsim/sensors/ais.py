@@ -48,7 +48,7 @@ Draws, at need (:func:`trafficsim.noise.normal_from`): ``AIS_TX_NORMAL_DIMS`` st
 from the transmitting ship's stream (``ais`` purpose) per report sent (position north, east;
 velocity north, east; heading) and ``AIS_RX_NORMAL_DIMS`` from the directed pair's stream
 (``ais_rx``) per report that arrives at the receiver (the reception event, received when
-``z < Phi^-1(p_receive)``). Nothing is drawn between reports.
+``z < Phi^-1(p_receive)``; none when ``p_receive`` is 1). Nothing is drawn between reports.
 
 Config keys (per ship; defaults in brackets): ``enabled`` [true] (transponder fitted),
 ``sigma_position_m`` [5.0], ``sigma_velocity_mps`` [0.1], ``sigma_heading_deg`` [0.5],
@@ -67,8 +67,8 @@ import numpy as np
 from trafficsim.errors import InputError
 from trafficsim.jit import kernel
 from trafficsim.noise import check_streams, normal_from
-from trafficsim.sensors import KNOT_MPS, check_keys, column, flags, wrap_2pi
-from trafficsim.sensors.radar import probit, wrap_2pi_scalar
+from trafficsim.sensors import KNOT_MPS, check_keys, column, flags, wrap_2pi, wrap_2pi_scalar
+from trafficsim.sensors.radar import probit
 from trafficsim.ships.base import EAST, NORTH, PSI, R, U, V
 
 #: standard normals per report sent: position N, E; velocity N, E; heading
@@ -413,8 +413,10 @@ def _interval_in_current(u: float, v: float, cn: float, ce: float, turning: bool
 
 @kernel
 def _quantise_angle(angle_rad: float, step_rad: float, n_steps: float) -> float:
-    """:func:`quantise_angle` of one angle (``n_steps`` = 2 pi / step, a whole number)."""
-    return (np.rint(wrap_2pi_scalar(angle_rad) / step_rad) % n_steps) * step_rad
+    """:func:`quantise_angle` of one angle (``n_steps`` = 2 pi / step, a whole number; the
+    rounded step count lies in ``[0, n_steps]``, so its modulo is one comparison)."""
+    q = np.rint(wrap_2pi_scalar(angle_rad) / step_rad)
+    return (q - n_steps if q >= n_steps else q) * step_rad
 
 
 @kernel
@@ -503,7 +505,7 @@ def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, head: np.ndarray
         ok = False
         if math.isfinite(newest):
             last_rx[k] = newest  # consumed whether heard or not
-            if enabled[i] and normal_from(streams, k) < z_receive[i]:
+            if enabled[i] and (z_receive[i] == math.inf or normal_from(streams, k) < z_receive[i]):
                 dn, de = x_true[NORTH, j] - x_true[NORTH, i], x_true[EAST, j] - x_true[EAST, i]
                 side = _norm_side(dn, de, max_range[i], 1.0)
                 ok = side < 0 if side != 0 else math.hypot(dn, de) <= max_range[i]

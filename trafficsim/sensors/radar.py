@@ -65,7 +65,7 @@ import numpy as np
 from trafficsim.errors import InputError
 from trafficsim.jit import kernel
 from trafficsim.noise import check_streams, normal_from
-from trafficsim.sensors import TWO_PI, check_keys, column, flags
+from trafficsim.sensors import check_keys, column, flags, wrap_2pi_scalar
 from trafficsim.ships.base import EAST, NORTH, PSI
 
 #: standard normals per directed pair per scan: range noise, bearing noise, detection draw
@@ -261,13 +261,6 @@ def _c(a: np.ndarray, dtype: type = float) -> np.ndarray:
 
 
 _NONE, _NONE3 = np.zeros(0), np.zeros((0, 2, 2))
-
-
-@kernel
-def wrap_2pi_scalar(angle: float) -> float:
-    """:func:`trafficsim.sensors.wrap_2pi` of one angle, rad (the same float modulo)."""
-    out = angle % TWO_PI
-    return 0.0 if out >= TWO_PI else out
 
 
 @kernel
