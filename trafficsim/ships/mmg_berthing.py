@@ -87,11 +87,14 @@ Choices (where this module departs from, or had to complete, the published simul
   a_P7 (n P)^2 as u crosses zero and to a_P5 (P/D)^2 u^2 as n crosses zero; the rudder inflow
   jumps from Kitagawa's (propeller suction, u_R < 0) to u_R = u = 0 as u crosses zero with the
   propeller reversed. Here (constants :data:`J_FADE`, :data:`J_RAMP`): beyond |J| = J_FADE = 1
-  (past the open-water curve's K_T = 0, J = 0.73 for the Esso Osaka propeller) the forces of a
+  (past the open-water curve's K_T = 0, near J = 0.7 for a usual propeller) the forces of a
   propeller turning ahead fade as J_FADE / |J|, i.e. linearly in n as n -> 0; the second-quadrant
   side force and moment ramp in linearly over |J_s| < J_RAMP = 0.05 from zero at u = 0; and
   Kitagawa's inflow blends linearly into the fourth quadrant's u_R = u over |J_s| < J_RAMP.
-  Elsewhere the published forms hold unchanged. The remaining discontinuities of the published
+  Elsewhere the published forms hold unchanged; replayed on the FRT-DS-ESSO runs, the bands
+  (and the switch below) change the heading errors by at most 0.02 deg RMS against the published
+  forms, while the jumps they remove were 1-5 % of the accelerations at u = 0 and n = 0
+  (``tests/ships/test_mmg_berthing.py``). The remaining discontinuities of the published
   model are kept: between the propeller-race inflow and Kitagawa's at K_T = 0 (the C_PR u^2 term
   appears there), and the small steps between Hachii's linear pieces (their coefficients make
   them nearly continuous).
@@ -461,7 +464,7 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     """Body-frame accelerations of ONE ship ([YY15] motion equations at midship).
 
     Args:
-        p: ``float64[71]`` packed parameter row (:class:`BerthingParams`).
+        p: ``float64[72]`` packed parameter row (:class:`BerthingParams`).
         x: ``float64[8]`` state in the ``base`` layout: u, v (midship, through the water,
             m/s), r (rad/s), rudder (rad, + = starboard turn), rps (rev/s).
         env: ``float64[4]`` (current north, current east, wind speed, wind from); the wind
