@@ -100,7 +100,7 @@ def starting_spec(model: str, base: Mapping[str, Any], runs: Sequence[preprocess
     if base["model"] == model:
         return spec
     if model in WIND_FAMILIES:
-        raise InputError(f"the {model} model needs a {model} base ship (every coefficient not "
+        raise InputError(f"the {model} model needs an {model} base ship (every coefficient not "
                          f"fitted comes from it); '{base['name']}' is a {base['model']} ship",
                          key="--base")
     declared = families()[model].coefficients
