@@ -27,11 +27,13 @@ effect                 parameters (off value)                              where
                        feels follows the LOGGED rudder (an order, or an
                        indicator ahead of the gear) by a first-order lag
                        with a rate limit
-``resistance``         ``scale`` (1): hull resistance ``R0'`` times scale  hull (``mmg``)
-``propeller_asymmetry``  ``rudder_offset_deg`` (0): neutral rudder angle   hull (``mmg``)
-                       ``delta_0`` (the hull feels ``delta + delta_0``)
-``shallow_water``      ``draught_to_depth`` (0): ``T/h``, corrections of   hull (``mmg``)
-                       the linear hull derivatives and the sway added
+``resistance``         ``scale`` (1): hull resistance times scale: ``R0'``  hull (``mmg``,
+                       (``mmg``), ``X_0F`` and ``X_0A`` ahead and astern   ``mmg_berthing``)
+                       (``mmg_berthing``)
+``propeller_asymmetry``  ``rudder_offset_deg`` (0): neutral rudder angle   hull (``mmg``,
+                       ``delta_0`` (the hull feels ``delta + delta_0``)    ``mmg_berthing``)
+``shallow_water``      ``draught_to_depth`` (0): ``T/h``, corrections of   hull (``mmg``,
+                       the linear hull derivatives and the sway added      ``mmg_berthing``)
                        mass (:func:`shallow_water_factor`)
 ``ais_latency``        ``latency_s`` (0): every reported channel is the    all reported channels
                        truth ``latency_s`` earlier (reception time stamp);
@@ -43,7 +45,14 @@ In a scenario: ``current`` and ``wind`` add to the encounter's environment for t
 (``navigation.pv_sp_m2ps3``, ``gnss.antenna_x_m/y_m``, ``compass.bias_deg/deviation_deg``,
 ``ais.latency_s``); ``steering_lag`` sets the steering gear (``actuators.rudder_tau_s`` and
 ``rudder_rate_degps``: the logged rudder is then the order); ``resistance``,
-``propeller_asymmetry`` and ``shallow_water`` change the ship's ``mmg`` coefficients.
+``propeller_asymmetry`` and ``shallow_water`` change the ship's hull coefficients, for the two
+families with a hull model of the MMG kind (:data:`HULL_FAMILIES`). In ``mmg_berthing`` (the
+low-speed model of Miyauchi et al. 2022) they act on the same quantities as in ``mmg``: the
+surge resistance (there one coefficient ahead and one astern, both scaled), the neutral rudder
+angle, and the linear derivatives ``Y_v, Y_r, N_v, N_r`` with the sway added mass; its
+cross-flow drag, like ``mmg``'s cubic terms, is left unchanged by shallow water (Kijima's
+correction is for the linear derivatives). The other families (``nomoto``, ``response``,
+``modular``) have no such hull terms, so these effects are refused for them.
 """
 
 from __future__ import annotations
@@ -254,23 +263,26 @@ def shallow_water_factor(draught_to_depth: float, spec: Mapping[str, Any]) -> fl
     return 1.0 / (1.0 - xi) ** n - xi
 
 
-_HULL_NEEDS_MMG = ("resistance", "propeller_asymmetry", "shallow_water")
+_HULL_EFFECTS = ("resistance", "propeller_asymmetry", "shallow_water")
+#: families whose hull coefficients the hull effects change, and the resistance coefficients
+HULL_FAMILIES = {"mmg": ("R0",), "mmg_berthing": ("X_0F", "X_0A")}
 
 
 def apply_spec(spec: Mapping[str, Any], effects: Mapping[str, Mapping[str, float]]
                ) -> dict[str, Any]:
     """The ship spec with the hull and steering effects of ``effects`` applied (a copy)."""
-    hull = [n for n in _HULL_NEEDS_MMG if n in effects]
+    hull = [n for n in _HULL_EFFECTS if n in effects]
     if not hull and "steering_lag" not in effects:
         return dict(spec)
     out = copy.deepcopy(dict(spec))
-    if hull and out["model"] != "mmg":
-        raise InputError(f"effect '{hull[0]}' acts on the mmg hull model; ship "
-                         f"'{out.get('name')}' is a '{out['model']}' model",
-                         key=f"effects.{hull[0]}")
+    if hull and out["model"] not in HULL_FAMILIES:
+        raise InputError(f"effect '{hull[0]}' acts on the hull model of the "
+                         f"{' and '.join(HULL_FAMILIES)} families; ship '{out.get('name')}' is "
+                         f"a '{out['model']}' model", key=f"effects.{hull[0]}")
     c = out.get("coefficients", {})
     if "resistance" in effects:
-        c["R0"] = float(c["R0"]) * effects["resistance"]["scale"]
+        for key in HULL_FAMILIES[out["model"]]:
+            c[key] = float(c[key]) * effects["resistance"]["scale"]
     if "propeller_asymmetry" in effects:
         c["delta_0"] = float(c.get("delta_0", 0.0)) + math.radians(
             effects["propeller_asymmetry"]["rudder_offset_deg"])

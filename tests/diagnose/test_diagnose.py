@@ -80,19 +80,6 @@ def test_cli_errors(capsys: pytest.CaptureFixture[str]) -> None:
     assert cli.main(["diagnose", "--data", "x.csv"]) == 2
 
 
-def test_mmg_folder_reports_what_it_cannot_represent(capsys: pytest.CaptureFixture[str],
-                                                     tmp_path: Path) -> None:
-    folder = (Path(__file__).parents[2] / ".." / "shared" / "data" / "esso-osaka-mmg"
-              / "python_module" / "input_csv")
-    if not folder.is_dir():
-        pytest.skip("MMG parameter folder not available")
-    assert cli.main(["diagnose", "--ship", str(folder), "--data", "x.csv", "--out",
-                     str(tmp_path / "o")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1
-    assert "cannot represent" in err and "coeff_drag_sway" in err and "ai_coeff_prop0" in err
-
-
 def test_wind_of_each_run_recovered() -> None:
     """Every run sails in its own wind (the weather of its day): the environment is fitted per
     run, on the training and the held-out runs alike, and each run's wind is recovered."""

@@ -1,42 +1,76 @@
 """An MMG parameter folder (``principal_particulars.csv``, ``MMG_params.csv``,
-``model_switch.csv``, as published with the Esso Osaka berthing model of Miyauchi et al. 2022)
-read at run time as an ``mmg`` ship spec; nothing of it is stored in the project.
+``model_switch.csv``, the format published with the Esso Osaka berthing model of Miyauchi et al.
+2022) read at run time as an ``mmg_berthing`` ship spec (:mod:`trafficsim.ships.mmg_berthing`);
+nothing of it is stored in the project.
 
-Mapping onto the ``mmg`` family (:mod:`trafficsim.ships.mmg`, [YY15] notation):
+Every entry is either mapped or listed below as ignored; anything else, a missing entry, a
+repeated one, a value that is not a number or a switch the family does not implement is one
+:class:`~trafficsim.errors.InputError` naming the file, the line and the key.
 
-=============================  ==========================================================
-folder                         ship spec
-=============================  ==========================================================
-lpp, breadth, draft            length_m, beam_m, draught_m
-mass_nd (m / (1/2 rho L^2 d))  displacement_m3 = mass_nd L^2 d / 2 (the model is written in
-                               non-dimensional masses, so the density cancels)
-x_lcg                          lcg_m
-dia_prop, area_rudder          propeller_diameter_m, rudder_area_m2
-lambda_rudder (H^2 / A)        rudder_height_m = sqrt(lambda A); f_alpha = 6.13 lambda /
-                               (lambda + 2.25) (Fujii's formula, as in [YY15])
-x_location_rudder              x_R = x / L
-area_projected_trans/lateral   windage_frontal/lateral_area_m2 (wind model off in the base)
-massx_nd, massy_nd             m_x, m_y
-IzzJzz_nd                      J_z = IzzJzz_nd - mass_nd k_zz^2 with k_zz = 0.25
-xuu_nd, xvr_nd                 R0 = -xuu_nd, X_vr
-yv_nd, yr_nd, nv_nd, nr_nd     Y_v, Y_r, N_v, N_r
-kt_coeff0..2, t_prop,          k_0..k_2, t_P, w_P0, x_P
-w_prop_zero, xp_prop_nd
-t_rudder, ah_rudder,           t_R, a_H, x_H, l_R, kappa, epsilon, gamma_R_minus,
-xh_rudder_nd, lr_rudder_nd,    gamma_R_plus
-kx_rudder, epsilon_rudder,
-gammaN_rudder, gammaP_rudder
-=============================  ==========================================================
+``principal_particulars.csv`` (``parameter,value``):
 
-What the family cannot represent -- the cross-flow drag hull model (``coeff_drag_sway``,
-``cry_cross_flow``, ``crn_cross_flow``, ``coeff_drag_fore``, ``coeff_drag_aft``) in place of
-[YY15]'s cubic polynomials, the four-quadrant propeller and its lateral force (``ai_*``, ``bi_*``,
-``ci_*``, ``Jmin``, ``alpha_prop``, ``tau_prop``, ``coeff_cp_prop`` with ``switch_prop_y/n``),
-the reverse-flow rudder terms (``kx_rudder_reverse``, ``cpr_rudder``, ``coeff_urudder_zero``)
--- is reported as one :class:`~trafficsim.errors.InputError` listing the entries; nothing is
-dropped silently. Fujiwara's wind regressors other than the areas (``AOD``, ``LCW``, ``LCBR``,
-``HBR``, ``HC``, ``SBW``, ``Lz``) are not needed: the base model runs without wind (the wind is
-a candidate effect of the diagnosis, with the Isherwood loads of the areas).
+==========================  ================================================================
+lpp, breadth, draft         length_m, beam_m, draught_m
+mass_nd (m / (1/2 rho L^2   displacement_m3 = mass_nd L^2 d / 2 (with the folder's density the
+d))                         mass is right: 244.6 kg for the Esso Osaka model)
+rho_fresh                   water_density_kgpm3 (mass and every hydrodynamic force)
+x_lcg (x_G / L)             lcg_m = x_lcg L (0.094 m for the Esso Osaka model, as its data set
+                            states)
+dia_prop, pitchr            propeller_diameter_m, propeller_pitch_ratio
+area_rudder, lambda_rudder  rudder_area_m2; rudder_height_m = sqrt(lambda A_R); coefficient
+(H_R^2 / A_R)               f_alpha = 6.13 lambda / (lambda + 2.25) (Fujii)
+x_location_rudder (m)       coefficient x_R = x / L
+area_projected_trans,       windage_frontal_area_m2, windage_lateral_area_m2,
+area_projected_lateral, AOD windage_superstructure_area_m2 (Isherwood's A_SS)
+LCW (centroid of A_L ahead  windage_centroid_from_bow_m = L / 2 - LCW
+of midship, m)
+maxtickness_rudder          ignored: Lindenburg's rudder force only (switch_fn = 2, refused)
+rho_air, LCBR, HBR, HC,     ignored: Fujiwara's wind regressors; the base runs without wind
+SBW, Lz                     (the wind is a candidate effect of the diagnosis, with Isherwood's
+                            loads on the areas above and 1.225 kg/m3 air)
+==========================  ================================================================
+
+``MMG_params.csv`` (``parameter,params_init,params_min,params_max``; ``params_init`` is the
+model, ``params_min``/``params_max`` the ranges of [M22]'s parameter search, ignored):
+
+=====================================  =======================================================
+massx_nd, massy_nd                     m_x, m_y
+IzzJzz_nd ((I_zG + J_z) / (1/2 rho     J_z = IzzJzz_nd - mass_nd k_zz^2 with k_zz = 0.25 (only
+L^4 d))                                the sum enters the motion equations)
+xuu_nd, coeff_drag_aft                 X_0F, X_0A (resistance ahead and astern)
+coeff_drag_fore                        must equal xuu_nd: both are X_0F (the published
+                                       simulator takes X_0F from xuu_nd)
+xvr_nd, yv_nd, yr_nd, nv_nd, nr_nd     X_vr, Y_v, Y_r, N_v, N_r
+coeff_drag_sway, cry_cross_flow,       C_D, C_rY, C_rN (cross-flow drag)
+crn_cross_flow
+kt_coeff0..2, t_prop, w_prop_zero,     k_0..k_2, t_P, w_P0, tau_P, C_P, x_P
+tau_prop, coeff_cp_prop, xp_prop_nd
+ai_coeff_prop0..7, bi_coeff_prop0..7,  a_P0..a_P7, b_P0..b_P7, c_P0..c_P3 (propeller side
+ci_coeff_prop0..3                      force, moment and astern thrust)
+t_rudder, ah_rudder, xh_rudder_nd,     t_R, a_H, x_H, l_R, k_x, k_x_reverse, epsilon, C_PR
+lr_rudder_nd, kx_rudder,
+kx_rudder_reverse, epsilon_rudder,
+cpr_rudder
+gammaN_rudder, gammaP_rudder           gamma_R_plus, gamma_R_minus (module doc of the family)
+Jmin, alpha_prop                       ignored: second thrust model only (switch_prop_x = 2,
+                                       refused)
+coeff_urudder_zero                     ignored: second astern rudder inflow only (switch_ur =
+                                       2, refused)
+XX0, XX1, XX3, XX5, YY1, YY3, YY5,     ignored if present: Fujiwara's wind coefficients
+NN1, NN2, NN3
+=====================================  =======================================================
+
+``model_switch.csv`` (``model,value``): ``switch_prop_x`` must be 1 (Hachii's astern thrust),
+``switch_fn`` 1 (Fujii) and ``switch_ur`` 1 (Kitagawa); ``switch_prop_y``, ``switch_prop_n``,
+``switch_rudder`` (0 or 1) become the coefficients ``switch_prop_y``, ``switch_prop_n``,
+``switch_rudder_astern``; ``switch_wind`` and ``switch_windtype`` are ignored (base without
+wind, as above).
+
+Not in the folder (choices, as in ``tests/identify/data/esso_base.yaml``): service speed
+0.4 m/s (the approach speed of the turning tests at 10 rps), rudder 35 deg at 24 deg/s with a
+0.1 s lag, propeller speed within +-20 rps with a 0.5 s lag (the data's range), RK4 steps of at
+most 0.25 s (replays of the FRT-DS-ESSO runs with 0.3 s and with 0.01 s steps agree to 1 mm and
+0.01 deg), Isherwood's windage perimeter and mast groups at their defaults.
 """
 
 from __future__ import annotations
@@ -49,91 +83,176 @@ from typing import Any
 from trafficsim.errors import InputError
 
 FILES = ("principal_particulars.csv", "MMG_params.csv", "model_switch.csv")
-NOT_REPRESENTABLE = ("coeff_drag_sway", "cry_cross_flow", "crn_cross_flow", "coeff_drag_fore",
-                     "coeff_drag_aft", "tau_prop", "coeff_cp_prop", "Jmin", "alpha_prop",
-                     "kx_rudder_reverse", "cpr_rudder", "coeff_urudder_zero")
-NOT_REPRESENTABLE_PREFIX = ("ai_coeff_prop", "bi_coeff_prop", "ci_coeff_prop")
-_IGNORED = ("rho_fresh", "rho_air", "pitchr", "maxtickness_rudder", "AOD", "LCW", "LCBR", "HBR",
-            "HC", "SBW", "Lz")
-_SWITCHES = ("switch_prop_x", "switch_prop_y", "switch_prop_n", "switch_rudder", "switch_wind",
-             "switch_windtype", "switch_fn", "switch_ur")
+_HEADERS = {FILES[0]: ("parameter", "value"),
+            FILES[1]: ("parameter", "params_init", "params_min", "params_max"),
+            FILES[2]: ("model", "value")}
+
+_PARTICULARS = ("lpp", "breadth", "draft", "mass_nd", "x_lcg", "rho_fresh", "dia_prop", "pitchr",
+                "area_rudder", "lambda_rudder", "x_location_rudder", "area_projected_trans",
+                "area_projected_lateral", "AOD", "LCW")
+_PARTICULARS_IGNORED = ("maxtickness_rudder", "rho_air", "LCBR", "HBR", "HC", "SBW", "Lz")
+
+#: MMG_params.csv entry -> mmg_berthing coefficient
+_COEFFICIENTS = {
+    "massx_nd": "m_x", "massy_nd": "m_y", "xuu_nd": "X_0F", "coeff_drag_aft": "X_0A",
+    "xvr_nd": "X_vr", "yv_nd": "Y_v", "yr_nd": "Y_r", "nv_nd": "N_v", "nr_nd": "N_r",
+    "coeff_drag_sway": "C_D", "cry_cross_flow": "C_rY", "crn_cross_flow": "C_rN",
+    "kt_coeff0": "k_0", "kt_coeff1": "k_1", "kt_coeff2": "k_2", "t_prop": "t_P",
+    "w_prop_zero": "w_P0", "tau_prop": "tau_P", "coeff_cp_prop": "C_P", "xp_prop_nd": "x_P",
+    **{f"ai_coeff_prop{i}": f"a_P{i}" for i in range(8)},
+    **{f"bi_coeff_prop{i}": f"b_P{i}" for i in range(8)},
+    **{f"ci_coeff_prop{i}": f"c_P{i}" for i in range(4)},
+    "t_rudder": "t_R", "ah_rudder": "a_H", "xh_rudder_nd": "x_H", "lr_rudder_nd": "l_R",
+    "kx_rudder": "k_x", "kx_rudder_reverse": "k_x_reverse", "epsilon_rudder": "epsilon",
+    "cpr_rudder": "C_PR", "gammaN_rudder": "gamma_R_plus", "gammaP_rudder": "gamma_R_minus",
+}
+_PARAMS_OTHER = ("IzzJzz_nd", "coeff_drag_fore")
+#: read if present, not used (module doc)
+_PARAMS_IGNORED = ("Jmin", "alpha_prop", "coeff_urudder_zero", "XX0", "XX1", "XX3", "XX5",
+                   "YY1", "YY3", "YY5", "NN1", "NN2", "NN3")
+
+#: switch -> (values accepted, coefficient it sets or None, what the other values would be)
+_SWITCHES: dict[str, tuple[tuple[float, ...], str | None, str]] = {
+    "switch_prop_x": ((1.0,), None, "2 is the second thrust model, not implemented"),
+    "switch_prop_y": ((0.0, 1.0), "switch_prop_y", ""),
+    "switch_prop_n": ((0.0, 1.0), "switch_prop_n", ""),
+    "switch_rudder": ((0.0, 1.0), "switch_rudder_astern", ""),
+    "switch_fn": ((1.0,), None, "2 is Lindenburg's rudder force, not implemented"),
+    "switch_ur": ((1.0,), None, "2 is the second astern rudder inflow, not implemented"),
+    "switch_wind": ((0.0, 1.0), None, ""),
+    "switch_windtype": ((1.0, 2.0, 3.0, 4.0), None, ""),
+}
+K_ZZ = 0.25
+IGNORED = (*_PARTICULARS_IGNORED, *_PARAMS_IGNORED, "switch_wind", "switch_windtype",
+           "params_min", "params_max")
 
 
-def _table(path: Path, value_col: int) -> dict[str, float]:
-    if not path.is_file():
-        raise InputError(f"missing {path.name} in the MMG parameter folder", path=str(path))
-    out: dict[str, float] = {}
-    with path.open(newline="") as fh:
-        rows = list(csv.reader(fh))
-    for line, row in enumerate(rows[1:], start=2):
-        if not row or not row[0].strip():
-            continue
-        try:
-            out[row[0].strip()] = float(row[value_col])
-        except (ValueError, IndexError):
-            raise InputError(f"line {line}: expected a number in column {value_col + 1}, got "
-                             f"{row!r}", path=str(path)) from None
-    return out
+class _Table:
+    """One CSV of the folder: values by key with their line numbers."""
+
+    def __init__(self, folder: Path, name: str) -> None:
+        self.path = folder / name
+        if not self.path.is_file():
+            raise InputError(f"missing {name} in the MMG parameter folder (expected "
+                             f"{', '.join(FILES)})", path=str(folder))
+        with self.path.open(newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
+        header = tuple(c.strip() for c in rows[0]) if rows else ()
+        if header != _HEADERS[name]:
+            raise InputError(f"expected the header {','.join(_HEADERS[name])}, got "
+                             f"{','.join(header) or 'nothing'}", path=str(self.path), line=1)
+        self.values: dict[str, float] = {}
+        self.lines: dict[str, int] = {}
+        for line, row in enumerate(rows[1:], start=2):
+            if not row or not "".join(row).strip():
+                continue
+            key = row[0].strip()
+            if key in self.values:
+                raise InputError(f"'{key}' given twice (first on line {self.lines[key]})",
+                                 path=str(self.path), line=line, key=key)
+            try:
+                value = float(row[1])
+            except (ValueError, IndexError):
+                got = row[1].strip() if len(row) > 1 else "nothing"
+                raise InputError(f"expected a number in column 2, got {got!r}",
+                                 path=str(self.path), line=line, key=key) from None
+            if not math.isfinite(value):
+                raise InputError(f"expected a finite number, got {value}",
+                                 path=str(self.path), line=line, key=key)
+            self.values[key] = value
+            self.lines[key] = line
+
+    def check_keys(self, required: tuple[str, ...], allowed: tuple[str, ...]) -> None:
+        for key, line in self.lines.items():
+            if key not in required and key not in allowed:
+                raise InputError(f"unknown entry (not in the MMG parameter folder format of "
+                                 f"Miyauchi et al. 2022; expected one of "
+                                 f"{', '.join((*required, *allowed))})",
+                                 path=str(self.path), line=line, key=key)
+        for key in required:
+            if key not in self.values:
+                raise InputError("missing entry", path=str(self.path), key=key)
+
+    def error(self, key: str, message: str) -> InputError:
+        return InputError(message, path=str(self.path), line=self.lines.get(key), key=key)
+
+    def positive(self, key: str) -> float:
+        value = self.values[key]
+        if value <= 0.0:
+            raise self.error(key, f"must be > 0, got {value:g}")
+        return value
 
 
 def read_folder(folder: Path) -> dict[str, Any]:
-    """The folder as an ``mmg`` ship spec (module doc), or one InputError naming what the
-    family cannot represent."""
-    pp = _table(folder / FILES[0], 1)
-    mp = _table(folder / FILES[1], 1)
-    sw = _table(folder / FILES[2], 1)
-    known = {"lpp", "breadth", "draft", "mass_nd", "x_lcg", "dia_prop", "area_rudder",
-             "lambda_rudder", "x_location_rudder", "area_projected_trans",
-             "area_projected_lateral", *_IGNORED}
-    unknown = [k for k in pp if k not in known] + [k for k in sw if k not in _SWITCHES]
-    mapped = {"massx_nd": "m_x", "massy_nd": "m_y", "xvr_nd": "X_vr", "yv_nd": "Y_v",
-              "yr_nd": "Y_r", "nv_nd": "N_v", "nr_nd": "N_r", "kt_coeff0": "k_0",
-              "kt_coeff1": "k_1", "kt_coeff2": "k_2", "t_prop": "t_P", "w_prop_zero": "w_P0",
-              "xp_prop_nd": "x_P", "t_rudder": "t_R", "ah_rudder": "a_H",
-              "xh_rudder_nd": "x_H", "lr_rudder_nd": "l_R", "kx_rudder": "kappa",
-              "epsilon_rudder": "epsilon", "gammaN_rudder": "gamma_R_minus",
-              "gammaP_rudder": "gamma_R_plus"}
-    special = {"IzzJzz_nd", "xuu_nd"}
-    lost = []
-    for key, value in mp.items():
-        if key in mapped or key in special:
-            continue
-        if key in NOT_REPRESENTABLE or key.startswith(NOT_REPRESENTABLE_PREFIX):
-            if value != 0.0:
-                lost.append(key)
-        else:
-            unknown.append(key)
-    if unknown:
-        raise InputError(f"unknown entries {', '.join(unknown)} (not in the Miyauchi 2022 MMG "
-                         "parameter format)", path=str(folder))
-    if lost:
-        raise InputError("the mmg family (MMG standard method) cannot represent "
-                         f"{', '.join(lost)} (cross-flow drag hull, four-quadrant propeller and "
-                         "its lateral force, reverse-flow rudder); give a ship file instead",
-                         path=str(folder))
-    length, draught = pp["lpp"], pp["draft"]
-    lam = pp["lambda_rudder"]
-    coeffs = {mapped[k]: v for k, v in mp.items() if k in mapped}
-    coeffs["R0"] = -mp["xuu_nd"]
-    coeffs["k_zz"] = 0.25
-    coeffs["J_z"] = mp["IzzJzz_nd"] - pp["mass_nd"] * 0.25**2
-    coeffs["x_R"] = pp["x_location_rudder"] / length
+    """The folder as an ``mmg_berthing`` ship spec (module doc), or one InputError."""
+    folder = Path(folder)
+    pp = _Table(folder, FILES[0])
+    mp = _Table(folder, FILES[1])
+    sw = _Table(folder, FILES[2])
+    pp.check_keys(_PARTICULARS, _PARTICULARS_IGNORED)
+    mp.check_keys((*_COEFFICIENTS, *_PARAMS_OTHER), _PARAMS_IGNORED)
+    sw.check_keys(tuple(_SWITCHES), ())
+
+    coeffs: dict[str, float] = {}
+    for key, (allowed, target, other) in _SWITCHES.items():
+        value = sw.values[key]
+        if value not in allowed:
+            why = f" ({other})" if other else ""
+            raise sw.error(key, f"expected one of {', '.join(f'{a:g}' for a in allowed)}, got "
+                                f"{value:g}{why}")
+        if target is not None:
+            coeffs[target] = value
+
+    length, draught = pp.positive("lpp"), pp.positive("draft")
+    mass_nd = pp.positive("mass_nd")
+    for key in ("breadth", "rho_fresh", "dia_prop", "pitchr", "area_rudder", "lambda_rudder"):
+        pp.positive(key)
+    coeffs.update({target: mp.values[key] for key, target in _COEFFICIENTS.items()})
+    fore, xuu = mp.values["coeff_drag_fore"], mp.values["xuu_nd"]
+    if not math.isclose(fore, xuu, rel_tol=1e-9, abs_tol=1e-12):
+        raise mp.error("coeff_drag_fore", f"differs from xuu_nd ({xuu:g}, line "
+                                          f"{mp.lines['xuu_nd']}): both are the resistance "
+                                          f"coefficient ahead X_0F")
+    coeffs["k_zz"] = K_ZZ
+    coeffs["J_z"] = mp.values["IzzJzz_nd"] - mass_nd * K_ZZ**2
+    if coeffs["J_z"] < 0.0:
+        raise mp.error("IzzJzz_nd", f"{mp.values['IzzJzz_nd']:g} is below the hull's own yaw "
+                                    f"inertia mass_nd k_zz^2 = {mass_nd * K_ZZ**2:g}")
+    for key in ("epsilon_rudder",):
+        if mp.values[key] <= 0.0:
+            raise mp.error(key, f"must be > 0, got {mp.values[key]:g}")
+    lam = pp.values["lambda_rudder"]
     coeffs["f_alpha"] = 6.13 * lam / (lam + 2.25)
-    for key in ("X_vv", "X_rr", "X_vvvv", "Y_vvv", "Y_vvr", "Y_vrr", "Y_rrr", "N_vvv", "N_vvr",
-                "N_vrr", "N_rrr"):
-        coeffs.setdefault(key, 0.0)
+    coeffs["x_R"] = pp.values["x_location_rudder"] / length
+    coeffs["delta_0"] = 0.0
+    present = [k for k in IGNORED if k in pp.values or k in mp.values or k in sw.values]
     return {
-        "schema_version": 1, "name": folder.name, "model": "mmg", "path": str(folder),
-        "particulars": {"length_m": length, "beam_m": pp["breadth"], "draught_m": draught,
-                        "displacement_m3": pp["mass_nd"] * 0.5 * length**2 * draught,
-                        "lcg_m": pp["x_lcg"], "propeller_diameter_m": pp["dia_prop"],
-                        "rudder_area_m2": pp["area_rudder"],
-                        "rudder_height_m": math.sqrt(lam * pp["area_rudder"]),
-                        "windage_frontal_area_m2": pp["area_projected_trans"],
-                        "windage_lateral_area_m2": pp["area_projected_lateral"]},
-        "service_speed_kn": 0.8,
-        "actuators": {"rudder_max_deg": 35.0, "rudder_rate_degps": 20.0, "rudder_tau_s": 0.1,
-                      "rps_max": 30.0, "rps_min": -30.0, "engine_tau_s": 1.0},
-        "coefficients": coeffs, "integration": {"max_dt_s": 0.05},
-        "mmg_folder": f"base model read from {folder}",
+        "schema_version": 1, "name": folder.name, "model": "mmg_berthing",
+        "description": f"MMG parameter folder {folder} (Miyauchi et al. 2022 format), read at "
+                       "run time",
+        "source": "the folder's CSV files; mapping in trafficsim/diagnose/mmgfolder.py",
+        "path": str(folder),
+        "particulars": {
+            "length_m": length, "beam_m": pp.values["breadth"], "draught_m": draught,
+            "displacement_m3": mass_nd * 0.5 * length**2 * draught,
+            "water_density_kgpm3": pp.values["rho_fresh"],
+            "lcg_m": pp.values["x_lcg"] * length,
+            "propeller_diameter_m": pp.values["dia_prop"],
+            "propeller_pitch_ratio": pp.values["pitchr"],
+            "rudder_area_m2": pp.values["area_rudder"],
+            "rudder_height_m": math.sqrt(lam * pp.values["area_rudder"]),
+            "windage_frontal_area_m2": pp.values["area_projected_trans"],
+            "windage_lateral_area_m2": pp.values["area_projected_lateral"],
+            "windage_superstructure_area_m2": pp.values["AOD"],
+            "windage_centroid_from_bow_m": 0.5 * length - pp.values["LCW"]},
+        "service_speed_kn": 0.4 * 3600.0 / 1852.0,
+        "actuators": {"rudder_max_deg": 35.0, "rudder_rate_degps": 24.0, "rudder_tau_s": 0.1,
+                      "rps_max": 20.0, "rps_min": -20.0, "engine_tau_s": 0.5},
+        "coefficients": coeffs,
+        "autopilot": {"kp": 3.0, "kd_s": 12.0, "ki_per_s": 0.0},
+        "integration": {"max_dt_s": 0.25},
+        "sensors": {},
+        "mmg_folder": (f"base model: the MMG parameter folder {folder} (family mmg_berthing, "
+                       "Miyauchi et al. 2022), read at run time; ignored entries: "
+                       f"{', '.join(present)}, params_min/params_max"),
     }

@@ -23,7 +23,8 @@ Choices when not given (documented in the README):
   ``response`` the EKF starts from zero as in [seed 001, section 4.2]; for ``nomoto`` from
   another family: K' = T' = 2, n3' = 0, ``rps_service`` from the measured speed per rps at
   speeds above 30 % of the service speed, ``surge_tau_s = 5 L / U``. ``mmg`` needs an ``mmg``
-  base ship (every coefficient not fitted comes from it).
+  base ship (every coefficient not fitted comes from it), ``mmg_berthing`` an ``mmg_berthing``
+  one (e.g. an MMG parameter folder, :mod:`trafficsim.diagnose.mmgfolder`).
 """
 
 from __future__ import annotations
@@ -45,8 +46,10 @@ from trafficsim.io.trialdata import TrialData, read_trial
 from trafficsim.ships.base import families
 from trafficsim.ships.library import load_ship
 
-MODELS = ("response", "nomoto", "mmg")
+MODELS = ("response", "nomoto", "mmg", "mmg_berthing")
 METHODS = ("oe", "ekf", "ekf+oe")
+#: families with wind loads (Isherwood); each needs a base ship of its own family
+WIND_FAMILIES = ("mmg", "mmg_berthing")
 KNOT = 1852.0 / 3600.0
 
 
@@ -96,9 +99,9 @@ def starting_spec(model: str, base: Mapping[str, Any], runs: Sequence[preprocess
     spec = copy.deepcopy(dict(base))
     if base["model"] == model:
         return spec
-    if model == "mmg":
-        raise InputError(f"the mmg model needs an mmg base ship (every coefficient not fitted "
-                         f"comes from it); '{base['name']}' is a {base['model']} ship",
+    if model in WIND_FAMILIES:
+        raise InputError(f"the {model} model needs an {model} base ship (every coefficient not "
+                         f"fitted comes from it); '{base['name']}' is a {base['model']} ship",
                          key="--base")
     declared = families()[model].coefficients
     length = float(base["particulars"]["length_m"])
@@ -125,7 +128,8 @@ def starting_spec(model: str, base: Mapping[str, Any], runs: Sequence[preprocess
 
 def _has_wind_loads(spec: Mapping[str, Any]) -> bool:
     parts = spec["particulars"]
-    return (spec["model"] == "mmg" and float(parts.get("windage_lateral_area_m2", 0.0)) > 0
+    return (spec["model"] in WIND_FAMILIES
+            and float(parts.get("windage_lateral_area_m2", 0.0)) > 0
             and float(parts.get("windage_frontal_area_m2", 0.0)) > 0)
 
 

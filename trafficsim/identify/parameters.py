@@ -9,7 +9,8 @@ Default subsets (documented choices):
 
 * ``nomoto``: all five coefficients (K', T', n3', rps_service, surge_tau_s).
 * ``response``: all sixteen coefficients of [seed 001, eq 2] (``a1..a9, b1..b4, c1..c3``).
-* ``mmg``: the resistance ``R0``, the linear hull derivatives ``Y_v, Y_r, N_v, N_r``, the
+* ``mmg`` (and ``mmg_berthing``, with its resistance ahead ``X_0F`` for ``R0``): the
+  resistance ``R0``, the linear hull derivatives ``Y_v, Y_r, N_v, N_r``, the
   surge-sway coupling ``X_vr`` (speed loss in a turn) and the rudder's normal-force slope
   ``f_alpha``; propeller, interaction, added-mass and non-linear hull coefficients stay at the
   base ship's values. Fitting every MMG coefficient from a few runs is ill-posed (strongly
@@ -41,6 +42,7 @@ DEFAULT_FIT: dict[str, tuple[str, ...]] = {
     "response": ("a1", "a2", "a3", "a4", "a5", "a6", "a7", "a8", "a9", "b1", "b2", "b3", "b4",
                  "c1", "c2", "c3"),
     "mmg": ("R0", "X_vr", "Y_v", "Y_r", "N_v", "N_r", "f_alpha"),
+    "mmg_berthing": ("X_0F", "X_vr", "Y_v", "Y_r", "N_v", "N_r", "f_alpha"),
 }
 
 #: (lower, upper) per coefficient; absent = unbounded
@@ -62,6 +64,18 @@ BOUNDS: dict[str, dict[str, tuple[float, float]]] = {
         "epsilon": (0.3, 3.0), "kappa": (0.0, 1.5), "f_alpha": (0.3, 10.0),
         "C_1": (0.0, 10.0), "C_2_plus": (0.1, 5.0), "C_2_minus": (0.1, 5.0),
         "astern_thrust_ratio": (0.1, 1.5),
+    },
+    # the low-speed model's resistance coefficients are negative (X_0F, X_0A), its cross-flow
+    # drag positive; the rest as for mmg
+    "mmg_berthing": {
+        "X_0F": (-0.5, 0.0), "X_0A": (-0.5, 0.0), "X_vr": (-2.0, 2.0), "Y_v": (-3.0, 0.0),
+        "Y_r": (-1.0, 1.0), "N_v": (-1.0, 1.0), "N_r": (-1.0, 0.0), "C_D": (0.0, 5.0),
+        "C_rY": (0.0, 5.0), "C_rN": (0.0, 5.0),
+        "m_x": (0.0, 0.3), "m_y": (0.0, 1.0), "J_z": (0.0, 0.2), "k_zz": (0.1, 0.5),
+        "t_P": (0.0, 0.6), "w_P0": (0.0, 0.9), "x_P": (-1.0, 0.0),
+        "t_R": (0.0, 0.9), "a_H": (0.0, 1.5), "x_H": (-1.0, 0.0), "x_R": (-0.6, -0.3),
+        "gamma_R_plus": (0.05, 2.0), "gamma_R_minus": (0.05, 2.0), "l_R": (-2.0, 0.0),
+        "epsilon": (0.3, 3.0), "k_x": (0.0, 1.5), "f_alpha": (0.3, 10.0),
     },
 }
 

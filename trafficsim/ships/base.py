@@ -241,7 +241,13 @@ def register(family: ModelFamily) -> ModelFamily:
 
 def families() -> dict[str, ModelFamily]:
     """All registered model families by name."""
-    from trafficsim.ships import mmg, modular, nomoto, response  # noqa: F401  (registration)
+    from trafficsim.ships import (  # noqa: F401  (registration)
+        mmg,
+        mmg_berthing,
+        modular,
+        nomoto,
+        response,
+    )
 
     return dict(_REGISTRY)
 

@@ -20,11 +20,11 @@ from collections.abc import Callable
 import numpy as np
 
 from trafficsim.jit import inline_kernel, kernel
-from trafficsim.ships import mmg, modular, nomoto, response
+from trafficsim.ships import mmg, mmg_berthing, modular, nomoto, response
 from trafficsim.ships.base import gather_ship
 
 #: integer codes of the model families in the compiled dispatch
-FAMILY_CODE = {"nomoto": 0, "response": 1, "mmg": 2, "modular": 3}
+FAMILY_CODE = {"nomoto": 0, "response": 1, "mmg": 2, "modular": 3, "mmg_berthing": 4}
 #: columns of the actuator table
 RUDDER_MAX, RUDDER_RATE, RUDDER_TAU, RPS_MAX, RPS_MIN, ENGINE_TAU = range(6)
 TWO_PI = 2.0 * math.pi
@@ -39,6 +39,8 @@ def accel(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[flo
         return response.accel(p, x, env)
     if code == 2:
         return mmg.accel(p, x, env)
+    if code == 4:
+        return mmg_berthing.accel(p, x, env)
     return modular.accel(p, x, env)
 
 
@@ -116,6 +118,8 @@ def step_ships(codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
             _rk4(response.accel, p, a, x, rc, nc, env, h, m, w)
         elif code == 2:
             _rk4(mmg.accel, p, a, x, rc, nc, env, h, m, w)
+        elif code == 4:
+            _rk4(mmg_berthing.accel, p, a, x, rc, nc, env, h, m, w)
         else:
             _rk4(modular.accel, p, a, x, rc, nc, env, h, m, w)
         x[2] = x[2] % TWO_PI

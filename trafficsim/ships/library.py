@@ -3,6 +3,10 @@
 A ship file holds particulars, actuator limits and the coefficients of one model family; its format
 is documented in the README ("Ship files"). Loading validates the file and checks ``coefficients``
 against the family's declared coefficient names, so a typo is reported with its line.
+
+A path may also name an MMG parameter folder (``MMG_params.csv`` and its two companions, the
+format of Miyauchi et al. 2022): it is read at run time as an ``mmg_berthing`` ship
+(:mod:`trafficsim.diagnose.mmgfolder`).
 """
 
 from __future__ import annotations
@@ -18,6 +22,8 @@ from trafficsim.errors import ScenarioError, ShipLibraryError
 from trafficsim.io.yamlio import FieldError, Strict, load_yaml, validate
 
 LIBRARY_DIR = Path(__file__).parent / "library"
+#: the file that makes a folder an MMG parameter folder
+MMG_FOLDER_MARKER = "MMG_params.csv"
 
 
 class Particulars(Strict):
@@ -95,8 +101,12 @@ def find_ship(type_or_path: str, base_dir: Path | None = None) -> Path:
         p = Path(type_or_path)
         if not p.is_absolute() and base_dir is not None:
             p = base_dir / p
+        if p.is_dir() and (p / MMG_FOLDER_MARKER).is_file():
+            return p.resolve()
         if not p.is_file():
-            raise ShipLibraryError(f"ship file '{type_or_path}' not found (looked at {p})")
+            raise ShipLibraryError(f"ship file '{type_or_path}' not found (looked at {p}; a "
+                                   f"folder must hold the {MMG_FOLDER_MARKER} of an MMG "
+                                   "parameter folder)")
         return p.resolve()
     p = LIBRARY_DIR / f"{type_or_path}.yaml"
     if p.is_file():
@@ -118,6 +128,10 @@ def load_ship(type_or_path: str, base_dir: Path | None = None) -> dict[str, Any]
 def _load_cached(path: str) -> dict[str, Any]:
     from trafficsim.ships.base import families
 
+    if Path(path).is_dir():
+        from trafficsim.diagnose.mmgfolder import read_folder
+
+        return read_folder(Path(path))  # its errors name the folder's file, line and key
     try:
         ship = validate(Path(path), ShipFile)
     except ScenarioError as err:  # same located message, as the ship-file error it is
