@@ -105,7 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     ident = sub.add_parser("identify", help="fit a ship model to trial runs; writes a ship "
                            "file, a convergence plot and a validation report")
-    ident.add_argument("--model", required=True, choices=["response", "nomoto", "mmg"])
+    ident.add_argument("--model", required=True,
+                       choices=["response", "nomoto", "mmg", "mmg_berthing"])
     ident.add_argument("--data", type=Path, nargs="+", required=True, metavar="RUN",
                        help="training runs: trial-data CSV or FRT-DS-ESSO files, or folders")
     ident.add_argument("--holdout", type=Path, nargs="+", default=[], metavar="RUN",
