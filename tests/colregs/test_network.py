@@ -488,3 +488,21 @@ def test_kernel_matches_the_reference_evaluator(net_data: dict[str, Any],
             else:
                 assert math.isnan(d.actions[row, i])
         explain(net, d.path[i], feats[:, i])  # consistent with the kernel: does not raise
+
+
+def test_load_reuses_a_compiled_file_until_it_or_a_file_it_extends_changes(tmp_path) -> None:
+    for name in ("base.yaml", "turn_port.yaml"):
+        (tmp_path / name).write_bytes((EXTENDS / name).read_bytes())
+    child = tmp_path / "turn_port.yaml"
+    first = load(child, VOCAB)
+    assert load(child, VOCAB) is first
+    base = tmp_path / "base.yaml"
+    text = base.read_text()
+    assert "turn_deg: 30" in text
+    base.write_text(text.replace("turn_deg: 30", "turn_deg: 40"))  # same size, same second
+    again = load(child, VOCAB)
+    assert again is not first
+    assert again.rules.parameters["turn_deg"] == 40.0 and first.rules.parameters["turn_deg"] == 30.0
+    base.unlink()
+    with pytest.raises(ScenarioError):
+        load(child, VOCAB)

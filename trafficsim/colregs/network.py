@@ -25,10 +25,12 @@ is NaN is false, whatever the operator (so ``[x, "!=", 1]`` is false for a NaN `
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -252,11 +254,38 @@ def loads(text: str | bytes, vocabulary: Vocabulary, path_label: str = "<string>
 def load(path: str | os.PathLike[str], vocabulary: Vocabulary) -> Network:
     """Check and compile a rule file (and the files it ``extends``).
 
+    A process keeps the networks it compiled: the same file is parsed again only when its
+    content or that of a file it extends has changed (compared by digest), so that a
+    campaign's chunks do not parse the rules again and again. The arrays of a network are
+    never written to.
+
     Raises:
         ScenarioError: unreadable file or every problem of it and of the files it extends, each
             ``file:line: key: message``.
     """
-    return compile_rules(parse_file(path, vocabulary), vocabulary)
+    key = (os.path.abspath(path), id(vocabulary))
+    hit = _LOADED.get(key)
+    if hit is not None and hit[0] is vocabulary and hit[2] == _signatures(hit[1].rules.files):
+        return hit[1]
+    net = compile_rules(parse_file(path, vocabulary), vocabulary)
+    _LOADED[key] = (vocabulary, net, _signatures(net.rules.files))
+    return net
+
+
+#: networks compiled by :func:`load`: (absolute path, vocabulary id) -> (vocabulary, network,
+#: signatures of the files read)
+_LOADED: dict[tuple[str, int], tuple[Vocabulary, Network, tuple]] = {}
+
+
+def _signatures(files: Sequence[str]) -> tuple:
+    """Digest of each file's content; None for one that cannot be read."""
+    out = []
+    for f in files:
+        try:
+            out.append(hashlib.sha1(Path(f).read_bytes()).digest())
+        except OSError:
+            out.append(None)
+    return tuple(out)
 
 
 # --------------------------------------------------------------------------------------------
