@@ -556,6 +556,8 @@ class _Receivers:
 # columns of the per-ship tables of _StepTables (one short row per ship and instrument, so a
 # ship's constants of one instrument share a cache line and absent parts are never read)
 _W11, _W12, _W21, _W22, _WL11, _WL21, _WL22, _WG_YAW, _WG_SURGE, _WG_SWAY = range(10)
+if (_WG_SURGE - _WG_YAW, _WG_SWAY - _WG_YAW) != (waves.SURGE, waves.SWAY):
+    raise ImportError("the wave gain columns must follow the channel order")
 _G_SIGMA, _G_GM_A, _G_GM_Q, _G_GROSS_P, _G_GROSS_M, _G_P_START, _G_P_END = range(7)
 _C_SIGMA, _C_BIAS, _C_DRIFT_A, _C_DRIFT_Q, _H_ALPHA, _H_BETA = range(6)
 _F_SIGMA, _F_SP, _F_DT, _F_THRESHOLD, _F_REOPEN = range(5)
@@ -638,8 +640,9 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
     ``heading0``/``heading`` ``(2, n)`` heading (rad) and yaw rate (rad/s) estimates.
 
     Draws, at need, straight from each ship's streams (``*_streams`` ``(n, 4)``, advanced in
-    place): ``waves`` two normals per channel where the
-    ship's sea is on; ``gnss_gross`` a uniform for the outage chain (where outages start or one
+    place): ``waves`` two normals per channel whose output is on (non-zero sigma) where the
+    ship's sea is on (the state of a channel without output decays undriven);
+    ``gnss_gross`` a uniform for the outage chain (where outages start or one
     is on), one for the gross-error test (valid fixes, ``gross_prob > 0``) and one for a gross
     error's direction; ``gnss`` the Gauss-Markov error's two normals (where it is on), then the
     white noise's two (valid fixes); ``compass`` the drift's normal (where on), then the white
@@ -652,7 +655,7 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
             driven = wtab[i, _WL11] != 0.0 or wtab[i, _WL21] != 0.0 or wtab[i, _WL22] != 0.0
             for j in range(waves.N_CHANNELS):
                 e1 = e2 = 0.0
-                if driven:
+                if driven and wtab[i, _WG_YAW + j] != 0.0:  # (a channel without gain: no output)
                     e1 = normal_from(wave_streams, i)
                     e2 = normal_from(wave_streams, i)
                 a1, a2 = z1[i, j], z2[i, j]

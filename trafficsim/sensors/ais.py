@@ -469,7 +469,7 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
         z_vn, z_ve, z_h = normal_from(streams, i), normal_from(streams, i), normal_from(streams, i)
         vn += sv[i] * z_vn
         ve += sv[i] * z_ve
-        sog = math.hypot(vn, ve)
+        sog = math.sqrt(vn * vn + ve * ve)  # (hypot: 20 ns more; equal to the 0.1 kn step)
         h = (head[i] + 1) % AIS_BUFFER
         head[i] = h
         buf_t[i, h] = t_s
