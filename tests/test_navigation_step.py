@@ -120,8 +120,9 @@ SEA = {"heading_sigma_deg": 1.5, "surge_sigma_m": 0.8, "sway_sigma_m": 1.2, "pea
 
 def _fleet() -> tuple[list[dict], list[str]]:
     """Ships covering every branch: gross errors, outages, slow fixes, lever arms, waves of both
-    forms (one without surge), magnetic deviation and drift, log and actuator sensors, two and three receivers with
-    correlation, tight gates (restarts), a fully reopening gate, filters none / pv / ekf."""
+    forms (one without surge), magnetic deviation and drift, log and actuator sensors, two and
+    three receivers with correlation, tight gates (restarts), a fully reopening gate, filters
+    none / pv / ekf."""
     mag = {"kind": "magnetic", "deviation_deg": [0.5, 2.0, -1.0, 0.7, 0.3],
            "drift_sigma_deg": 0.8, "drift_tau_s": 120.0, "bias_deg": 0.4}
     tight = {"gate_sigma": 3.0, "max_rejections": 2}

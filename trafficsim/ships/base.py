@@ -36,6 +36,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from trafficsim.errors import ShipLibraryError
 from trafficsim.jit import kernel
 
 N_STATE = 8
@@ -161,6 +162,28 @@ def gather_ship(X: np.ndarray, E: np.ndarray, i: int, x: np.ndarray, env: np.nda
         x[j] = X[j, i]
     for j in range(4):
         env[j] = E[j, i]
+
+
+def coefficient(ship: Mapping[str, Any], key: str, default: float | None, model: str) -> float:
+    """Coefficient ``key`` of a ship spec (``default`` where absent; None: required)."""
+    value = ship.get("coefficients", {}).get(key, default)
+    if value is None:
+        raise ShipLibraryError(f"missing required coefficient '{key}' for model '{model}'",
+                               path=ship.get("path"), key=f"coefficients.{key}")
+    return float(value)
+
+
+def particular(ship: Mapping[str, Any], key: str, defaults: Mapping[str, float | None],
+               model: str) -> float:
+    """Particular ``key`` of a ship spec (``defaults[key]`` where absent; None: required)."""
+    parts = ship["particulars"]
+    if key in parts:
+        return float(parts[key])
+    default = defaults.get(key)
+    if default is None:
+        raise ShipLibraryError(f"missing particular '{key}' required by model '{model}'",
+                               path=ship.get("path"), key=f"particulars.{key}")
+    return float(default)
 
 
 def stack(dicts: Sequence[Mapping[str, Any]], key: str, default: float | None = None) -> np.ndarray:

@@ -3,8 +3,8 @@
 Reference: Yasukawa H., Yoshimura Y. (2015) "Introduction of MMG standard method for ship
 maneuvering predictions", J Mar Sci Technol 20:37-52, doi:10.1007/s00773-014-0293-y, cited
 below as [YY15] with the model part it describes (motion equations, hull forces, propeller,
-rudder). The paper's text could not be consulted for this work; the formulas below are the
-standard method as published and reproduced in public implementations, and the KVLCC2 numbers
+rudder). The paper is cited through secondary sources: the formulas below are the standard
+method as published and reproduced in public implementations, and the KVLCC2 numbers
 in the ship files are those of the paper's KVLCC2 tables as transcribed identically in several
 public sources (ShipMMG.jl, TUD_RL, others), see the ship files.
 
@@ -79,10 +79,18 @@ from typing import Any
 
 import numpy as np
 
-from trafficsim.errors import ShipLibraryError
 from trafficsim.jit import kernel
 from trafficsim.ships import wind
-from trafficsim.ships.base import RHO_WATER, RPS, RUDDER, U, V, register
+from trafficsim.ships.base import (
+    RHO_WATER,
+    RPS,
+    RUDDER,
+    U,
+    V,
+    coefficient,
+    particular,
+    register,
+)
 from trafficsim.ships.base import R as YAW_RATE
 
 G = 9.80665  # m/s2
@@ -240,10 +248,12 @@ class MMGFamily:
         (x_G, default 0) and the windage particulars of :mod:`trafficsim.ships.wind`.
         """
         def col(key: str) -> np.ndarray:
-            return np.array([_coef(s, key, self.coefficients[key]) for s in ships], dtype=float)
+            return np.array([coefficient(s, key, self.coefficients[key], self.name)
+                             for s in ships], dtype=float)
 
         def part(key: str) -> np.ndarray:
-            return np.array([_part(s, key) for s in ships], dtype=float)
+            return np.array([particular(s, key, _PARTICULARS, self.name) for s in ships],
+                            dtype=float)
 
         rho = RHO_WATER
         L, d = part("length_m"), part("draught_m")
@@ -374,25 +384,6 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     rhs_y = yf - p[_M_MX] * ur
     rhs_n = nf - p[_XG_M] * ur
     return du, p[_INV11] * rhs_y + p[_INV12] * rhs_n, p[_INV12] * rhs_y + p[_INV22] * rhs_n
-
-
-def _coef(ship: Mapping[str, Any], key: str, default: float | None) -> float:
-    value = ship.get("coefficients", {}).get(key, default)
-    if value is None:
-        raise ShipLibraryError(f"missing required coefficient '{key}' for model 'mmg'",
-                               path=ship.get("path"), key=f"coefficients.{key}")
-    return float(value)
-
-
-def _part(ship: Mapping[str, Any], key: str) -> float:
-    parts = ship["particulars"]
-    if key in parts:
-        return float(parts[key])
-    default = _PARTICULARS.get(key)
-    if default is None:
-        raise ShipLibraryError(f"missing particular '{key}' required by model 'mmg'",
-                               path=ship.get("path"), key=f"particulars.{key}")
-    return float(default)
 
 
 FAMILY = register(MMGFamily())

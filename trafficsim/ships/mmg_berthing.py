@@ -19,10 +19,10 @@ References (cited below by their tags):
   Seiunmaru for the side force and moment of a propeller ahead on a ship going astern (second
   quadrant), Kitagawa's rudder inflow with the propeller reversed, Fujii's normal-force slope:
   these names are those [M22]'s authors give the terms in the simulator they published with
-  the parameter folder (NAOE-5thLab ``mmg-1p1r-simulator``, CC BY-NC 4.0); the original papers
-  could not be consulted for this work, nor could the text of [M22]. The forms below were
-  therefore taken from that published simulator's behaviour (read, not copied) and written
-  anew; where this module departs from it, the departure is listed under "Choices".
+  the parameter folder (NAOE-5thLab ``mmg-1p1r-simulator``, CC BY-NC 4.0). Those papers and the
+  text of [M22] are cited through that simulator: the forms below follow its behaviour (no
+  code of it is used), and where this module departs from it the departure is listed under
+  "Choices".
 
 Motion (3 DOF at midship, [YY15]), identical to :mod:`.mmg`::
 
@@ -132,7 +132,16 @@ import numpy as np
 from trafficsim.errors import ShipLibraryError
 from trafficsim.jit import inline_kernel, kernel
 from trafficsim.ships import wind
-from trafficsim.ships.base import RHO_WATER, RPS, RUDDER, U, V, register
+from trafficsim.ships.base import (
+    RHO_WATER,
+    RPS,
+    RUDDER,
+    U,
+    V,
+    coefficient,
+    particular,
+    register,
+)
 from trafficsim.ships.base import R as YAW_RATE
 
 #: |J| beyond which the forces of a propeller turning ahead fade as J_FADE / |J| (module doc)
@@ -307,13 +316,16 @@ class MMGBerthingFamily:
         1025) and the windage particulars of :mod:`trafficsim.ships.wind`.
         """
         def col(key: str) -> np.ndarray:
-            return np.array([_coef(s, key, self.coefficients[key]) for s in ships], dtype=float)
+            return np.array([coefficient(s, key, self.coefficients[key], self.name)
+                             for s in ships], dtype=float)
 
         def part(key: str) -> np.ndarray:
-            return np.array([_part(s, key) for s in ships], dtype=float)
+            return np.array([particular(s, key, _PARTICULARS, self.name) for s in ships],
+                            dtype=float)
 
         for key in ("switch_prop_y", "switch_prop_n", "switch_rudder_astern"):
-            bad = [s.get("name", "?") for s in ships if _coef(s, key, 1.0) not in (0.0, 1.0)]
+            bad = [s.get("name", "?") for s in ships
+                   if coefficient(s, key, 1.0, self.name) not in (0.0, 1.0)]
             if bad:
                 raise ShipLibraryError(f"coefficient '{key}' must be 0 or 1 (ship {bad[0]})",
                                        key=f"coefficients.{key}")
@@ -505,25 +517,6 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     rhs_y = yf - p[_M_MX] * ur
     rhs_n = nf - p[_XG_M] * ur
     return du, p[_INV11] * rhs_y + p[_INV12] * rhs_n, p[_INV12] * rhs_y + p[_INV22] * rhs_n
-
-
-def _coef(ship: Mapping[str, Any], key: str, default: float | None) -> float:
-    value = ship.get("coefficients", {}).get(key, default)
-    if value is None:
-        raise ShipLibraryError(f"missing required coefficient '{key}' for model 'mmg_berthing'",
-                               path=ship.get("path"), key=f"coefficients.{key}")
-    return float(value)
-
-
-def _part(ship: Mapping[str, Any], key: str) -> float:
-    parts = ship["particulars"]
-    if key in parts:
-        return float(parts[key])
-    default = _PARTICULARS.get(key)
-    if default is None:
-        raise ShipLibraryError(f"missing particular '{key}' required by model 'mmg_berthing'",
-                               path=ship.get("path"), key=f"particulars.{key}")
-    return float(default)
 
 
 FAMILY = register(MMGBerthingFamily())
