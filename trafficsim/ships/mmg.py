@@ -79,7 +79,7 @@ from typing import Any
 
 import numpy as np
 
-from trafficsim.jit import kernel
+from trafficsim.jit import inline_kernel, kernel
 from trafficsim.ships import wind
 from trafficsim.ships.base import (
     RHO_WATER,
@@ -208,7 +208,9 @@ _FIELDS = tuple(f.name for f in fields(MMGParams))
 _W0 = _FIELDS.index(wind.WINDAGE_FIELDS[0])
 _W1 = _W0 + len(wind.WINDAGE_FIELDS)
 _DELTA0 = _FIELDS.index("delta0")
-assert _FIELDS[_INV22] == "inv22" and _FIELDS[_W0:_W1] == wind.WINDAGE_FIELDS
+#: the columns of :func:`mass_terms`, consecutive in both MMG families' parameter rows
+MASS_FIELDS = ("mx_den", "m_my", "m_mx", "xg_m", "inv11", "inv12", "inv22")
+assert _FIELDS[_MX_DEN:_INV22 + 1] == MASS_FIELDS and _FIELDS[_W0:_W1] == wind.WINDAGE_FIELDS
 
 
 class MMGFamily:
@@ -267,9 +269,6 @@ class MMGFamily:
         j_z = col("J_z") * fn * L * L
         i_zg = m * (col("k_zz") * L) ** 2
         i_tot = i_zg + x_g**2 * m + j_z
-        m_my = m + m_y
-        xg_m = x_g * m
-        det = m_my * i_tot - xg_m**2
         a_h = col("a_H")
         hull = {f: col(k) * (fn if f[0] == "n" else fx) for f, k in _HULL}
         w = wind.build(ships)
@@ -297,13 +296,7 @@ class MMGFamily:
             xr_k=-(1.0 - col("t_R")),
             yr_k=-(1.0 + a_h),
             nr_k=-(col("x_R") + a_h * col("x_H")) * L,
-            mx_den=1.0 / (m + m_x),
-            m_my=m_my,
-            m_mx=m + m_x,
-            xg_m=xg_m,
-            inv11=i_tot / det,
-            inv12=-xg_m / det,
-            inv22=m_my / det,
+            **mass_terms(m, m_x, m_y, i_tot, x_g),
             **{f.name: getattr(w, f.name) for f in fields(w)},
             delta0=col("delta_0"),
         )
@@ -378,12 +371,32 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     yf = y_h + p[_YR_K] * f_n * cos_d + ya
     nf = n_h + p[_NR_K] * f_n * cos_d + na
 
-    # motion at midship [YY15]
+    return midship_accel(p, _MX_DEN, xf, yf, nf, u, v, r)
+
+
+def mass_terms(m: np.ndarray, m_x: np.ndarray, m_y: np.ndarray, i_tot: np.ndarray,
+               x_g: np.ndarray) -> dict[str, np.ndarray]:
+    """The mass columns of the motion equations at midship [YY15] (``mx_den`` ... ``inv22``
+    of :class:`MMGParams`, in that order): mass ``m``, added masses ``m_x``, ``m_y`` (kg), yaw
+    inertia about midship with added inertia ``i_tot`` (kg m^2), ``x_G`` (m)."""
+    m_my, xg_m = m + m_y, x_g * m
+    det = m_my * i_tot - xg_m**2
+    return dict(zip(MASS_FIELDS, (1.0 / (m + m_x), m_my, m + m_x, xg_m, i_tot / det,
+                                  -xg_m / det, m_my / det), strict=True))
+
+
+@inline_kernel
+def midship_accel(p: np.ndarray, at: int, xf: float, yf: float, nf: float, u: float, v: float,
+                  r: float) -> tuple[float, float, float]:
+    """``(du, dv, dr)`` from the total forces ``xf, yf, nf`` by the motion equations at midship
+    [YY15]; ``p[at:at + 7]`` holds the columns of :func:`mass_terms` in their order."""
+    mx_den, m_my, m_mx, xg_m = p[at], p[at + 1], p[at + 2], p[at + 3]
+    inv11, inv12, inv22 = p[at + 4], p[at + 5], p[at + 6]
     ur = u * r
-    du = (xf + p[_M_MY] * v * r + p[_XG_M] * r * r) * p[_MX_DEN]
-    rhs_y = yf - p[_M_MX] * ur
-    rhs_n = nf - p[_XG_M] * ur
-    return du, p[_INV11] * rhs_y + p[_INV12] * rhs_n, p[_INV12] * rhs_y + p[_INV22] * rhs_n
+    du = (xf + m_my * v * r + xg_m * r * r) * mx_den
+    rhs_y = yf - m_mx * ur
+    rhs_n = nf - xg_m * ur
+    return du, inv11 * rhs_y + inv12 * rhs_n, inv12 * rhs_y + inv22 * rhs_n
 
 
 FAMILY = register(MMGFamily())

@@ -143,6 +143,7 @@ from trafficsim.ships.base import (
     register,
 )
 from trafficsim.ships.base import R as YAW_RATE
+from trafficsim.ships.mmg import MASS_FIELDS, mass_terms, midship_accel
 
 #: |J| beyond which the forces of a propeller turning ahead fade as J_FADE / |J| (module doc)
 J_FADE = 1.0
@@ -275,7 +276,7 @@ _FIELDS = tuple(f.name for f in fields(BerthingParams))
 _W0 = _FIELDS.index(wind.WINDAGE_FIELDS[0])
 _W1 = _W0 + len(wind.WINDAGE_FIELDS)
 _DELTA0 = _FIELDS.index("delta0")
-assert _FIELDS[_INV22] == "inv22" and _FIELDS[_W0:_W1] == wind.WINDAGE_FIELDS
+assert _FIELDS[_MX_DEN:_INV22 + 1] == MASS_FIELDS and _FIELDS[_W0:_W1] == wind.WINDAGE_FIELDS
 
 
 class MMGBerthingFamily:
@@ -340,8 +341,6 @@ class MMGBerthingFamily:
         m_x, m_y = col("m_x") * fn, col("m_y") * fn
         j_z = col("J_z") * fn * L * L
         i_tot = m * (col("k_zz") * L) ** 2 + x_g**2 * m + j_z
-        m_my, xg_m = m + m_y, x_g * m
-        det = m_my * i_tot - xg_m**2
         a_h, eps = col("a_H"), col("epsilon")
         sw_y, sw_n = col("switch_prop_y"), col("switch_prop_n")
         w = wind.build(ships)
@@ -365,8 +364,7 @@ class MMGBerthingFamily:
             rud_astern=col("switch_rudder_astern"),
             xr_k=-(1.0 - col("t_R")), yr_k=-(1.0 + a_h),
             nr_k=-(col("x_R") + a_h * col("x_H")) * L,
-            mx_den=1.0 / (m + m_x), m_my=m_my, m_mx=m + m_x, xg_m=xg_m,
-            inv11=i_tot / det, inv12=-xg_m / det, inv22=m_my / det,
+            **mass_terms(m, m_x, m_y, i_tot, x_g),
             **{f.name: getattr(w, f.name) for f in fields(w)},
             delta0=col("delta_0"),
         )
@@ -512,11 +510,7 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     yf = y_h + y_p + p[_YR_K] * f_n * cos_d + ya
     nf = n_h + n_p + p[_NR_K] * f_n * cos_d + na
 
-    ur = u * r
-    du = (xf + p[_M_MY] * v * r + p[_XG_M] * r * r) * p[_MX_DEN]
-    rhs_y = yf - p[_M_MX] * ur
-    rhs_n = nf - p[_XG_M] * ur
-    return du, p[_INV11] * rhs_y + p[_INV12] * rhs_n, p[_INV12] * rhs_y + p[_INV22] * rhs_n
+    return midship_accel(p, _MX_DEN, xf, yf, nf, u, v, r)
 
 
 FAMILY = register(MMGBerthingFamily())
