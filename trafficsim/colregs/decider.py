@@ -59,6 +59,7 @@ from trafficsim.colregs.vocabulary import (
 from trafficsim.control.guidance import LOOKAHEAD_L
 from trafficsim.errors import InputError
 from trafficsim.jit import kernel
+from trafficsim.sensors import mod_2pi_scalar
 from trafficsim.sensors.radar import directed_pairs
 
 #: the bundled rules files (``rules/`` at the top of the project)
@@ -403,54 +404,24 @@ class Decider:
         chi = self.line_course_rad[r]
         e = self._cross_track_m(own_state)[r]
         ordered = np.where(np.isnan(self.course_order_rad[r]), route, self.course_order_rad[r])
-        # rows: (route speed, reduced speed) x (towards the line's course, towards the route)
-        k = _RESUME_STEPS_RAD.size
-        target = np.stack([chi, route, chi, route], axis=1)  # (s, 4)
-        back = (target - ordered[:, None] + math.pi) % (2 * math.pi) - math.pi
-        turn = np.sign(back)[:, :, None] * np.minimum(_RESUME_STEPS_RAD, np.abs(back)[:, :, None])
-        course = ordered[:, None, None] + turn  # (s, 4, k)
-        home = (np.abs(turn) >= np.abs(back)[:, :, None] - 1e-9) & (
-            np.arange(4) % 2 == 1)[None, :, None]  # the route itself
         slow = np.where(self.speed_factor[r] < 1.0, self.speed_factor[r], DEFAULT_SLOW_FACTOR)
-        factor = np.where(np.arange(4) < 2, 1.0, slow[:, None])  # (s, 4)
-        present = np.hypot(own_vel[0, r], own_vel[1, r])
-        # where each candidate course meets the route line
-        across = np.sin(course - chi[:, None, None])  # cross-track rate per unit speed
-        meets = e[:, None, None] * across < -1e-9
-        dist = np.where(meets, -e[:, None, None] / np.where(meets, across, 1.0), math.inf)
-        worst = np.full((s, 4, k), math.inf)
-        passing = np.full((s, 4, k), math.inf)
-        alongside = np.zeros((s, 4, k), dtype=bool)
         c = np.ascontiguousarray
-        _resume_margins(c(np.cos(course)), c(np.sin(course)), c(np.cos(chi)), c(np.sin(chi)),
-                        c(dist), c(route_speed_mps[r, None] * factor), c(present), c(ps),
-                        c(other[0, pairs] - own_state[0, o[pairs]]),
-                        c(other[1, pairs] - own_state[1, o[pairs]]), c(other[2, pairs]),
-                        c(other[3, pairs]), c(self.kept_distance_m[o[pairs]]),
-                        float(self.horizon_s), worst, passing, alongside)
-        reach = (np.cumsum(passing < 0.0, axis=2) == 0) & (worst >= 0.0)
-        off_route = np.abs((course - route[:, None, None] + math.pi) % (2 * math.pi) - math.pi)
-        # a course that takes the ship further off its line comes after a reduced speed; there,
-        # where a safe course nearer the route lies beyond courses it cannot turn through at
-        # route speed, a reduced speed first (the ship in the way draws clear sooner)
-        away = e[:, None, None] * np.sin(course - chi[:, None, None]) > _AWAY * np.abs(
-            e[:, None, None])
-        reduced = (np.arange(4) >= 2)[None, :, None]
-        blocked = ((worst[:, :2] >= 0.0) & ~reach[:, :2]).any(axis=(1, 2))[:, None, None]
-        cost = (np.degrees(off_route) - 1.0 * home + 5000.0 * alongside
-                + 2000.0 * away + 1000.0 * (reduced != blocked))
-        flat = np.where(reach, cost, math.inf).reshape(s, 4 * k)
-        chosen = np.argmin(flat, axis=1)
-        found = np.isfinite(flat[np.arange(s), chosen])  # none: the ship keeps its order
-        row, col = chosen // k, chosen % k
-        rows = np.arange(s)
-        on_route = found & home[rows, row, col]
+        found, home, row, course = (np.zeros(s, dtype=bool), np.zeros(s, dtype=bool),
+                                    np.zeros(s, dtype=np.int64), np.zeros(s))
+        _resume_plan(c(ordered), c(route), c(chi), c(e), c(slow), c(route_speed_mps[r]),
+                     c(np.hypot(own_vel[0, r], own_vel[1, r])), c(ps),
+                     c(other[0, pairs] - own_state[0, o[pairs]]),
+                     c(other[1, pairs] - own_state[1, o[pairs]]), c(other[2, pairs]),
+                     c(other[3, pairs]), c(self.kept_distance_m[o[pairs]]),
+                     float(self.horizon_s), found, home, row, course)
+        on_route = found & home
+        factor = np.where(row < 2, 1.0, slow)
         released = np.zeros(n, dtype=bool)
         released[r] = on_route & (row < 2)
         steer = found & ~on_route
-        self.course_order_rad[r[steer]] = np.mod(course[rows, row, col][steer], 2 * math.pi)
+        self.course_order_rad[r[steer]] = np.mod(course[steer], 2 * math.pi)
         self.course_order_rad[r[on_route]] = np.nan  # on the route (at reduced speed: resuming)
-        self.speed_factor[r[found]] = factor[rows, row][found]
+        self.speed_factor[r[found]] = factor[found]
         return released
 
     def _orders(self, own_state: np.ndarray, own_vel: np.ndarray, other: np.ndarray,
@@ -557,6 +528,86 @@ class Decider:
         """Blind spots as records: ship, other ship, role, time first seen."""
         return [{"ship": names[b.ship], "other": names[b.other], "role": b.role,
                  "from_s": b.from_s} for b in self.blind_spots]
+
+
+@kernel
+def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.ndarray,
+                 slow: np.ndarray, route_speed: np.ndarray, present: np.ndarray,
+                 pair_ship: np.ndarray, pn: np.ndarray, pe: np.ndarray, wn: np.ndarray,
+                 we: np.ndarray, kept: np.ndarray, horizon_s: float, found: np.ndarray,
+                 home: np.ndarray, chosen_row: np.ndarray, chosen_course: np.ndarray) -> None:
+    """The candidates of :meth:`Decider._resume` and the choice among them, per resuming ship.
+
+    Per ship (``ordered`` present course order, ``route`` route course, ``chi`` the route
+    line's course, ``e`` cross-track error, ``slow`` reduced-speed factor) and its pairs (as
+    :func:`_resume_margins`): rows (route speed, reduced speed) x (towards the line's course,
+    towards the route course), steps :data:`_RESUME_STEPS_RAD`; out per ship whether a
+    candidate was ``found``, whether it is the route itself (``home``), its row and course.
+    """
+    s, k = ordered.shape[0], _RESUME_STEPS_RAD.size
+    c1, s1 = np.empty((s, 4, k)), np.empty((s, 4, k))
+    meet, speed = np.empty((s, 4, k)), np.empty((s, 4))
+    course, turned_home = np.empty((s, 4, k)), np.empty((s, 4, k), dtype=np.bool_)
+    across = np.empty((s, 4, k))
+    c2, s2 = np.empty(s), np.empty(s)
+    for i in range(s):
+        c2[i], s2[i] = math.cos(chi[i]), math.sin(chi[i])
+        for row in range(4):
+            target = chi[i] if row % 2 == 0 else route[i]
+            back = mod_2pi_scalar(target - ordered[i] + math.pi) - math.pi
+            sign = 1.0 if back > 0.0 else (-1.0 if back < 0.0 else (0.0 if back == 0.0 else back))
+            speed[i, row] = route_speed[i] * (1.0 if row < 2 else slow[i])
+            for step in range(k):
+                turn = sign * min(_RESUME_STEPS_RAD[step], abs(back))
+                turned_home[i, row, step] = abs(turn) >= abs(back) - 1e-9 and row % 2 == 1
+                cs = ordered[i] + turn
+                course[i, row, step] = cs
+                if step > 0 and cs == course[i, row, step - 1]:  # clipped at the target
+                    c1[i, row, step], s1[i, row, step] = c1[i, row, step - 1], s1[i, row, step - 1]
+                    across[i, row, step] = across[i, row, step - 1]
+                    meet[i, row, step] = meet[i, row, step - 1]
+                    continue
+                c1[i, row, step], s1[i, row, step] = math.cos(cs), math.sin(cs)
+                a = math.sin(cs - chi[i])  # cross-track rate per unit speed
+                across[i, row, step] = a
+                meet[i, row, step] = -e[i] / a if e[i] * a < -1e-9 else math.inf
+    worst, passing = np.full((s, 4, k), math.inf), np.full((s, 4, k), math.inf)
+    alongside = np.zeros((s, 4, k), dtype=np.bool_)
+    _resume_margins(c1, s1, c2, s2, meet, speed, present, pair_ship, pn, pe, wn, we, kept,
+                    horizon_s, worst, passing, alongside)
+    deg = 180.0 / math.pi
+    for i in range(s):
+        # a course further off the line comes after a reduced speed; there, where a safe
+        # course nearer the route lies beyond courses not to be turned through at route speed,
+        # a reduced speed first (the ship in the way draws clear sooner)
+        blocked = False
+        for row in range(2):
+            clear = True
+            for step in range(k):
+                clear = clear and not passing[i, row, step] < 0.0
+                if worst[i, row, step] >= 0.0 and not clear:
+                    blocked = True
+        best, best_row, best_step = math.inf, 0, 0
+        for row in range(4):
+            clear = True  # every course turned through on the way keeps the distance
+            for step in range(k):
+                clear = clear and not passing[i, row, step] < 0.0
+                cs = course[i, row, step]
+                # (a candidate repeating the one before is no better and reached no sooner)
+                if not (clear and worst[i, row, step] >= 0.0) or (
+                        step > 0 and cs == course[i, row, step - 1]):
+                    continue
+                off = abs(mod_2pi_scalar(cs - route[i] + math.pi) - math.pi)
+                away = e[i] * across[i, row, step] > _AWAY * abs(e[i])
+                cost = (off * deg - 1.0 * turned_home[i, row, step]
+                        + 5000.0 * alongside[i, row, step] + 2000.0 * away
+                        + 1000.0 * ((row >= 2) != blocked))
+                if cost < best:
+                    best, best_row, best_step = cost, row, step
+        found[i] = math.isfinite(best)  # none: the ship keeps its order
+        home[i] = found[i] and turned_home[i, best_row, best_step]
+        chosen_row[i] = best_row
+        chosen_course[i] = course[i, best_row, best_step]
 
 
 @kernel

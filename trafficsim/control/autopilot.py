@@ -16,6 +16,7 @@ import math
 import numpy as np
 
 from trafficsim.jit import kernel
+from trafficsim.sensors import mod_2pi_scalar
 
 INTEGRAL_BAND_RAD = math.radians(10.0)
 
@@ -34,6 +35,8 @@ def rudder_command(psi_d: np.ndarray, psi: np.ndarray, r: np.ndarray, integral: 
     n = np.shape(psi)[0]
 
     def arr(v: np.ndarray | float) -> np.ndarray:
+        if isinstance(v, np.ndarray) and v.shape == (n,) and v.dtype == float:
+            return np.ascontiguousarray(v)  # (the common case: per-ship columns every step)
         return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=float), (n,)))
 
     out = np.empty(n)
@@ -47,7 +50,7 @@ def _rudder_command(psi_d: np.ndarray, psi: np.ndarray, r: np.ndarray, integral:
                     kp: np.ndarray, kd_s: np.ndarray, ki_per_s: np.ndarray,
                     rudder_max: np.ndarray, dt: float, out: np.ndarray) -> None:
     for i in range(psi.shape[0]):
-        err = (psi_d[i] - psi[i] + math.pi) % (2.0 * math.pi) - math.pi
+        err = mod_2pi_scalar(psi_d[i] - psi[i] + math.pi) - math.pi
         if abs(err) < INTEGRAL_BAND_RAD:
             integral[i] += err * dt
         cmd = kp[i] * err + ki_per_s[i] * integral[i] - kd_s[i] * r[i]

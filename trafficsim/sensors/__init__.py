@@ -61,7 +61,7 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
         minimum: if given, values below it (or equal, with ``strictly``) are an error.
     """
     n = len(configs)
-    defaults = np.broadcast_to(np.asarray(default, dtype=float), (n,))
+    defaults = np.broadcast_to(np.asarray(default, dtype=float), (n,)).tolist()
     out = np.empty(n)
     for i, cfg in enumerate(configs):  # build time only, never on the step path
         raw = cfg.get(key, None)

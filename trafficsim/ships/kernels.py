@@ -20,6 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 from trafficsim.jit import inline_kernel, kernel
+from trafficsim.sensors import mod_2pi_scalar
 from trafficsim.ships import mmg, mmg_berthing, modular, nomoto, response
 from trafficsim.ships.base import gather_ship
 
@@ -45,50 +46,65 @@ def accel(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[flo
 
 
 @inline_kernel
+def _kinematics(x: tuple | np.ndarray, env: tuple | np.ndarray) -> tuple[float, float, float]:
+    """Rates of north, east and heading: the velocities through the water turned to the earth
+    frame plus the current, and the yaw rate."""
+    c, s = math.cos(x[2]), math.sin(x[2])
+    return x[3] * c - x[4] * s + env[0], x[3] * s + x[4] * c + env[1], x[5]
+
+
+@inline_kernel
 def motion_rates(du: float, dv: float, dr: float, x: np.ndarray, env: np.ndarray,
                  out: np.ndarray) -> None:
-    """Rates of the six motion states: position and heading from the velocities through the
-    water turned to the earth frame plus the current, and the family's accelerations."""
-    c, s = math.cos(x[2]), math.sin(x[2])
-    out[0] = x[3] * c - x[4] * s + env[0]
-    out[1] = x[3] * s + x[4] * c + env[1]
-    out[2] = x[5]
+    """Rates of the six motion states into ``out``: :func:`_kinematics` and the family's
+    accelerations."""
+    out[0], out[1], out[2] = _kinematics(x, env)
     out[3] = du
     out[4] = dv
     out[5] = dr
 
 
 @inline_kernel
-def _derivative(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: np.ndarray,
-                rudder_cmd: float, rps_cmd: float, env: np.ndarray, out: np.ndarray) -> None:
+def _derivative(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple, rudder_cmd: float,
+                rps_cmd: float, env: tuple) -> tuple:
+    """The eight state rates of one ship: kinematics, the family's accelerations, steering gear
+    and engine."""
     du, dv, dr = accel_fn(p, x, env)
-    motion_rates(du, dv, dr, x, env, out)
+    dn, de, dpsi = _kinematics(x, env)
     target = min(max(rudder_cmd, -a[RUDDER_MAX]), a[RUDDER_MAX])
     rate = (target - x[6]) / a[RUDDER_TAU]
-    out[6] = min(max(rate, -a[RUDDER_RATE]), a[RUDDER_RATE])
-    out[7] = (min(max(rps_cmd, a[RPS_MIN]), a[RPS_MAX]) - x[7]) / a[ENGINE_TAU]
+    return (dn, de, dpsi, du, dv, dr, min(max(rate, -a[RUDDER_RATE]), a[RUDDER_RATE]),
+            (min(max(rps_cmd, a[RPS_MIN]), a[RPS_MAX]) - x[7]) / a[ENGINE_TAU])
 
 
 @inline_kernel
-def _rk4(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: np.ndarray, rc: float, nc: float,
-         env: np.ndarray, h: float, substeps: int, w: np.ndarray) -> None:
-    """``substeps`` classic RK4 steps of ``h`` of one ship in place; ``w`` ``(5, 8)`` scratch.
-    Written once and compiled once per family (``accel_fn``), so a ship's four derivative
-    evaluations carry no family dispatch."""
-    xt, k1, k2, k3, k4 = w[0], w[1], w[2], w[3], w[4]
+def _stage(x: tuple, f: float, k: tuple) -> tuple:
+    """``x + f k`` of two 8-states."""
+    return (x[0] + f * k[0], x[1] + f * k[1], x[2] + f * k[2], x[3] + f * k[3],
+            x[4] + f * k[4], x[5] + f * k[5], x[6] + f * k[6], x[7] + f * k[7])
+
+
+@inline_kernel
+def _rk4(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple, rc: float, nc: float,
+         env: tuple, h: float, substeps: int) -> tuple:
+    """``substeps`` classic RK4 steps of ``h`` of one ship's 8-state ``x`` (a tuple, so that it
+    stays in registers); returns the new state. Written once and compiled once per family
+    (``accel_fn``), so a ship's four derivative evaluations carry no family dispatch."""
+    half, sixth = 0.5 * h, h / 6.0
     for _ in range(substeps):
-        _derivative(accel_fn, p, a, x, rc, nc, env, k1)
-        for j in range(8):
-            xt[j] = x[j] + 0.5 * h * k1[j]
-        _derivative(accel_fn, p, a, xt, rc, nc, env, k2)
-        for j in range(8):
-            xt[j] = x[j] + 0.5 * h * k2[j]
-        _derivative(accel_fn, p, a, xt, rc, nc, env, k3)
-        for j in range(8):
-            xt[j] = x[j] + h * k3[j]
-        _derivative(accel_fn, p, a, xt, rc, nc, env, k4)
-        for j in range(8):
-            x[j] += (h / 6.0) * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
+        k1 = _derivative(accel_fn, p, a, x, rc, nc, env)
+        k2 = _derivative(accel_fn, p, a, _stage(x, half, k1), rc, nc, env)
+        k3 = _derivative(accel_fn, p, a, _stage(x, half, k2), rc, nc, env)
+        k4 = _derivative(accel_fn, p, a, _stage(x, h, k3), rc, nc, env)
+        x = (x[0] + sixth * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+             x[1] + sixth * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+             x[2] + sixth * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]),
+             x[3] + sixth * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3]),
+             x[4] + sixth * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4]),
+             x[5] + sixth * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5]),
+             x[6] + sixth * (k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6]),
+             x[7] + sixth * (k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7]))
+    return x
 
 
 @kernel
@@ -102,29 +118,25 @@ def step_ships(codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
         X: ``(8, n)`` state, updated in place; rudder_cmd (rad), rps_cmd (rev/s): ``(n,)``.
         E: ``(4, n)`` environment rows (current north, current east, wind speed, wind from).
     """
-    n = X.shape[1]
-    x = np.empty(8)
-    w = np.empty((5, 8))
-    env = np.empty(4)
-    for i in range(n):
-        gather_ship(X, E, i, x, env)
+    for i in range(X.shape[1]):
+        x = (X[0, i], X[1, i], X[2, i], X[3, i], X[4, i], X[5, i], X[6, i], X[7, i])
+        env = (E[0, i], E[1, i], E[2, i], E[3, i])
         code, p, a = codes[i], P[i], A[i]
         rc, nc = rudder_cmd[i], rps_cmd[i]
         m = substeps[i]
         h = dt / m
         if code == 0:
-            _rk4(nomoto.accel, p, a, x, rc, nc, env, h, m, w)
+            x = _rk4(nomoto.accel, p, a, x, rc, nc, env, h, m)
         elif code == 1:
-            _rk4(response.accel, p, a, x, rc, nc, env, h, m, w)
+            x = _rk4(response.accel, p, a, x, rc, nc, env, h, m)
         elif code == 2:
-            _rk4(mmg.accel, p, a, x, rc, nc, env, h, m, w)
+            x = _rk4(mmg.accel, p, a, x, rc, nc, env, h, m)
         elif code == 4:
-            _rk4(mmg_berthing.accel, p, a, x, rc, nc, env, h, m, w)
+            x = _rk4(mmg_berthing.accel, p, a, x, rc, nc, env, h, m)
         else:
-            _rk4(modular.accel, p, a, x, rc, nc, env, h, m, w)
-        x[2] = x[2] % TWO_PI
-        for j in range(8):
-            X[j, i] = x[j]
+            x = _rk4(modular.accel, p, a, x, rc, nc, env, h, m)
+        X[0, i], X[1, i], X[2, i], X[3, i] = x[0], x[1], mod_2pi_scalar(x[2]), x[3]
+        X[4, i], X[5, i], X[6, i], X[7, i] = x[4], x[5], x[6], x[7]
 
 
 @kernel
