@@ -70,12 +70,16 @@ class PairMetrics:
 
 @kernel
 def _inside_domain(kind: int, x: np.ndarray, own: int, sign: float, dn: float, de: float,
-                   length_m: np.ndarray) -> bool:
-    """Whether the other ship of a pair (``sign`` x (dn, de) from ship ``own``) is inside the
-    domain of ``own``, sized by its length and speed through the water."""
+                   rng: float, length_m: np.ndarray) -> bool:
+    """Whether the other ship of a pair (``sign`` x (dn, de) from ship ``own``, at range
+    ``rng``) is inside the domain of ``own``, sized by its length and speed through the water;
+    beyond the domain's reach (with a margin far above rounding) without turning to the body
+    frame."""
+    prm = domains.ship_params(kind, length_m[own], x[U, own], False)
+    if rng > domains.reach_m(kind, prm) * (1.0 + 1e-9):
+        return False
     c, s = math.cos(x[PSI, own]), math.sin(x[PSI, own])
     fwd, stbd = sign * (dn * c + de * s), sign * (-dn * s + de * c)
-    prm = domains.ship_params(kind, length_m[own], x[U, own], False)
     return domains.inside(kind, prm, fwd, stbd)
 
 
@@ -94,8 +98,8 @@ def _accumulate(x: np.ndarray, length_m: np.ndarray, pi: np.ndarray, pj: np.ndar
         rng = math.hypot(dn, de)
         if rng < min_range[p]:
             min_range[p], t_min[p] = rng, t_s
-        if not violation[p] and (_inside_domain(kind, x, a, 1.0, dn, de, length_m)
-                                 or _inside_domain(kind, x, b, -1.0, dn, de, length_m)):
+        if not violation[p] and (_inside_domain(kind, x, a, 1.0, dn, de, rng, length_m)
+                                 or _inside_domain(kind, x, b, -1.0, dn, de, rng, length_m)):
             violation[p], t_violation[p] = True, t_s
         if rng < 0.5 * (length_m[a] + length_m[b]) and not collision[p]:
             near[count] = p
