@@ -89,3 +89,16 @@ def test_compiled_metrics_match_array_formulas(domain: str) -> None:
     np.testing.assert_array_equal(m.t_domain_violation_s, first)
     np.testing.assert_array_equal(m.domain_violation, ~np.isnan(first))
     assert 0 < m.domain_violation.sum() < n // 2
+
+
+@pytest.mark.parametrize("domain", domains.DOMAINS)
+def test_a_ship_just_inside_the_domain_at_any_bearing_is_a_violation(domain: str) -> None:
+    """Also where the domain reaches farthest: the compiled loop skips the body-frame test only
+    beyond the domain's reach."""
+    bearings = np.radians(np.arange(0.0, 360.0, 5.0))
+    reach = domains.boundary_distance_m(domain, bearings, np.full(bearings.size, L),
+                                        np.full(bearings.size, 6.0))
+    for b, r in zip(bearings, reach, strict=True):
+        d = 0.999 * r
+        x = _state([0.0, d * np.cos(b)], [0.0, d * np.sin(b)], [0.0, 0.0])
+        assert _metrics(x, domain).domain_violation[0], np.degrees(b)
