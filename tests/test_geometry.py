@@ -1,8 +1,10 @@
+import math
+
 import numpy as np
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from trafficsim.geometry import cpa, hull_outlines, hulls_overlap
+from trafficsim.geometry import NORM_MARGIN, cpa, hull_outlines, hulls_overlap, hypot_below
 
 finite = st.floats(-1e5, 1e5, allow_nan=False)
 speed = st.floats(-30, 30, allow_nan=False)
@@ -35,3 +37,20 @@ def test_hulls_overlap_only_when_touching():
     a = hull_outlines(z, z, z, np.full(2, 100.0), np.full(2, 20.0))
     b = hull_outlines(np.array([90.0, 110.0]), z, z, np.full(2, 100.0), np.full(2, 20.0))
     assert hulls_overlap(a, b).tolist() == [True, False]
+
+
+@settings(max_examples=500, deadline=None)  # (the first call compiles)
+@given(st.floats(), st.floats(), st.floats())
+def test_hypot_below_is_the_comparison_it_replaces(a, b, limit):
+    assert hypot_below(a, b, limit) == (math.hypot(a, b) < limit)
+
+
+def test_hypot_below_decides_within_the_margin_by_hypot_itself():
+    """Points on, just inside and just outside a circle, at every bearing and at the edge of
+    the band where the squares alone no longer decide."""
+    for limit in (1e-3, 1.0, 926.0, 3.7e4):
+        for bearing in np.radians(np.arange(0.0, 360.0, 7.5)):
+            for f in (1.0, 1.0 - 1e-16, 1.0 + 1e-15, 1.0 - NORM_MARGIN, 1.0 + NORM_MARGIN,
+                      1.0 - 2 * NORM_MARGIN, 1.0 + 2 * NORM_MARGIN):
+                a, b = f * limit * math.cos(bearing), f * limit * math.sin(bearing)
+                assert hypot_below(a, b, limit) == (math.hypot(a, b) < limit)

@@ -1,9 +1,44 @@
-"""Encounter geometry shared by metrics and (later) the decision network; vectorised over pairs."""
+"""Encounter geometry shared by metrics, instruments and the decision network: vectorised over
+pairs, and scalar kernels for compiled loops."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import shapely
+
+from trafficsim.jit import kernel
+
+#: relative margin about a threshold outside which the squared norm decides a comparison of
+#: ``hypot`` (whose error is below 1e-15) on its own
+NORM_MARGIN = 1e-9
+
+
+@kernel
+def norm_side(a: float, b: float, limit: float, scale: float) -> int:
+    """+1 if ``hypot(a, b) / scale`` is surely above ``limit`` (>= 0), -1 if surely below, 0
+    within :data:`NORM_MARGIN` of it (or NaN): the caller then evaluates the comparison itself
+    (libm's ``hypot`` costs about 40 ns, the squares 5)."""
+    s2 = a * a + b * b
+    hi = limit * scale * (1.0 + NORM_MARGIN)
+    if s2 > hi * hi:
+        return 1
+    lo = limit * scale * (1.0 - NORM_MARGIN)
+    if s2 < lo * lo:
+        return -1
+    return 0
+
+
+@kernel
+def hypot_below(a: float, b: float, limit: float) -> bool:
+    """``math.hypot(a, b) < limit``, as that expression evaluates, by the squares
+    (:func:`norm_side`) wherever they decide it. Never true for a limit that is not positive
+    (or NaN)."""
+    if not limit > 0.0:
+        return False
+    side = norm_side(a, b, limit, 1.0)
+    return side < 0 if side != 0 else math.hypot(a, b) < limit
 
 
 def cpa(rel_north_m: np.ndarray, rel_east_m: np.ndarray, rel_vn_mps: np.ndarray,

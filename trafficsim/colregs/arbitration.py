@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from trafficsim.colregs.vocabulary import PORT, STARBOARD
+from trafficsim.geometry import hypot_below
 from trafficsim.jit import kernel
 
 #: candidate course offsets, rad (+ = starboard), and whether a candidate runs at reduced speed
@@ -95,24 +96,34 @@ _OFF_DEG, _COS_OFF, _SIN_OFF = np.degrees(_OFF), np.cos(_OFF), np.sin(_OFF)
 
 
 @kernel
-def closest_m(pn: float, pe: float, dvn: float, dve: float, span_s: float) -> float:
-    """Closest range over the next ``span_s`` on straight lines, where the range closes now.
+def closest_offset(pn: float, pe: float, dvn: float, dve: float, span_s: float
+                   ) -> tuple[float, float]:
+    """The other ship's position relative to the own ship at the closest approach over the next
+    ``span_s`` on straight lines, where the range closes now; ``(inf, inf)`` where it opens.
 
     ``pn, pe``, ``dvn, dve``: the other ship's position and velocity relative to the own ship.
-    A later CPA counts by the range at the end of the span (a slowly closing ship on a nearly
+    A later CPA counts by the position at the end of the span (a slowly closing ship on a nearly
     parallel course counts by where it will be then, not at its late CPA); no relative motion
-    keeps the present range (it counts: it is not past the CPA); a pair already past its CPA
-    (range opening) gives +inf: it constrains nothing. The closed-form DCPA/TCPA of straight
-    tracks [colregs.md section 4]; closing is told by the sign of the product itself (``-dot /
-    v2`` can underflow to 0 at a tiny range).
+    keeps the present position (it counts: it is not past the CPA); a pair already past its CPA
+    (range opening) constrains nothing. The closed-form DCPA/TCPA of straight tracks
+    [colregs.md section 4]; closing is told by the sign of the product itself (``-dot / v2``
+    can underflow to 0 at a tiny range).
     """
     v2 = dvn * dvn + dve * dve
     dot = pn * dvn + pe * dve
     if not (dot < 0.0 or v2 <= 1e-12):
-        return math.inf
+        return math.inf, math.inf
     t = -dot / max(v2, 1e-12) if v2 > 1e-12 else 0.0
     t = min(max(t, 0.0), span_s)
-    return math.hypot(pn + dvn * t, pe + dve * t)
+    return pn + dvn * t, pe + dve * t
+
+
+@kernel
+def closest_m(pn: float, pe: float, dvn: float, dve: float, span_s: float) -> float:
+    """Closest range over the next ``span_s`` (:func:`closest_offset`; +inf where the range
+    opens)."""
+    a, b = closest_offset(pn, pe, dvn, dve, span_s)
+    return math.hypot(a, b)
 
 
 @kernel
@@ -122,58 +133,97 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
             ove: np.ndarray, required: np.ndarray, horizon_s: float, cos_off: np.ndarray,
             sin_off: np.ndarray, off_deg: np.ndarray, reduced: np.ndarray, chosen: np.ndarray,
             ok_out: np.ndarray) -> None:
-    """:func:`choose`: worst margin and running alongside per ship and candidate over its
-    pairs, then the cheapest candidate by the preference cost of the module docstring."""
+    """:func:`choose`: per ship and candidate, whether it keeps every pair's distance and whether
+    it runs alongside a ship; then the cheapest safe candidate by the preference cost of the
+    module docstring. Safety needs only the sign of each margin, told by the squares
+    (:func:`~trafficsim.geometry.hypot_below`); the worst margins themselves are worked out
+    only for the ships with no safe candidate, which take the largest."""
     s, n_cand = base.shape[0], off_deg.shape[0]
-    own_vn, own_ve = np.empty((s, n_cand)), np.empty((s, n_cand))
-    worst = np.full((s, n_cand), math.inf)
+    safe = np.ones((s, n_cand), dtype=np.bool_)
     alongside = np.zeros((s, n_cand), dtype=np.bool_)
-    for i in range(s):  # candidate courses base + offset by the angle-sum formulas
-        cb, sb = math.cos(base[i]), math.sin(base[i])
-        for k in range(n_cand):
-            sp = speed[i] * (factor[i] if reduced[k] else 1.0)
-            own_vn[i, k] = sp * (cb * cos_off[k] - sb * sin_off[k])
-            own_ve[i, k] = sp * (sb * cos_off[k] + cb * sin_off[k])
     for p in range(pair_ship.shape[0]):
         i, req = pair_ship[p], required[p]
         near = req > 0.0 and math.hypot(pn[p], pe[p]) < ALONGSIDE_RANGE_FACTOR * max(req, 1.0)
+        cb, sb = math.cos(base[i]), math.sin(base[i])
         for k in range(n_cand):
-            dvn, dve = ovn[p] - own_vn[i, k], ove[p] - own_ve[i, k]
-            margin = closest_m(pn[p], pe[p], dvn, dve, horizon_s) - req
-            if margin < worst[i, k]:
-                worst[i, k] = margin
+            vn, ve = _own_velocity(cb, sb, speed[i], factor[i], reduced[k], cos_off[k],
+                                   sin_off[k])
+            dvn, dve = ovn[p] - vn, ove[p] - ve
+            a, b = closest_offset(pn[p], pe[p], dvn, dve, horizon_s)
+            if hypot_below(a, b, req):  # closest_m - req < 0
+                safe[i, k] = False
             if near and dvn * dvn + dve * dve < ALONGSIDE_SPEED_MPS * ALONGSIDE_SPEED_MPS:
                 alongside[i, k] = True
-    cost = np.empty(n_cand)
+    # worst margins of the ships with no safe candidate (row -1: not needed)
+    row = np.full(s, -1, dtype=np.int64)
+    n_stuck = 0
     for i in range(s):
-        any_ok, top = False, -math.inf
+        if not safe[i].any():
+            row[i] = n_stuck
+            n_stuck += 1
+    worst = np.full((n_stuck, n_cand), math.inf)
+    for p in range(pair_ship.shape[0]):
+        r = row[pair_ship[p]]
+        if r >= 0:
+            i = pair_ship[p]
+            cb, sb = math.cos(base[i]), math.sin(base[i])
+            for k in range(n_cand):
+                vn, ve = _own_velocity(cb, sb, speed[i], factor[i], reduced[k], cos_off[k],
+                                       sin_off[k])
+                margin = closest_m(pn[p], pe[p], ovn[p] - vn, ove[p] - ve,
+                                   horizon_s) - required[p]
+                if margin < worst[r, k]:
+                    worst[r, k] = margin
+    for i in range(s):
+        r = row[i]
+        top = -math.inf
+        if r >= 0:  # nothing safe: the largest worst-case margin on an allowed side
+            for k in range(n_cand):
+                top = max(top, -math.inf if _wrong_side(side[i], off_deg[k]) else worst[r, k])
+        best_k, best_c = 0, math.inf  # the cheapest eligible candidate
         for k in range(n_cand):
-            d = off_deg[k]
-            wrong = (side[i] == STARBOARD and d < 0.0) or (side[i] == PORT and d > 0.0)
-            too_small = abs(d) < least_deg[i] - 1e-9 and d != 0.0
-            c = abs(d) + (0.5 if d < 0.0 else 0.0)  # starboard first among equals (EITHER)
-            c += 1000.0 * wrong + 500.0 * too_small + 400.0 * alongside[i, k]
-            if reduced[k]:
-                c += -0.25 if reduce_asked[i] else 200.0
-            if d == 0.0 and least_deg[i] > 0.0:
-                c += 300.0  # a bare speed reduction only where no alteration is asked
-            cost[k] = c
-            any_ok = any_ok or worst[i, k] >= 0.0
-            fallback = -math.inf if wrong else worst[i, k]
-            top = max(top, fallback)
-        # nothing safe: the largest worst-case margin, ties broken by the preference cost
-        best_k, best_c = 0, math.inf
-        for k in range(n_cand):
-            d = off_deg[k]
-            wrong = (side[i] == STARBOARD and d < 0.0) or (side[i] == PORT and d > 0.0)
-            if any_ok:
-                eligible = worst[i, k] >= 0.0
+            if r < 0:
+                eligible = safe[i, k]
             else:
-                eligible = (-math.inf if wrong else worst[i, k]) >= top - 1e-6
-            if eligible and cost[k] < best_c:
-                best_k, best_c = k, cost[k]
+                eligible = (-math.inf if _wrong_side(side[i], off_deg[k])
+                            else worst[r, k]) >= top - 1e-6
+            if eligible:
+                c = _cost(off_deg[k], reduced[k], side[i], least_deg[i], reduce_asked[i],
+                          alongside[i, k])
+                if c < best_c:
+                    best_k, best_c = k, c
         run = current[i]
-        if run >= 0 and worst[i, run] >= 0.0 and not alongside[i, run]:
+        if run >= 0 and safe[i, run] and not alongside[i, run]:
             best_k = run  # a running manoeuvre that still satisfies every pair is kept
         chosen[i] = best_k
-        ok_out[i] = worst[i, best_k] >= 0.0
+        ok_out[i] = safe[i, best_k]
+
+
+@kernel
+def _own_velocity(cb: float, sb: float, speed: float, factor: float, reduced: bool,
+                  cos_off: float, sin_off: float) -> tuple[float, float]:
+    """Own velocity north and east of a candidate: the course base + offset by the angle-sum
+    formulas (``cb, sb``: cos and sin of the base course), at the reduced speed or not."""
+    sp = speed * (factor if reduced else 1.0)
+    return sp * (cb * cos_off - sb * sin_off), sp * (sb * cos_off + cb * sin_off)
+
+
+@kernel
+def _wrong_side(side: float, offset_deg: float) -> bool:
+    """Whether a course offset turns to the side not allowed."""
+    return (side == STARBOARD and offset_deg < 0.0) or (side == PORT and offset_deg > 0.0)
+
+
+@kernel
+def _cost(offset_deg: float, reduced: bool, side: float, least_deg: float, reduce_asked: bool,
+          alongside: bool) -> float:
+    """Preference cost of a candidate (module docstring): lower is preferred."""
+    d = offset_deg
+    too_small = abs(d) < least_deg - 1e-9 and d != 0.0
+    c = abs(d) + (0.5 if d < 0.0 else 0.0)  # starboard first among equals (EITHER)
+    c += 1000.0 * _wrong_side(side, d) + 500.0 * too_small + 400.0 * alongside
+    if reduced:
+        c += -0.25 if reduce_asked else 200.0
+    if d == 0.0 and least_deg > 0.0:
+        c += 300.0  # a bare speed reduction only where no alteration is asked
+    return c

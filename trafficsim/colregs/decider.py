@@ -58,6 +58,7 @@ from trafficsim.colregs.vocabulary import (
 )
 from trafficsim.control.guidance import LOOKAHEAD_L
 from trafficsim.errors import InputError
+from trafficsim.geometry import hypot_below
 from trafficsim.jit import kernel
 from trafficsim.sensors import mod_2pi_scalar
 from trafficsim.sensors.radar import directed_pairs
@@ -571,10 +572,10 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
                 a = math.sin(cs - chi[i])  # cross-track rate per unit speed
                 across[i, row, step] = a
                 meet[i, row, step] = -e[i] / a if e[i] * a < -1e-9 else math.inf
-    worst, passing = np.full((s, 4, k), math.inf), np.full((s, 4, k), math.inf)
+    keeps, clears = np.ones((s, 4, k), dtype=np.bool_), np.ones((s, 4, k), dtype=np.bool_)
     alongside = np.zeros((s, 4, k), dtype=np.bool_)
     _resume_margins(c1, s1, c2, s2, meet, speed, present, pair_ship, pn, pe, wn, we, kept,
-                    horizon_s, worst, passing, alongside)
+                    horizon_s, keeps, clears, alongside)
     deg = 180.0 / math.pi
     for i in range(s):
         # a course further off the line comes after a reduced speed; there, where a safe
@@ -584,17 +585,17 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
         for row in range(2):
             clear = True
             for step in range(k):
-                clear = clear and not passing[i, row, step] < 0.0
-                if worst[i, row, step] >= 0.0 and not clear:
+                clear = clear and clears[i, row, step]
+                if keeps[i, row, step] and not clear:
                     blocked = True
         best, best_row, best_step = math.inf, 0, 0
         for row in range(4):
             clear = True  # every course turned through on the way keeps the distance
             for step in range(k):
-                clear = clear and not passing[i, row, step] < 0.0
+                clear = clear and clears[i, row, step]
                 cs = course[i, row, step]
                 # (a candidate repeating the one before is no better and reached no sooner)
-                if not (clear and worst[i, row, step] >= 0.0) or (
+                if not (clear and keeps[i, row, step]) or (
                         step > 0 and cs == course[i, row, step - 1]):
                     continue
                 off = abs(mod_2pi_scalar(cs - route[i] + math.pi) - math.pi)
@@ -614,17 +615,21 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
 def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarray,
                     meet_m: np.ndarray, speed: np.ndarray, present: np.ndarray,
                     pair_ship: np.ndarray, pn: np.ndarray, pe: np.ndarray, wn: np.ndarray,
-                    we: np.ndarray, kept: np.ndarray, horizon_s: float, worst: np.ndarray,
-                    passing: np.ndarray, alongside: np.ndarray) -> None:
+                    we: np.ndarray, kept: np.ndarray, horizon_s: float, keeps: np.ndarray,
+                    clears: np.ndarray, alongside: np.ndarray) -> None:
     """The safety of :meth:`Decider._resume`'s candidates over the pairs, in place.
 
     Per pair (own ship ``pair_ship``, other ship at ``pn, pe`` relative, velocity ``wn, we``)
     and candidate ``(row, step)`` of course ``(c1, s1)`` (cos, sin) at ``speed[ship, row]``,
     and at the ``present`` speed for the turns (step > 0): the closest approach as steered
     (straight on) and along the path it leads to (straight on for ``meet_m`` until the route
-    line of direction ``(c2, s2)``, then along it). ``worst`` takes the smaller of the two less
-    the kept distance with :data:`RESUME_MARGIN`; ``passing`` the steered one less the kept
-    distance; ``alongside`` marks a near ship passed at little relative speed.
+    line of direction ``(c2, s2)``, then along it). ``keeps`` is cleared where either comes
+    closer than the kept distance with :data:`RESUME_MARGIN`, ``clears`` where the steered one
+    comes closer than the kept distance; ``alongside`` marks a near ship passed at little
+    relative speed. Only the sides of the distances are needed, told by the squares
+    (:func:`~trafficsim.geometry.hypot_below`); a closest approach that is not a number (a
+    position that is not, at no relative speed) constrains nothing, and where the path's first
+    leg gives one its second leg is not looked at.
     """
     n_rows, k = c1.shape[1], c1.shape[2]
     for p in range(pair_ship.shape[0]):
@@ -634,33 +639,36 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
                 < arbitration.ALONGSIDE_RANGE_FACTOR * kept[p] * (1.0 + RESUME_MARGIN))
         alongside_prev = False
         for row in range(n_rows):
-            steered = leads = math.inf
+            short = close = False  # the previous candidate's verdicts
             for step in range(k):
                 # turns clipped at the target course repeat the previous candidate
                 if (step >= 2 and c1[i, row, step] == c1[i, row, step - 1]
                         and s1[i, row, step] == s1[i, row, step - 1]
                         and meet_m[i, row, step] == meet_m[i, row, step - 1]):
-                    worst[i, row, step] = min(worst[i, row, step], min(steered, leads) - keep)
-                    passing[i, row, step] = min(passing[i, row, step], steered - kept[p])
+                    keeps[i, row, step] &= not short
+                    clears[i, row, step] &= not close
                     alongside[i, row, step] |= alongside_prev
                     continue
-                steered = leads = math.inf
+                short = close = False
                 for variant in range(2):
                     if variant == 1 and step == 0:
                         continue
                     v = speed[i, row] if variant == 0 else present[i]
                     dn1 = wn[p] - v * c1[i, row, step]
                     de1 = we[p] - v * s1[i, row, step]
-                    straight = arbitration.closest_m(pn[p], pe[p], dn1, de1, horizon_s)
+                    a, b = arbitration.closest_offset(pn[p], pe[p], dn1, de1, horizon_s)
+                    close = close or hypot_below(a, b, kept[p])
+                    short = short or hypot_below(a, b, keep)
                     t1 = min(meet_m[i, row, step] / max(v, 1e-9), horizon_s)
-                    line = arbitration.closest_m(pn[p], pe[p], dn1, de1, t1)
-                    if t1 < horizon_s:
+                    a, b = arbitration.closest_offset(pn[p], pe[p], dn1, de1, t1)
+                    short = short or hypot_below(a, b, keep)
+                    if t1 < horizon_s and not _nan_range(a, b):
                         dn2, de2 = wn[p] - v * c2[i], we[p] - v * s2[i]
-                        line = min(line, arbitration.closest_m(
-                            pn[p] + dn1 * t1, pe[p] + de1 * t1, dn2, de2, horizon_s - t1))
-                    steered, leads = min(steered, straight), min(leads, line)
-                worst[i, row, step] = min(worst[i, row, step], min(steered, leads) - keep)
-                passing[i, row, step] = min(passing[i, row, step], steered - kept[p])
+                        a, b = arbitration.closest_offset(pn[p] + dn1 * t1, pe[p] + de1 * t1,
+                                                          dn2, de2, horizon_s - t1)
+                        short = short or hypot_below(a, b, keep)
+                keeps[i, row, step] &= not short
+                clears[i, row, step] &= not close
                 alongside_prev = False
                 if near:
                     sp = speed[i, row]
@@ -668,3 +676,9 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
                     dve = we[p] - sp * s1[i, row, step]
                     if dvn * dvn + dve * dve < arbitration.ALONGSIDE_SPEED_MPS**2:
                         alongside[i, row, step] = alongside_prev = True
+
+
+@kernel
+def _nan_range(a: float, b: float) -> bool:
+    """Whether ``math.hypot(a, b)`` is not a number (a NaN and no infinity)."""
+    return (math.isnan(a) or math.isnan(b)) and not (math.isinf(a) or math.isinf(b))

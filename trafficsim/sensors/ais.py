@@ -65,6 +65,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trafficsim.errors import InputError
+from trafficsim.geometry import norm_side
 from trafficsim.jit import kernel
 from trafficsim.noise import check_streams, normal_from
 from trafficsim.sensors import KNOT_MPS, check_keys, column, flags, wrap_2pi, wrap_2pi_scalar
@@ -354,30 +355,10 @@ _COG_STEPS = float(round(2.0 * math.pi / COG_STEP_RAD))
 _HEADING_STEPS = float(round(2.0 * math.pi / HEADING_STEP_RAD))
 
 
-#: relative margin about a threshold outside which the squared norm decides a comparison of
-#: ``hypot`` (whose error is below 1e-15) on its own
-_MARGIN = 1e-9
-
-
-@kernel
-def _norm_side(a: float, b: float, limit: float, scale: float) -> int:
-    """+1 if ``hypot(a, b) / scale`` is surely above ``limit``, -1 if surely below, 0 within
-    ``_MARGIN`` of it (or NaN): the caller then evaluates the comparison itself (libm's
-    ``hypot`` costs about 40 ns, the squares 5)."""
-    s2 = a * a + b * b
-    hi = limit * scale * (1.0 + _MARGIN)
-    if s2 > hi * hi:
-        return 1
-    lo = limit * scale * (1.0 - _MARGIN)
-    if s2 < lo * lo:
-        return -1
-    return 0
-
-
 @kernel
 def _faster_than(vn: float, ve: float, kn: float) -> bool:
     """``hypot(vn, ve) / KNOT_MPS > kn``, as that expression evaluates."""
-    side = _norm_side(vn, ve, kn, KNOT_MPS)
+    side = norm_side(vn, ve, kn, KNOT_MPS)
     return side > 0 if side != 0 else math.hypot(vn, ve) / KNOT_MPS > kn
 
 
@@ -507,7 +488,7 @@ def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, head: np.ndarray
             last_rx[k] = newest  # consumed whether heard or not
             if enabled[i] and (z_receive[i] == math.inf or normal_from(streams, k) < z_receive[i]):
                 dn, de = x_true[NORTH, j] - x_true[NORTH, i], x_true[EAST, j] - x_true[EAST, i]
-                side = _norm_side(dn, de, max_range[i], 1.0)
+                side = norm_side(dn, de, max_range[i], 1.0)
                 ok = side < 0 if side != 0 else math.hypot(dn, de) <= max_range[i]
         valid[k] = ok
         if ok:
