@@ -11,6 +11,8 @@ NM = 1852.0  # metres per nautical mile
 
 def from_kn(speed_kn: ArrayLike) -> np.ndarray | float:
     """Knots to m/s."""
+    if isinstance(speed_kn, float | int):  # (the scalar case without numpy's dispatch)
+        return float(speed_kn) * KN
     return np.asarray(speed_kn, dtype=float) * KN if np.ndim(speed_kn) else float(speed_kn) * KN
 
 

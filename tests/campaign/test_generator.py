@@ -4,10 +4,24 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from trafficsim.campaign.generator import classify, draw
+from trafficsim.campaign.generator import _weighted, classify, draw
 from trafficsim.campaign.spec import load_spec
 from trafficsim.geometry import cpa
 from trafficsim.units import NM
+
+
+@pytest.mark.parametrize("n_names", [1, 2, 6, 9, 17])
+def test_weighted_draw_is_numpys_choice(n_names):
+    """The same draw as ``Generator.choice`` with probabilities, number for number (numpy sums
+    eight or more weights pairwise)."""
+    names = tuple(f"t{k}" for k in range(n_names))
+    for trial in range(50):
+        w = np.random.default_rng(trial).uniform(0.0, 3.0, n_names)
+        w[trial % n_names] += 0.1
+        weights = dict(zip(names, w.tolist(), strict=True))
+        mine, theirs = np.random.default_rng(trial), np.random.default_rng(trial)
+        for _ in range(20):
+            assert _weighted(weights, names, mine) == names[theirs.choice(n_names, p=w / w.sum())]
 
 
 def _velocity(setup):

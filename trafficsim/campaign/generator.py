@@ -18,6 +18,8 @@ is the same whatever the batch, chunk or worker it runs in.
 
 from __future__ import annotations
 
+import bisect
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -90,15 +92,22 @@ def _course_offset(kind: str, rng: np.random.Generator) -> float:
     return math.radians(rng.uniform(-30.0, 30.0))  # overtaking either way
 
 
+@functools.lru_cache(maxsize=64)
+def _cdf(p: tuple[float, ...]) -> tuple[float, ...]:
+    """Normalised cumulative weights, computed as ``rng.choice(len(p), p=p)`` computes them."""
+    a = np.asarray(p, dtype=float)
+    cdf = np.cumsum(a / a.sum())
+    cdf /= cdf[-1]
+    return tuple(cdf.tolist())
+
+
 def _weighted(weights: dict[str, float], names: tuple[str, ...] | list[str],
               rng: np.random.Generator) -> str:
     """One of ``names`` with probability proportional to its weight: exactly the draw of
     ``rng.choice(len(names), p=p)`` (one uniform against the normalised cumulative weights),
-    without its per-call validation."""
-    p = np.array([weights.get(n, 0.0) for n in names], dtype=float)
-    cdf = np.cumsum(p / p.sum())
-    cdf /= cdf[-1]
-    return names[int(cdf.searchsorted(rng.random(), side="right"))]
+    without its per-call validation and arrays."""
+    cdf = _cdf(tuple(float(weights.get(n, 0.0)) for n in names))
+    return names[bisect.bisect_right(cdf, rng.random())]
 
 
 def _sensors(spec: CampaignSpec, rng: np.random.Generator) -> dict[str, Any]:

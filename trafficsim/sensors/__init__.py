@@ -62,6 +62,13 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
     """
     n = len(configs)
     defaults = np.broadcast_to(np.asarray(default, dtype=float), (n,)).tolist()
+    values = [d if (v := cfg.get(key, None)) is None else v
+              for cfg, d in zip(configs, defaults, strict=True)]
+    if all(type(v) is float or type(v) is int for v in values):  # the common case, at once
+        out = np.array(values, dtype=float)
+        if np.isfinite(out).all() and (minimum is None or not np.any(
+                out <= minimum if strictly else out < minimum)):
+            return out * scale
     out = np.empty(n)
     for i, cfg in enumerate(configs):  # build time only, never on the step path
         raw = cfg.get(key, None)
