@@ -44,6 +44,7 @@ import numpy as np
 
 from trafficsim.colregs.vocabulary import ENUMS, MANOEUVRES
 from trafficsim.engine import Simulation
+from trafficsim.jit import kernel
 from trafficsim.ships.base import EAST, NORTH, PSI, U
 
 R_MIN_M, R_NM_M, R_COL_M = 1000.0, 800.0, 200.0
@@ -124,31 +125,12 @@ class PairObserver:
         return np.sign(-dn * np.sin(psi) + de * np.cos(psi))
 
     def observe(self, sim: Simulation) -> None:
-        """One sample of the true state (and of the decisions just taken)."""
-        x, o, t = sim.batch.x, self.own, self.tgt
-        dn, de = x[NORTH, t] - x[NORTH, o], x[EAST, t] - x[EAST, o]
-        rng = np.hypot(dn, de)
-        change = _wrap_pi(x[PSI, o] - self.x0[PSI, o])
-        dv = x[U, o] - self.x0[U, o]
-        self.stbd_rad = np.maximum(self.stbd_rad, change)
-        self.port_rad = np.maximum(self.port_rad, -change)
-        self.faster_mps = np.maximum(self.faster_mps, dv)
-        self.slower_mps = np.maximum(self.slower_mps, -dv)
-        moved = ((np.abs(change) > MANOEUVRE_COURSE_RAD) | (np.abs(dv) > MANOEUVRE_SPEED_MPS))
-        first = moved & np.isnan(self.range_at_manoeuvre_m)
-        self.range_at_manoeuvre_m[first] = rng[first]
-        closer = rng < self.closest_m
-        self.closest_m = np.where(closer, rng, self.closest_m)
-        self.alpha_cpa = np.where(closer, np.arctan2(de, dn) - x[PSI, o], self.alpha_cpa)
-        self.beta_cpa = np.where(closer, np.arctan2(-de, -dn) - x[PSI, t], self.beta_cpa)
-        self.stbd_cpa = np.where(closer, self.stbd_rad, self.stbd_cpa)
-        self.port_cpa = np.where(closer, self.port_rad, self.port_cpa)
-        self.faster_cpa = np.where(closer, self.faster_mps, self.faster_cpa)
-        self.slower_cpa = np.where(closer, self.slower_mps, self.slower_cpa)
-        side = self._side(x)
-        ahead = (-dn * np.cos(x[PSI, t]) - de * np.sin(x[PSI, t])) > 0.0  # own ahead of tgt
-        self.crossed_ahead |= ahead & (side * self.side < 0)
-        self.side = np.where(side != 0, side, self.side)
+        """One sample of the true state (and of the decisions just taken): one compiled loop
+        over the directed pairs."""
+        _observe(sim.batch.x, self.x0, self.own, self.tgt, self.closest_m, self.alpha_cpa,
+                 self.beta_cpa, self.stbd_rad, self.port_rad, self.faster_mps,
+                 self.slower_mps, self.stbd_cpa, self.port_cpa, self.faster_cpa,
+                 self.slower_cpa, self.range_at_manoeuvre_m, self.side, self.crossed_ahead)
         self._decisions(sim)
 
     def _decisions(self, sim: Simulation) -> None:
@@ -209,6 +191,47 @@ class PairObserver:
                 both = np.where(np.isnan(mine[:half]), mine[half:], mine[:half])
             out[f"score_rule{r}"] = both
         return out
+
+
+@kernel
+def _larger(a: float, b: float) -> float:
+    """``np.maximum(a, b)`` of two numbers (NaN wins; of equal numbers the second)."""
+    return a if a > b or math.isnan(a) else b
+
+
+@kernel
+def _observe(x: np.ndarray, x0: np.ndarray, own: np.ndarray, tgt: np.ndarray,
+             closest: np.ndarray, alpha: np.ndarray, beta: np.ndarray, stbd: np.ndarray,
+             port: np.ndarray, faster: np.ndarray, slower: np.ndarray, stbd_cpa: np.ndarray,
+             port_cpa: np.ndarray, faster_cpa: np.ndarray, slower_cpa: np.ndarray,
+             range_at_manoeuvre: np.ndarray, side: np.ndarray, crossed_ahead: np.ndarray
+             ) -> None:
+    """:meth:`PairObserver.observe` of every directed pair, in place (attributes of
+    :class:`PairObserver`; ``x`` the true state now, ``x0`` at the start)."""
+    for k in range(own.shape[0]):
+        o, t = own[k], tgt[k]
+        dn, de = x[NORTH, t] - x[NORTH, o], x[EAST, t] - x[EAST, o]
+        rng = math.hypot(dn, de)
+        change = (x[PSI, o] - x0[PSI, o] + math.pi) % (2.0 * math.pi) - math.pi
+        dv = x[U, o] - x0[U, o]
+        stbd[k], port[k] = _larger(stbd[k], change), _larger(port[k], -change)
+        faster[k], slower[k] = _larger(faster[k], dv), _larger(slower[k], -dv)
+        moved = abs(change) > MANOEUVRE_COURSE_RAD or abs(dv) > MANOEUVRE_SPEED_MPS
+        if moved and math.isnan(range_at_manoeuvre[k]):
+            range_at_manoeuvre[k] = rng
+        if rng < closest[k]:
+            closest[k] = rng
+            alpha[k] = math.atan2(de, dn) - x[PSI, o]
+            beta[k] = math.atan2(-de, -dn) - x[PSI, t]
+            stbd_cpa[k], port_cpa[k] = stbd[k], port[k]
+            faster_cpa[k], slower_cpa[k] = faster[k], slower[k]
+        c, s = math.cos(x[PSI, t]), math.sin(x[PSI, t])
+        now = np.sign(dn * s - de * c)  # (the own ship relative to the other: -dn, -de)
+        ahead = (-dn * c - de * s) > 0.0  # own ahead of the other
+        if ahead and now * side[k] < 0:
+            crossed_ahead[k] = True
+        if now != 0:
+            side[k] = now
 
 
 def grade(obs: PairObserver) -> dict[int, np.ndarray]:
