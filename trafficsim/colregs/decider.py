@@ -554,10 +554,18 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
     for i in range(s):
         c2[i], s2[i] = math.cos(chi[i]), math.sin(chi[i])
         for row in range(4):
+            speed[i, row] = route_speed[i] * (1.0 if row < 2 else slow[i])
+            if row >= 2:  # the courses of rows 0 and 1 at the reduced speed
+                for step in range(k):
+                    turned_home[i, row, step] = turned_home[i, row - 2, step]
+                    course[i, row, step] = course[i, row - 2, step]
+                    c1[i, row, step], s1[i, row, step] = c1[i, row - 2, step], s1[i, row - 2, step]
+                    across[i, row, step] = across[i, row - 2, step]
+                    meet[i, row, step] = meet[i, row - 2, step]
+                continue
             target = chi[i] if row % 2 == 0 else route[i]
             back = mod_2pi_scalar(target - ordered[i] + math.pi) - math.pi
             sign = 1.0 if back > 0.0 else (-1.0 if back < 0.0 else (0.0 if back == 0.0 else back))
-            speed[i, row] = route_speed[i] * (1.0 if row < 2 else slow[i])
             for step in range(k):
                 turn = sign * min(_RESUME_STEPS_RAD[step], abs(back))
                 turned_home[i, row, step] = abs(turn) >= abs(back) - 1e-9 and row % 2 == 1
@@ -629,9 +637,12 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
     relative speed. Only the sides of the distances are needed, told by the squares
     (:func:`~trafficsim.geometry.hypot_below`); a closest approach that is not a number (a
     position that is not, at no relative speed) constrains nothing, and where the path's first
-    leg gives one its second leg is not looked at.
+    leg gives one its second leg is not looked at. Rows 2 and 3 repeat the courses of rows 0
+    and 1 at the reduced speed, so at the present speed they take the verdicts of those rows.
     """
     n_rows, k = c1.shape[1], c1.shape[2]
+    # verdicts at the present speed of rows 0 and 1, whose courses rows 2 and 3 repeat
+    present_short, present_close = np.empty((2, k), np.bool_), np.empty((2, k), np.bool_)
     for p in range(pair_ship.shape[0]):
         i = pair_ship[p]
         keep = kept[p] * (1.0 + RESUME_MARGIN)
@@ -653,20 +664,20 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
                 for variant in range(2):
                     if variant == 1 and step == 0:
                         continue
-                    v = speed[i, row] if variant == 0 else present[i]
-                    dn1 = wn[p] - v * c1[i, row, step]
-                    de1 = we[p] - v * s1[i, row, step]
-                    a, b = arbitration.closest_offset(pn[p], pe[p], dn1, de1, horizon_s)
-                    close = close or hypot_below(a, b, kept[p])
-                    short = short or hypot_below(a, b, keep)
-                    t1 = min(meet_m[i, row, step] / max(v, 1e-9), horizon_s)
-                    a, b = arbitration.closest_offset(pn[p], pe[p], dn1, de1, t1)
-                    short = short or hypot_below(a, b, keep)
-                    if t1 < horizon_s and not _nan_range(a, b):
-                        dn2, de2 = wn[p] - v * c2[i], we[p] - v * s2[i]
-                        a, b = arbitration.closest_offset(pn[p] + dn1 * t1, pe[p] + de1 * t1,
-                                                          dn2, de2, horizon_s - t1)
-                        short = short or hypot_below(a, b, keep)
+                    if variant == 1 and row >= 2:  # rows 2, 3: the courses of rows 0, 1
+                        too_short, too_close = present_short[row - 2, step], present_close[
+                            row - 2, step]
+                    else:
+                        v = speed[i, row] if variant == 0 else present[i]
+                        too_short, too_close = _too_close(
+                            pn[p], pe[p], wn[p] - v * c1[i, row, step],
+                            we[p] - v * s1[i, row, step], wn[p] - v * c2[i], we[p] - v * s2[i],
+                            min(meet_m[i, row, step] / max(v, 1e-9), horizon_s), horizon_s,
+                            kept[p], keep)
+                        if variant == 1:
+                            present_short[row, step], present_close[row, step] = (too_short,
+                                                                                  too_close)
+                    short, close = short or too_short, close or too_close
                 keeps[i, row, step] &= not short
                 clears[i, row, step] &= not close
                 alongside_prev = False
@@ -676,6 +687,25 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
                     dve = we[p] - sp * s1[i, row, step]
                     if dvn * dvn + dve * dve < arbitration.ALONGSIDE_SPEED_MPS**2:
                         alongside[i, row, step] = alongside_prev = True
+
+
+@kernel
+def _too_close(pn: float, pe: float, dn1: float, de1: float, dn2: float, de2: float, t1: float,
+               horizon_s: float, kept: float, keep: float) -> tuple[bool, bool]:
+    """Whether one candidate passes nearer than ``keep`` (straight on, or along its path: the
+    first leg for ``t1``, then the second) and whether straight on nearer than ``kept``
+    (:func:`_resume_margins`; ``dn1, de1`` and ``dn2, de2`` the other ship's velocity relative
+    to the own ship on either leg)."""
+    a, b = arbitration.closest_offset(pn, pe, dn1, de1, horizon_s)
+    close, short = hypot_below(a, b, kept), hypot_below(a, b, keep)
+    if not short:
+        a, b = arbitration.closest_offset(pn, pe, dn1, de1, t1)
+        short = hypot_below(a, b, keep)
+        if not short and t1 < horizon_s and not _nan_range(a, b):
+            a, b = arbitration.closest_offset(pn + dn1 * t1, pe + de1 * t1, dn2, de2,
+                                              horizon_s - t1)
+            short = hypot_below(a, b, keep)
+    return short, close
 
 
 @kernel
