@@ -47,6 +47,9 @@ def check_keys(configs: Sequence[Mapping], allowed: Iterable[str], what: str) ->
                              key=f"{what}[{i}]")
 
 
+_PLAIN_NUMBERS = {float, int}
+
+
 def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float],
            what: str, scale: float = 1.0, minimum: float | None = None,
            strictly: bool = False) -> np.ndarray:
@@ -64,7 +67,7 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
     defaults = np.broadcast_to(np.asarray(default, dtype=float), (n,)).tolist()
     values = [d if (v := cfg.get(key, None)) is None else v
               for cfg, d in zip(configs, defaults, strict=True)]
-    if all(type(v) is float or type(v) is int for v in values):  # the common case, at once
+    if set(map(type, values)) <= _PLAIN_NUMBERS:  # the common case, at once
         out = np.array(values, dtype=float)
         if np.isfinite(out).all() and (minimum is None or not np.any(
                 out <= minimum if strictly else out < minimum)):

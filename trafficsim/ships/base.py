@@ -234,23 +234,18 @@ def steady_rps_for_speed(family: ModelFamily, params: Any, act: Actuators,
                          speed_mps: np.ndarray, iters: int = 60) -> np.ndarray:
     """Propeller speed giving steady straight-ahead ``speed_mps`` in calm water, ``(n,)``.
 
-    Vectorised bisection on the surge balance du(u, n) = 0 with v = r = rudder = 0.
-    Speeds the engine cannot reach return ``rps_max``.
+    Bisection on the surge balance du(u, n) = 0 with v = r = rudder = 0, one compiled loop
+    over ships. Speeds the engine cannot reach return ``rps_max``.
     """
-    speed = np.asarray(speed_mps, dtype=float)
+    from trafficsim.ships import kernels
+
+    speed = np.ascontiguousarray(speed_mps, dtype=float)
     n = speed.shape[0]
-    lo = np.zeros(n)
-    hi = act.rps_max.astype(float).copy()
-    x = np.zeros((N_STATE, n))
-    x[U] = speed
-    for _ in range(iters):
-        mid = 0.5 * (lo + hi)
-        x[RPS] = mid
-        du, _, _ = accelerations(family, params, x, Env())
-        accel = du > 0.0
-        hi = np.where(accel, mid, hi)
-        lo = np.where(accel, lo, mid)
-    return 0.5 * (lo + hi)
+    out = np.empty(n)
+    kernels.steady_rps(np.full(n, kernels.FAMILY_CODE[family.name], dtype=np.int64),
+                       pack(params), speed, np.ascontiguousarray(act.rps_max, dtype=float),
+                       env_table(Env(), n), int(iters), out)
+    return out
 
 
 _REGISTRY: dict[str, ModelFamily] = {}

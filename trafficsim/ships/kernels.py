@@ -22,7 +22,7 @@ import numpy as np
 from trafficsim.jit import inline_kernel, kernel
 from trafficsim.sensors import mod_2pi_scalar
 from trafficsim.ships import mmg, mmg_berthing, modular, nomoto, response
-from trafficsim.ships.base import gather_ship
+from trafficsim.ships.base import RPS, U, gather_ship
 
 #: integer codes of the model families in the compiled dispatch
 FAMILY_CODE = {"nomoto": 0, "response": 1, "mmg": 2, "modular": 3, "mmg_berthing": 4}
@@ -153,3 +153,26 @@ def accelerations(codes: np.ndarray, P: np.ndarray, X: np.ndarray, E: np.ndarray
         out[1, i] = dv
         out[2, i] = dr
     return out
+
+
+@kernel
+def steady_rps(codes: np.ndarray, P: np.ndarray, speed: np.ndarray, rps_max: np.ndarray,
+               E: np.ndarray, iters: int, out: np.ndarray) -> None:
+    """Propeller speed of steady straight-ahead ``speed`` per ship, into ``out`` ``(n,)``:
+    ``iters`` bisections of ``[0, rps_max]`` on the sign of the surge acceleration with
+    v = r = rudder = 0 (:func:`trafficsim.ships.base.steady_rps_for_speed`)."""
+    x, env = np.zeros(8), np.empty(4)
+    for i in range(speed.shape[0]):
+        for j in range(4):
+            env[j] = E[j, i]
+        x[U] = speed[i]
+        lo, hi = 0.0, rps_max[i]
+        for _ in range(iters):
+            mid = 0.5 * (lo + hi)
+            x[RPS] = mid
+            du, _, _ = accel(codes[i], P[i], x, env)
+            if du > 0.0:
+                hi = mid
+            else:
+                lo = mid
+        out[i] = 0.5 * (lo + hi)
