@@ -107,5 +107,14 @@ def test_streams_seeded_in_one_loop_are_numpys():
         want = [np.random.SFC64(np.random.SeedSequence(seed, spawn_key=key)).state["state"]
                 ["state"] for key in keys]
         np.testing.assert_array_equal(seeded_states(seed, keys), np.array(want, np.uint64))
+    # a table of equal keys of one word each (the engine's banks) is seeded at once
+    table = rng.integers(0, 60, (200, 4))
+    table[0] = [2**32 - 1, 0, 2**32 - 1, 1]
+    for seed in (0, 2**70 + 3):
+        want = [np.random.SFC64(np.random.SeedSequence(seed, spawn_key=tuple(map(int, key))))
+                .state["state"]["state"] for key in table]
+        np.testing.assert_array_equal(seeded_states(seed, table), np.array(want, np.uint64))
     with pytest.raises(ValueError, match=">= 0"):
         seeded_states(-1, [(0,)])
+    with pytest.raises(ValueError, match=">= 0"):
+        seeded_states(0, np.array([[1, -2, 3]]))

@@ -8,6 +8,7 @@ family's parameters packed into one zero-padded row of ``params``.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -205,10 +206,16 @@ def _pairs_within(enc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     pi_list, pj_list = [], []
     for group in np.split(order, bounds):  # build time only, not on the step path
         g = np.sort(group)
-        a, b = np.triu_indices(len(g), k=1)
+        a, b = _upper_pairs(len(g))
         pi_list.append(g[a])
         pj_list.append(g[b])
     return np.concatenate(pi_list), np.concatenate(pj_list)
+
+
+@functools.lru_cache(maxsize=32)
+def _upper_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``np.triu_indices(n, k=1)`` (encounters of the same size share it)."""
+    return np.triu_indices(n, k=1)
 
 
 def _ship_env(ships: Sequence[ShipSetup], envs: Sequence[EncounterEnv]) -> Env:

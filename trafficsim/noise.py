@@ -71,8 +71,22 @@ def seeded_states(seed: int, keys: Sequence[Sequence[int]]) -> np.ndarray:
     every key: bit-identical to numpy's, in one compiled loop (numpy takes about 40 us a
     stream, most of a campaign's start-up)."""
     run = _words(int(seed))
-    rows = [run + [0] * (_POOL_WORDS - len(run)) + [w for k in key for w in _words(int(k))]
-            if len(key) else run for key in keys]
+    prefix = run + [0] * (_POOL_WORDS - len(run))
+    try:
+        table = np.asarray(keys) if len(keys) else None
+    except ValueError:  # keys of different lengths
+        table = None
+    if (table is not None and table.ndim == 2 and table.shape[1] > 0
+            and table.dtype.kind in "iu" and table.min() >= 0 and table.max() <= _M32):
+        # every key one word per element: the rows at once
+        entropy = np.empty((table.shape[0], len(prefix) + table.shape[1]), dtype=np.uint64)
+        entropy[:, : len(prefix)] = prefix
+        entropy[:, len(prefix):] = table
+        out = np.empty((table.shape[0], 4), dtype=np.uint64)
+        _seed_sfc64(entropy, np.full(table.shape[0], entropy.shape[1], dtype=np.int64), out)
+        return out
+    rows = [prefix + [w for k in key for w in _words(int(k))] if len(key) else run
+            for key in keys]
     width = max((len(r) for r in rows), default=0)
     entropy = np.zeros((len(rows), width), dtype=np.uint64)
     lengths = np.array([len(r) for r in rows], dtype=np.int64)
@@ -286,9 +300,11 @@ class NoiseBank:
         if kind not in ("normal", "uniform"):
             raise ValueError(f"kind must be 'normal' or 'uniform', got {kind!r}")
         self.kind, self.dims, self.block_steps = kind, int(dims), int(block_steps)
-        others = [None] * len(encounter) if other is None else list(other)
-        self._keys = (seed, list(zip(encounter, ship_in_encounter, others, strict=True)),
-                      purpose)
+        columns = [encounter, ship_in_encounter] + ([] if other is None else [other])
+        rows = {len(c) for c in columns}
+        if len(rows) > 1:
+            raise ValueError(f"encounter, ship_in_encounter and other differ in length: {rows}")
+        self._keys = (seed, [np.asarray(c) for c in columns], purpose)
         self._state: np.ndarray | None = None  # seeded at the first draw: unread banks cost 0
         self._block: np.ndarray | None = None  # allocated at the first block: none at need
         self._row = self.block_steps
@@ -298,15 +314,15 @@ class NoiseBank:
         """``(n, 4)`` uint64 ``SFC64`` state of every stream, advanced by every refill (or, for
         instruments that draw at need, by :func:`normal_from`)."""
         if self._state is None:
-            seed, keys, purpose = self._keys
-            p = PURPOSES.index(purpose)
-            self._state = seeded_states(seed, [(e, s, p) if o is None else (e, s, p, o)
-                                               for e, s, o in keys])
+            seed, columns, purpose = self._keys
+            p = np.full(len(columns[0]), PURPOSES.index(purpose))
+            keys = [*columns[:2], p, *columns[2:]]  # (encounter, ship, purpose[, other])
+            self._state = seeded_states(seed, np.stack(keys, axis=1) if len(p) else [])
         return self._state
 
     def _refill(self) -> None:
         if self._block is None:
-            self._block = np.empty((self.block_steps, len(self._keys[1]), self.dims))
+            self._block = np.empty((self.block_steps, len(self._keys[1][0]), self.dims))
         _fill(self.state, self._block, self.kind == "normal", _K, _W, _F)
         self._row = 0
 

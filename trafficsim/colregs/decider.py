@@ -174,17 +174,16 @@ class Decider:
             InputError: an unknown behaviour or a faulty rules file (located).
         """
         files: list[Path] = []
-        ship_net = np.full(len(behaviours), -1, dtype=np.int64)
-        for k, name in enumerate(behaviours):
+        net_of: dict[str, int] = {}  # network index per behaviour (-1: none)
+        for name in dict.fromkeys(behaviours):  # distinct, in order of appearance
             if name not in BEHAVIOURS:
                 raise InputError(f"unknown behaviour {name!r}; known: {', '.join(BEHAVIOURS)}",
                                  key="behaviour")
             path = rules_file(name, rules)
-            if path is None:
-                continue
-            if path not in files:
+            if path is not None and path not in files:
                 files.append(path)
-            ship_net[k] = files.index(path)
+            net_of[name] = -1 if path is None else files.index(path)
+        ship_net = np.array([net_of[name] for name in behaviours], dtype=np.int64)
         nets = [network.load(p, VOCABULARY) for p in files]
         look = [n.rules.parameters.get("look_ahead_min", DEFAULT_LOOK_AHEAD_MIN) for n in nets]
         lost = np.array([60.0 * n.rules.parameters.get("lost_track_min", DEFAULT_LOST_TRACK_MIN)
