@@ -304,7 +304,7 @@ class NoiseBank:
         rows = {len(c) for c in columns}
         if len(rows) > 1:
             raise ValueError(f"encounter, ship_in_encounter and other differ in length: {rows}")
-        self._keys = (seed, [np.asarray(c) for c in columns], purpose)
+        self._keys = (seed, [np.array(c) for c in columns], purpose)  # (copies)
         self._state: np.ndarray | None = None  # seeded at the first draw: unread banks cost 0
         self._block: np.ndarray | None = None  # allocated at the first block: none at need
         self._row = self.block_steps
