@@ -667,11 +667,10 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
                         too_short, too_close = present_short[row - 2, step], present_close[
                             row - 2, step]
                     else:
-                        v = speed[i, row] if variant == 0 else present[i]
                         too_short, too_close = _too_close(
-                            pn[p], pe[p], wn[p] - v * c1[i, row, step],
-                            we[p] - v * s1[i, row, step], wn[p] - v * c2[i], we[p] - v * s2[i],
-                            min(meet_m[i, row, step] / max(v, 1e-9), horizon_s), horizon_s,
+                            pn[p], pe[p], wn[p], we[p],
+                            speed[i, row] if variant == 0 else present[i], c1[i, row, step],
+                            s1[i, row, step], meet_m[i, row, step], c2[i], s2[i], horizon_s,
                             kept[p], keep)
                         if variant == 1:
                             present_short[row, step], present_close[row, step] = (too_short,
@@ -689,20 +688,23 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarr
 
 
 @kernel
-def _too_close(pn: float, pe: float, dn1: float, de1: float, dn2: float, de2: float, t1: float,
-               horizon_s: float, kept: float, keep: float) -> tuple[bool, bool]:
-    """Whether one candidate passes nearer than ``keep`` (straight on, or along its path: the
-    first leg for ``t1``, then the second) and whether straight on nearer than ``kept``
-    (:func:`_resume_margins`; ``dn1, de1`` and ``dn2, de2`` the other ship's velocity relative
-    to the own ship on either leg)."""
+def _too_close(pn: float, pe: float, wn: float, we: float, v: float, c1: float, s1: float,
+               meet_m: float, c2: float, s2: float, horizon_s: float, kept: float, keep: float
+               ) -> tuple[bool, bool]:
+    """Whether one candidate, course ``(c1, s1)`` (cos, sin) at speed ``v``, passes the other
+    ship (at ``pn, pe``, velocity ``wn, we``) nearer than ``keep`` - straight on, or along its
+    path: straight on for ``meet_m``, then along the route line ``(c2, s2)`` - and whether
+    straight on nearer than ``kept`` (:func:`_resume_margins`)."""
+    dn1, de1 = wn - v * c1, we - v * s1
     a, b = arbitration.closest_offset(pn, pe, dn1, de1, horizon_s)
     close, short = hypot_below(a, b, kept), hypot_below(a, b, keep)
     if not short:
+        t1 = min(meet_m / max(v, 1e-9), horizon_s)
         a, b = arbitration.closest_offset(pn, pe, dn1, de1, t1)
         short = hypot_below(a, b, keep)
         if not short and t1 < horizon_s and not _nan_range(a, b):
-            a, b = arbitration.closest_offset(pn + dn1 * t1, pe + de1 * t1, dn2, de2,
-                                              horizon_s - t1)
+            a, b = arbitration.closest_offset(pn + dn1 * t1, pe + de1 * t1, wn - v * c2,
+                                              we - v * s2, horizon_s - t1)
             short = hypot_below(a, b, keep)
     return short, close
 
