@@ -33,6 +33,7 @@ from trafficsim.io.yamlio import (
     parse_yaml,
     read_bytes,
     read_file,
+    shown,
 )
 
 __all__ = [
@@ -351,7 +352,7 @@ def _read_chain(doc: Document) -> tuple[list[Document], list[ScenarioError]]:
             hint = " (put it in quotes)" if isinstance(written, bool | int | float) else ""
             return chain[::-1], [child.error(
                 f"expected the path of the rules file this one extends, got "
-                f"{_show(written)}{hint}", ("extends",))]
+                f"{shown(written)}{hint}", ("extends",))]
         parent = os.path.normpath(os.path.join(os.path.dirname(child.path), written))
         real = os.path.realpath(parent)
         if real in seen:
@@ -370,21 +371,6 @@ def _read_chain(doc: Document) -> tuple[list[Document], list[ScenarioError]]:
 # --------------------------------------------------------------------------------------------
 # Checking
 # --------------------------------------------------------------------------------------------
-
-def _show(value: Any) -> str:
-    """How a value looks in the file, for messages."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if value is None:
-        return "nothing (an empty value)"
-    if isinstance(value, dict):
-        return "a mapping"
-    if isinstance(value, list):
-        return "a list"
-    if isinstance(value, str):
-        return f"'{value if len(value) <= 40 else value[:37] + '...'}'"
-    return repr(value)
-
 
 def _close(word: str, options: Sequence[str]) -> str:
     """`` (did you mean 'x'?)`` for the closest option, or an empty string."""
@@ -472,7 +458,7 @@ class _Checker:
         if isinstance(value, str) and value.strip():
             return value
         hint = " (put it in quotes)" if isinstance(value, bool | int | float) else ""
-        self.error(loc, f"expected {what}, got {_show(value)}{hint}")
+        self.error(loc, f"expected {what}, got {shown(value)}{hint}")
         return None
 
     # ---- top level --------------------------------------------------------------------------
@@ -528,7 +514,7 @@ class _Checker:
         version = data["schema_version"]
         if not (isinstance(version, int) and not isinstance(version, bool)):
             self.error(("schema_version",),
-                       f"expected the whole number {SCHEMA_VERSION}, got {_show(version)}")
+                       f"expected the whole number {SCHEMA_VERSION}, got {shown(version)}")
             return True
         if version != SCHEMA_VERSION:
             self.error(("schema_version",),
@@ -552,7 +538,7 @@ class _Checker:
             return {}
         nodes = data["nodes"]
         if not isinstance(nodes, dict) or not nodes:
-            got = "no nodes" if nodes == {} else _show(nodes)
+            got = "no nodes" if nodes == {} else shown(nodes)
             self.error(("nodes",), f"expected a non-empty mapping of node name -> node, got "
                                    f"{got}")
             return {}
@@ -578,7 +564,7 @@ class _Checker:
             return
         if not isinstance(params, dict):
             self.error(loc, f"expected a mapping of parameter name -> number or enum constant, "
-                            f"got {_show(params)}")
+                            f"got {shown(params)}")
             return
         inherited = list(self.declared)
         for pname, value in params.items():
@@ -633,7 +619,7 @@ class _Checker:
                 self.error(loc, f"unknown enum constant '{value}'"
                                 f"{_close(value, list(self.vocab.enums))}; {expected}")
             return None
-        self.error(loc, f"expected a number or an enum constant, got {_show(value)}"
+        self.error(loc, f"expected a number or an enum constant, got {shown(value)}"
                         f"{_unquote_hint(value)}")
         return None
 
@@ -673,9 +659,9 @@ class _Checker:
         if _is_number(value):
             if math.isfinite(value):
                 return float(value)
-            self.error(loc, f"expected a finite number, got {_show(value)}")
+            self.error(loc, f"expected a finite number, got {shown(value)}")
             return None
-        self.error(loc, f"expected a number, got {_show(value)}{_unquote_hint(value)}")
+        self.error(loc, f"expected a number, got {shown(value)}{_unquote_hint(value)}")
         return None
 
     def parameter(self, name: str) -> Operand:
@@ -694,7 +680,7 @@ class _Checker:
                             "underscores, starting with a letter or underscore")
         if not isinstance(data, dict):
             self.error(loc, f"expected a node (a mapping with keys test, yes, no and optional "
-                            f"action, description), got {_show(data)}")
+                            f"action, description), got {shown(data)}")
             self.edges_ok = False
             return None
         # A misspelt key also makes the key it was meant to be missing: report the typo only.
@@ -743,12 +729,12 @@ class _Checker:
         if isinstance(value, str):
             return self.edge_target(value, False, loc, names)
         if not isinstance(value, dict):
-            self.error(loc, f"{expected}, got {_show(value)}")
+            self.error(loc, f"{expected}, got {shown(value)}")
             return None
         self.unknown_keys(value, _EDGE_KEYS, loc, "an edge")
         nxt = value.get("next", False)
         if not isinstance(nxt, bool):
-            self.error((*loc, "next"), f"expected true or false, got {_show(nxt)}")
+            self.error((*loc, "next"), f"expected true or false, got {shown(nxt)}")
             nxt = None
         if "to" not in value:
             self.error(loc, f"missing required key 'to'; {expected}")
@@ -771,7 +757,7 @@ class _Checker:
         if not isinstance(value, dict) or not value:
             self.error(loc, f"expected a mapping of action field -> value (fields: "
                             f"{', '.join(fields) or 'none declared'}), got "
-                            f"{_show(value) if value != {} else 'an empty mapping'}")
+                            f"{shown(value) if value != {} else 'an empty mapping'}")
             return None
         out: dict[str, Operand] = {}
         for key, raw in value.items():
@@ -800,7 +786,7 @@ class _Checker:
                 self.error(loc, f"unknown value '{raw}' for action field '{key}'"
                                 f"{_close(raw, spec.constants)}; expected one of: {allowed}")
             else:
-                self.error(loc, f"expected one of: {allowed}, got {_show(raw)}")
+                self.error(loc, f"expected one of: {allowed}, got {shown(raw)}")
             return None
         if isinstance(raw, str) and _NAME.match(raw):
             if raw in self.vocab.enums:
@@ -848,7 +834,7 @@ class _Checker:
         if isinstance(value, dict):
             return self.read_combination(value, loc)
         self.error(loc, "expected a test: a comparison [feature, op, value], {all: [...]}, "
-                        f"{{any: [...]}}, {{not: test}}, true or false; got {_show(value)}")
+                        f"{{any: [...]}}, {{not: test}}, true or false; got {shown(value)}")
         return None
 
     def read_combination(self, value: dict[str, Any], loc: tuple[str | int, ...]) -> Test | None:
@@ -874,7 +860,7 @@ class _Checker:
             item = self.read_test(inner, iloc)
             return None if item is None else Not(item)
         if not isinstance(inner, list) or not inner:
-            got = "an empty list" if inner == [] else _show(inner)
+            got = "an empty list" if inner == [] else shown(inner)
             self.error(iloc, f"expected a non-empty list of tests, got {got}")
             return None
         if not isinstance(inner[0], list | dict | bool) and len(inner) == 3:
@@ -896,7 +882,7 @@ class _Checker:
         ok = True
         features = self.vocab.features
         if not isinstance(feature, str):
-            self.error((*loc, 0), f"expected a feature name, got {_show(feature)}")
+            self.error((*loc, 0), f"expected a feature name, got {shown(feature)}")
             ok = False
         elif feature not in features:
             self.error((*loc, 0), f"unknown feature '{feature}'{_close(feature, features)}")
@@ -905,10 +891,10 @@ class _Checker:
             if isinstance(op, str):
                 hint = (f" (did you mean '{_OPERATOR_ALIASES[op]}'?)"
                         if op in _OPERATOR_ALIASES else _close(op, OPERATORS))
-                shown = f"'{op}'"
+                op_text = f"'{op}'"
             else:
-                hint, shown = "", _show(op)
-            self.error((*loc, 1), f"unknown operator {shown}{hint}; expected one of "
+                hint, op_text = "", shown(op)
+            self.error((*loc, 1), f"unknown operator {op_text}{hint}; expected one of "
                                   f"{', '.join(OPERATORS)} (quote '>', '>=' and '!=' in YAML)")
             return None
         if op == "between":
@@ -923,7 +909,7 @@ class _Checker:
 
     def between(self, value: Any, loc: tuple[str | int, ...]) -> tuple[Operand, Operand] | None:
         if not isinstance(value, list) or len(value) != 2:
-            got = f"{len(value)} items" if isinstance(value, list) else _show(value)
+            got = f"{len(value)} items" if isinstance(value, list) else shown(value)
             self.error(loc, f"between expects two numbers [lo, hi] (numbers or parameter "
                             f"names), got {got}")
             return None
@@ -971,7 +957,7 @@ class _Checker:
         if _is_number(value):
             number = self.number(value, loc)
             return None if number is None else Operand(value, number)
-        self.error(loc, f"expected {expected}, got {_show(value)}{_unquote_hint(value)}")
+        self.error(loc, f"expected {expected}, got {shown(value)}{_unquote_hint(value)}")
         return None
 
     # ---- graph ------------------------------------------------------------------------------

@@ -546,8 +546,8 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-def _got(value: Any, node: Node | None) -> str:
-    """How the offending value looks in the file."""
+def shown(value: Any, node: Node | None = None) -> str:
+    """How the offending value looks in the file (from its YAML ``node`` where known)."""
     if isinstance(value, _Rejected):
         value = value.value
     if isinstance(node, ScalarNode):
@@ -668,7 +668,7 @@ def _message(err: Mapping[str, Any], loc: Loc, node: Node | None,
     kind = err["type"]
     ctx = err.get("ctx") or {}
     value = err.get("input")
-    got = _got(value, node)
+    got = shown(value, node)
     if kind == "missing":
         return f"missing required key '{loc[-1]}'" if loc else "missing value"
     if kind == "extra_forbidden":
