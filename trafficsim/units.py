@@ -22,5 +22,7 @@ def to_kn(speed_mps: ArrayLike) -> np.ndarray | float:
 
 
 def compass_deg(angle_rad: ArrayLike) -> np.ndarray:
-    """Radians to compass degrees in [0, 360)."""
-    return np.mod(np.degrees(angle_rad), 360.0)
+    """Radians to compass degrees in [0, 360) (a tiny negative angle, whose remainder rounds
+    up to 360, is 0)."""
+    deg = np.mod(np.degrees(angle_rad), 360.0)
+    return np.where(deg >= 360.0, 0.0, deg)
