@@ -2,6 +2,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from trafficsim.campaign.summary import per_encounter, summarise, wilson
 
@@ -13,6 +15,15 @@ def test_wilson_interval_known_values():
     assert all(math.isnan(v) for v in wilson(0, 0))
     low, high = wilson(3, 1000)
     assert low < 0.003 < high
+
+
+@given(st.integers(1, 10**9), st.data())
+def test_wilson_interval_holds_the_proportion_and_ends_exactly_at_0_and_1(n, data):
+    """No collision in 1,000 encounters reports a lower end of 0, not 2e-19 (rounding)."""
+    k = data.draw(st.integers(0, n))
+    low, high = wilson(k, n)
+    assert 0.0 <= low <= k / n <= high <= 1.0
+    assert wilson(0, n)[0] == 0.0 and wilson(n, n)[1] == 1.0
 
 
 def _rows():

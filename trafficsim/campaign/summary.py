@@ -22,13 +22,16 @@ Z95 = 1.959963984540054
 
 
 def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
-    """Wilson score interval of the proportion ``k / n`` (``(nan, nan)`` for ``n = 0``)."""
+    """Wilson score interval of the proportion ``k / n`` (``(nan, nan)`` for ``n = 0``).
+
+    The interval always holds ``k / n``; the clamp keeps rounding from moving its ends past it
+    (``k = 0`` gives a lower end of exactly 0, ``k = n`` an upper end of exactly 1)."""
     if n == 0:
         return math.nan, math.nan
     p = k / n
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return max(0.0, centre - half), min(1.0, centre + half)
+    return min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half))
 
 
 def per_encounter(table: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
