@@ -25,6 +25,7 @@ from trafficsim.errors import InputError
 from trafficsim.identify import preprocess
 from trafficsim.identify.command import read_runs, working_interval_s
 from trafficsim.ships.library import load_ship
+from trafficsim.units import compass_deg
 
 KNOT = 1852.0 / 3600.0
 
@@ -150,11 +151,11 @@ def confirmation(diag: fit.Diagnosis, runs: Sequence[preprocess.Kinematics],
             diff = (np.degrees(np.arctan2(fe, fn) - np.arctan2(le, ln)) + 180.0) % 360.0 - 180.0
             rows.append({"run": run, "role": role, "fitted_north_mps": fn, "fitted_east_mps": fe,
                          "fitted_speed_mps": float(np.hypot(fn, fe)),
-                         "fitted_towards_deg": float(np.degrees(np.arctan2(fe, fn)) % 360.0),
+                         "fitted_towards_deg": float(compass_deg(np.arctan2(fe, fn))),
                          "logged_north_mps": ln, "logged_east_mps": le,
                          "logged_vector_speed_mps": float(np.hypot(ln, le)),
                          "logged_mean_speed_mps": mean_sp, "logged_rms_speed_mps": rms_sp,
-                         "logged_towards_deg": float(np.degrees(np.arctan2(le, ln)) % 360.0),
+                         "logged_towards_deg": float(compass_deg(np.arctan2(le, ln))),
                          "direction_error_deg": float(diff),
                          "speed_ratio": float(np.hypot(fn, fe) / max(np.hypot(ln, le), 1e-9))})
         if not rows:
