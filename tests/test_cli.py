@@ -48,7 +48,18 @@ def test_run_writes_trajectories_and_summary(tmp_path):
     (["trial", "kvlcc2", "--manoeuvre", "turning", "--rudder-deg", "-5", "--out", "o"],
      "positive"),
     (["trial", "kvlcc2", "--manoeuvre", "turning", "--speed-kn", "fast", "--out", "o"],
-     "expected a float"),
+     "expected a number, got 'fast'"),
+    (["campaign", "x.yaml", "--out", "o", "--workers", "two"], "expected a whole number"),
+    # values a ship cannot carry out (an absurd approach speed would make the automatic time
+    # step vanishingly small and the manoeuvre endless)
+    (["trial", "kvlcc2", "--manoeuvre", "turning", "--speed-kn", "1e9", "--out", "o"],
+     "--speed-kn: expected at most 2 times the service speed of 'kvlcc2' (15.5 kn), got 1e+09"),
+    (["trial", "kvlcc2", "--manoeuvre", "turning", "--rudder-deg", "90", "--out", "o"],
+     "--rudder-deg: expected at most the ship's rudder limit, 35 deg; got 90"),
+    (["trial", "cargo", "--manoeuvre", "zigzag", "--rudder-deg", "40", "--out", "o"],
+     "--rudder-deg: expected at most"),
+    (["trial", "kvlcc2", "--manoeuvre", "crash-stop", "--dt-s", "1e-9", "--out", "o"],
+     "--dt-s: expected a time step from 0.001 to 60 s"),
 ])
 def test_bad_flags_give_one_line_and_exit_2(args, expect):
     assert expect in one_line_error(cli(*args))

@@ -34,7 +34,8 @@ def _positive(kind: type) -> object:
         try:
             value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a {kind.__name__}, got '{text}'") from None
+            what = "a whole number" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {what}, got '{text}'") from None
         if value <= 0:
             raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
         return value

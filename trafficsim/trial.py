@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from trafficsim.errors import InputError
 from trafficsim.estimation import pv
 from trafficsim.io.results import write_csv, write_json
 from trafficsim.navigation import Navigation, merge_sensors
@@ -27,22 +28,32 @@ from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, Env, R, U, V
 from trafficsim.ships.library import load_ship
 from trafficsim.units import compass_deg, to_kn
 
+#: the command-line flag of each manoeuvre argument
+_FLAGS = {"speed_kn": "--speed-kn", "rudder_deg": "--rudder-deg", "dt_s": "--dt-s"}
+
 
 def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: float | None,
               port: bool, speed_kn: float | None, dt_s: float | None, out_dir: Path,
               sensors: bool = False, sp_m2ps3: float = 0.01, seed: int = 0
               ) -> tuple[dict[str, float], dict[str, dict[str, Any]]]:
-    """Run the manoeuvre; write ``trial.csv`` (trial-data format) and ``indices.json``."""
+    """Run the manoeuvre; write ``trial.csv`` (trial-data format) and ``indices.json``.
+
+    A value the manoeuvre rejects is reported under its command-line flag (``--speed-kn``)."""
     spec = load_ship(ship)
-    if manoeuvre == "turning":
-        rudder = rudder_deg if rudder_deg is not None else 35.0
-        track, indices = manoeuvres.turning_circle(spec, -rudder if port else rudder,
-                                                   speed_kn, dt_s)
-    elif manoeuvre == "zigzag":
-        rudder = rudder_deg if rudder_deg is not None else 10.0
-        track, indices = manoeuvres.zigzag(spec, rudder, heading_deg, speed_kn, dt_s)
-    else:
-        track, indices = manoeuvres.crash_stop(spec, speed_kn, dt_s)
+    try:
+        if manoeuvre == "turning":
+            rudder = rudder_deg if rudder_deg is not None else 35.0
+            track, indices = manoeuvres.turning_circle(spec, -rudder if port else rudder,
+                                                       speed_kn, dt_s)
+        elif manoeuvre == "zigzag":
+            rudder = rudder_deg if rudder_deg is not None else 10.0
+            track, indices = manoeuvres.zigzag(spec, rudder, heading_deg, speed_kn, dt_s)
+        else:
+            track, indices = manoeuvres.crash_stop(spec, speed_kn, dt_s)
+    except InputError as err:
+        if err.key in _FLAGS:
+            raise InputError(err.message, key=_FLAGS[err.key]) from None
+        raise
     criteria = manoeuvres.imo_criteria(manoeuvre, indices)
     if sensors:
         track = {**track, **sensor_columns(track, spec, sp_m2ps3, seed)}

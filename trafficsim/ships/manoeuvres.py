@@ -17,11 +17,19 @@ from typing import Any
 
 import numpy as np
 
+from trafficsim.errors import InputError
 from trafficsim.ships import base
 from trafficsim.ships.base import PSI, RPS, Actuators, Env, U
 from trafficsim.units import from_kn, to_kn
 
 Track = dict[str, np.ndarray]
+#: time steps a manoeuvre accepts, s (below 1 ms the hours a manoeuvre may take are billions of
+#: steps; above 60 s a step is longer than a large ship's turn takes to develop)
+DT_RANGE_S = (1e-3, 60.0)
+#: fastest approach a manoeuvre accepts, times the service speed (faster than the engine can
+#: hold, the ship approaches at full power and slows; a fouled hull cannot hold its service
+#: speed, say, and its trial is still wanted)
+MAX_SPEED_FACTOR = 2.0
 
 
 class _Ship:
@@ -34,6 +42,10 @@ class _Ship:
         self.env = env
         self.length = float(spec["particulars"]["length_m"])
         speed = from_kn(speed_kn if speed_kn is not None else spec["service_speed_kn"])
+        if not speed <= MAX_SPEED_FACTOR * from_kn(spec["service_speed_kn"]):
+            raise InputError(f"expected at most {MAX_SPEED_FACTOR:g} times the service speed "
+                             f"of '{spec['name']}' ({spec['service_speed_kn']:g} kn), got "
+                             f"{to_kn(speed):g} kn", key="speed_kn")
         self.rps0 = float(base.steady_rps_for_speed(self.family, self.params, self.act,
                                                     np.array([speed]))[0])
         self.max_dt = float(spec.get("integration", {}).get("max_dt_s", 1.0))
@@ -41,6 +53,13 @@ class _Ship:
         self.x[U] = speed
         self.x[RPS] = self.rps0
         self.speed0 = speed
+
+    def check_rudder(self, rudder_deg: float) -> None:
+        """Raise :class:`InputError` for a rudder angle beyond the steering gear's limit."""
+        limit = float(np.degrees(self.act.rudder_max_rad[0]))
+        if not abs(rudder_deg) <= limit + 1e-9:
+            raise InputError(f"expected at most the ship's rudder limit, {limit:g} deg; got "
+                             f"{abs(rudder_deg):g}", key="rudder_deg")
 
     def settle(self, seconds: float, dt: float) -> None:
         """Run straight with the approach rps until speed is steady."""
@@ -72,8 +91,12 @@ def _track(rows: list[np.ndarray], env: Env) -> Track:
 
 
 def _auto_dt(ship: _Ship, dt: float | None) -> float:
-    """Time step: given, else 1 s capped at L/(20 U) so small models turn smoothly."""
+    """Time step: given (within :data:`DT_RANGE_S`), else 1 s capped at L/(20 U) so small
+    models turn smoothly."""
     if dt is not None:
+        if not DT_RANGE_S[0] <= dt <= DT_RANGE_S[1]:
+            raise InputError(f"expected a time step from {DT_RANGE_S[0]:g} to "
+                             f"{DT_RANGE_S[1]:g} s, got {dt:g}", key="dt_s")
         return dt
     return float(min(1.0, 0.05 * ship.length / max(ship.speed0, 0.1)))
 
@@ -128,6 +151,7 @@ def turning_circle(spec: Mapping[str, Any], rudder_deg: float = 35.0,
     """
     env = env or Env()
     ship = _Ship(spec, speed_kn, env)
+    ship.check_rudder(rudder_deg)
     step = _auto_dt(ship, dt)
     ship.settle(60.0, step)
     rud = np.radians(rudder_deg)
@@ -180,6 +204,7 @@ def zigzag(spec: Mapping[str, Any], rudder_deg: float = 10.0, heading_deg: float
     env = env or Env()
     heading_deg = rudder_deg if heading_deg is None else heading_deg
     ship = _Ship(spec, speed_kn, env)
+    ship.check_rudder(rudder_deg)
     step = _auto_dt(ship, dt)
     ship.settle(60.0, step)
     rud, lim, rps0 = np.radians(rudder_deg), np.radians(heading_deg), ship.rps0
@@ -234,8 +259,6 @@ def crash_stop(spec: Mapping[str, Any], speed_kn: float | None = None, dt: float
     env = env or Env()
     ship = _Ship(spec, speed_kn, env)
     if not ship.family.supports_astern or ship.act.rps_min[0] >= 0.0:
-        from trafficsim.errors import InputError
-
         raise InputError(f"ship '{spec['name']}' ({spec['model']} model) cannot go astern: "
                          "a crash stop needs a model that supports astern thrust")
     step = _auto_dt(ship, dt)
