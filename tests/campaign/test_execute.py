@@ -111,3 +111,12 @@ def test_bad_flags_and_specs_exit_2(write_spec, tmp_path, capsys):
     assert main(["campaign", str(bad), "--out", str(tmp_path / "o"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert f"{bad}:9:" in err and "n_encounters_typo" in err
+
+
+def test_dask_without_an_address_exits_2_before_anything_is_made(write_spec, tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["campaign", str(write_spec()), "--out", str(out), "--executor", "dask"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("trafficsim: error: --executor dask needs --address")
+    assert "chunk" not in err  # no progress bar began
+    assert not out.exists()

@@ -120,16 +120,16 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
     spec = load_spec(spec_path)
     assert spec.path is not None
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    _check_folder(out, spec)
-    every = chunks(spec)
-    todo = [c for c in every if not _chunk_path(out, *c).exists()]
     workers = (os.cpu_count() or 1) if workers is None else workers
-    t0 = time.perf_counter()
-    ship_steps_now = 0
-    bar = tqdm(total=len(every), initial=len(every) - len(todo), unit="chunk",
-               disable=not progress, desc=spec.name)
-    with _executor(executor, workers, address) as pool:
+    with _executor(executor, workers, address) as pool:  # (a bad executor flag: nothing made)
+        out.mkdir(parents=True, exist_ok=True)
+        _check_folder(out, spec)
+        every = chunks(spec)
+        todo = [c for c in every if not _chunk_path(out, *c).exists()]
+        t0 = time.perf_counter()
+        ship_steps_now = 0
+        bar = tqdm(total=len(every), initial=len(every) - len(todo), unit="chunk",
+                   disable=not progress, desc=spec.name)
         if pool is None:
             results = ((c, _job(str(spec.path), *c)) for c in todo)
         else:
