@@ -232,17 +232,18 @@ def _size(text: str) -> tuple[int, int]:
 
 def _frame_flags(group: argparse._ActionsContainer) -> None:
     """How frames look (``render`` and ``run --frames``)."""
-    group.add_argument("--size", type=_size, default=(960, 720),
+    group.add_argument("--size", type=_size, default=_RUN_FRAME_FLAGS["--size"],
                        help="frame size WIDTHxHEIGHT in pixels (default 960x720)")
-    group.add_argument("--dpi", type=_positive(float), default=96.0,
+    group.add_argument("--dpi", type=_positive(float), default=_RUN_FRAME_FLAGS["--dpi"],
                        help="dots per inch: text and lines scale with it (default 96)")
     group.add_argument("--follow", default=None, metavar="SHIP",
                        help="follow this ship (default: a fixed view that fits every ship)")
-    group.add_argument("--range-nm", type=_positive(float), default=3.0,
+    group.add_argument("--range-nm", type=_positive(float),
+                       default=_RUN_FRAME_FLAGS["--range-nm"],
                        help="with --follow: distance from the ship to the view's edge "
                             "(default 3)")
     group.add_argument("--measurements", action="store_true", help="draw the raw GNSS fixes")
-    group.add_argument("--fps", type=_positive(float), default=10.0,
+    group.add_argument("--fps", type=_positive(float), default=_RUN_FRAME_FLAGS["--fps"],
                        help="GIF and MP4 frames per second (default 10)")
 
 
@@ -253,9 +254,19 @@ def _frame_options(args: argparse.Namespace) -> FrameOptions:
                         range_nm=args.range_nm, measurements=args.measurements)
 
 
+#: ``run``'s frame flags and their defaults: given without ``--frames`` they would do nothing
+_RUN_FRAME_FLAGS = {"--frames-every-s": None, "--size": (960, 720), "--dpi": 96.0,
+                    "--follow": None, "--range-nm": 3.0, "--measurements": False, "--fps": 10.0}
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from trafficsim.run import run_scenario
 
+    if args.frames is None:
+        for flag, default in _RUN_FRAME_FLAGS.items():
+            if getattr(args, flag[2:].replace("-", "_")) != default:
+                raise InputError("applies to the frames of a run: add --frames (png, gif or "
+                                 "mp4)", key=flag)
     hook = None
     if args.frames is not None:
         from trafficsim.render.export import LiveFrames
