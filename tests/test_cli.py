@@ -60,6 +60,22 @@ def test_run_writes_trajectories_and_summary(tmp_path):
      "--rudder-deg: expected at most"),
     (["trial", "kvlcc2", "--manoeuvre", "crash-stop", "--dt-s", "1e-9", "--out", "o"],
      "--dt-s: expected a time step from 0.001 to 60 s"),
+    # flags that would do nothing where they are given
+    (["trial", "cargo", "--manoeuvre", "turning", "--sp", "0.1", "--out", "o"],
+     "--sp: applies only with --sensors"),
+    (["trial", "cargo", "--manoeuvre", "turning", "--seed", "3", "--out", "o"],
+     "--seed: applies only with --sensors"),
+    (["trial", "cargo", "--manoeuvre", "turning", "--heading-deg", "20", "--out", "o"],
+     "--heading-deg: applies only to --manoeuvre zigzag"),
+    (["trial", "cargo", "--manoeuvre", "zigzag", "--port", "--out", "o"],
+     "--port: applies only to --manoeuvre turning"),
+    (["trial", "cargo", "--manoeuvre", "crash-stop", "--rudder-deg", "20", "--out", "o"],
+     "--rudder-deg: applies only to --manoeuvre turning or zigzag"),
+    (["campaign", "x.yaml", "--out", "o", "--address", "tcp://127.0.0.1:1"],
+     "--address: applies only with --executor dask"),
+    (["render", "nodir", "--out", "o", "--range-nm", "2"],
+     "--range-nm: applies only with --follow"),
+    (["render", "nodir", "--out", "o", "--fps", "5"], "--fps: applies only to GIF and MP4 frames"),
 ])
 def test_bad_flags_give_one_line_and_exit_2(args, expect):
     assert expect in one_line_error(cli(*args))

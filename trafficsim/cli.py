@@ -98,9 +98,11 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_argument("--sensors", action="store_true",
                        help="also record GNSS receiver output (gnss_*) and the navigation "
                             "estimate (est_*) beside the truth")
-    trial.add_argument("--sp", type=_positive(float), default=0.01,
-                       help="receiver filter spectral amplitude S_p, m^2/s^3 (default 0.01)")
-    trial.add_argument("--seed", type=int, default=0, help="seed of the instrument noise")
+    trial.add_argument("--sp", type=_positive(float), default=None,
+                       help="with --sensors: receiver filter spectral amplitude S_p, m^2/s^3 "
+                            "(default 0.01)")
+    trial.add_argument("--seed", type=int, default=None,
+                       help="with --sensors: seed of the instrument noise (default 0)")
     trial.add_argument("--out", type=Path, required=True, help="output folder")
     trial.set_defaults(func=_cmd_trial)
 
@@ -238,25 +240,38 @@ def _frame_flags(group: argparse._ActionsContainer) -> None:
                        help="dots per inch: text and lines scale with it (default 96)")
     group.add_argument("--follow", default=None, metavar="SHIP",
                        help="follow this ship (default: a fixed view that fits every ship)")
-    group.add_argument("--range-nm", type=_positive(float),
-                       default=_RUN_FRAME_FLAGS["--range-nm"],
+    group.add_argument("--range-nm", type=_positive(float), default=None,
                        help="with --follow: distance from the ship to the view's edge "
                             "(default 3)")
     group.add_argument("--measurements", action="store_true", help="draw the raw GNSS fixes")
-    group.add_argument("--fps", type=_positive(float), default=_RUN_FRAME_FLAGS["--fps"],
+    group.add_argument("--fps", type=_positive(float), default=None,
                        help="GIF and MP4 frames per second (default 10)")
+
+
+def _only_with(flag: str, given: bool, applies: bool, needs: str) -> None:
+    """Refuse a flag given where it would do nothing (rather than ignore it)."""
+    if given and not applies:
+        raise InputError(f"applies only {needs}", key=flag)
+
+
+def _fps(args: argparse.Namespace, fmt: str) -> float:
+    """Frames per second of a GIF or MP4 (``--fps``, default 10)."""
+    _only_with("--fps", args.fps is not None, fmt != "png", "to GIF and MP4 frames")
+    return 10.0 if args.fps is None else args.fps
 
 
 def _frame_options(args: argparse.Namespace) -> FrameOptions:
     from trafficsim.render.frame import FrameOptions
 
+    _only_with("--range-nm", args.range_nm is not None, args.follow is not None, "with --follow")
     return FrameOptions(size_px=args.size, dpi=args.dpi, follow=args.follow,
-                        range_nm=args.range_nm, measurements=args.measurements)
+                        range_nm=3.0 if args.range_nm is None else args.range_nm,
+                        measurements=args.measurements)
 
 
 #: ``run``'s frame flags and their defaults: given without ``--frames`` they would do nothing
 _RUN_FRAME_FLAGS = {"--frames-every-s": None, "--size": (960, 720), "--dpi": 96.0,
-                    "--follow": None, "--range-nm": 3.0, "--measurements": False, "--fps": 10.0}
+                    "--follow": None, "--range-nm": None, "--measurements": False, "--fps": None}
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
@@ -272,7 +287,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         from trafficsim.render.export import LiveFrames
 
         hook = LiveFrames(args.scenario, args.out / "frames", args.frames, args.frames_every_s,
-                          _frame_options(args), args.fps)
+                          _frame_options(args), _fps(args, args.frames))
     try:
         summary = run_scenario(args.scenario, args.out, hook)
     except BaseException:
@@ -302,6 +317,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_campaign(args: argparse.Namespace) -> int:
     from trafficsim.campaign.execute import run_campaign
 
+    _only_with("--address", args.address is not None, args.executor == "dask",
+               "with --executor dask")
     s = run_campaign(args.spec, args.out, args.workers, args.executor, args.address,
                      progress=not args.no_progress)
     rate = s["ship_steps_per_s"]
@@ -327,9 +344,19 @@ def _cmd_explain(args: argparse.Namespace) -> int:
 def _cmd_trial(args: argparse.Namespace) -> int:
     from trafficsim.trial import run_trial
 
-    indices, criteria = run_trial(args.ship, args.manoeuvre, args.rudder_deg, args.heading_deg,
-                                  args.port, args.speed_kn, args.dt_s, args.out, args.sensors,
-                                  args.sp, args.seed)
+    m = args.manoeuvre
+    _only_with("--rudder-deg", args.rudder_deg is not None, m != "crash-stop",
+               "to --manoeuvre turning or zigzag")
+    _only_with("--heading-deg", args.heading_deg is not None, m == "zigzag",
+               "to --manoeuvre zigzag")
+    _only_with("--port", args.port, m == "turning", "to --manoeuvre turning (a zig-zag starts "
+               "to starboard)")
+    for flag, value in (("--sp", args.sp), ("--seed", args.seed)):
+        _only_with(flag, value is not None, args.sensors, "with --sensors")
+    indices, criteria = run_trial(args.ship, m, args.rudder_deg, args.heading_deg, args.port,
+                                  args.speed_kn, args.dt_s, args.out, args.sensors,
+                                  0.01 if args.sp is None else args.sp,
+                                  0 if args.seed is None else args.seed)
     for key, value in indices.items():
         print(f"  {key}: {value:.4g}")
     for key, c in criteria.items():
@@ -448,7 +475,7 @@ def _cmd_render(args: argparse.Namespace) -> int:
     from trafficsim.render.export import render_run
 
     done = render_run(args.run_dir, args.out, args.format, args.every_s, _frame_options(args),
-                      args.fps, progress=not args.no_progress)
+                      _fps(args, args.format), progress=not args.no_progress)
     where = done.paths[0] if args.format != "png" else args.out
     print(f"{done.frames} frames in {done.seconds:.1f} s ({done.frames_per_s:.0f} frames/s): "
           f"{where}")
