@@ -76,6 +76,13 @@ def test_run_writes_trajectories_and_summary(tmp_path):
     (["render", "nodir", "--out", "o", "--range-nm", "2"],
      "--range-nm: applies only with --follow"),
     (["render", "nodir", "--out", "o", "--fps", "5"], "--fps: applies only to GIF and MP4 frames"),
+    # non-finite and out-of-range numbers (they crashed the frame drawing)
+    (["render", "nodir", "--out", "o", "--every-s", "nan"],
+     "expected a positive number, got 'nan'"),
+    (["render", "nodir", "--out", "o", "--dpi", "inf"], "expected a positive number, got 'inf'"),
+    (["render", "nodir", "--out", "o", "--dpi", "20000"],
+     "expected 10 to 1200 dots per inch, got '20000'"),
+    (["explain", "nodir", "--ship", "a", "--at-s", "nan"], "expected a finite number, got 'nan'"),
 ])
 def test_bad_flags_give_one_line_and_exit_2(args, expect):
     assert expect in one_line_error(cli(*args))

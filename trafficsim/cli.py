@@ -8,6 +8,7 @@ exit code 2, never a traceback. Heavy imports happen inside the commands so ``--
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -36,12 +37,22 @@ def _positive(kind: type) -> object:
         except ValueError:
             what = "a whole number" if kind is int else "a number"
             raise argparse.ArgumentTypeError(f"expected {what}, got '{text}'") from None
-        if value <= 0:
+        if not value > 0 or not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"expected a positive number, got '{text}'")
         return value
 
     parse.__name__ = kind.__name__
     return parse
+
+
+def _finite(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got '{text}'") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got '{text}'")
+    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -79,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
     why = sub.add_parser("explain", help="why a ship of a run did what it did")
     why.add_argument("run_dir", type=Path, help="output folder of 'trafficsim run'")
     why.add_argument("--ship", required=True, help="ship name")
-    why.add_argument("--at-s", type=float, default=None,
+    why.add_argument("--at-s", type=_finite, default=None,
                      help="explain the decisions at this time (default: the last change)")
     why.set_defaults(func=_cmd_explain)
 
@@ -221,6 +232,16 @@ def _non_negative_int(text: str) -> int:
     return value
 
 
+def _dpi(text: str) -> float:
+    from trafficsim.render.style import DPI_RANGE
+
+    value = _positive(float)(text)
+    if not DPI_RANGE[0] <= value <= DPI_RANGE[1]:
+        raise argparse.ArgumentTypeError(f"expected {DPI_RANGE[0]:g} to {DPI_RANGE[1]:g} dots "
+                                         f"per inch, got '{text}'")
+    return value
+
+
 def _size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -236,8 +257,9 @@ def _frame_flags(group: argparse._ActionsContainer) -> None:
     """How frames look (``render`` and ``run --frames``)."""
     group.add_argument("--size", type=_size, default=_RUN_FRAME_FLAGS["--size"],
                        help="frame size WIDTHxHEIGHT in pixels (default 960x720)")
-    group.add_argument("--dpi", type=_positive(float), default=_RUN_FRAME_FLAGS["--dpi"],
-                       help="dots per inch: text and lines scale with it (default 96)")
+    group.add_argument("--dpi", type=_dpi, default=_RUN_FRAME_FLAGS["--dpi"],
+                       help="dots per inch, 10 to 1200: text and lines scale with it "
+                            "(default 96)")
     group.add_argument("--follow", default=None, metavar="SHIP",
                        help="follow this ship (default: a fixed view that fits every ship)")
     group.add_argument("--range-nm", type=_positive(float), default=None,

@@ -106,3 +106,12 @@ def test_a_ship_alone_at_rest(synthetic_run):
 
 def test_clock():
     assert clock(0.0) == "0:00:00" and clock(3725.4) == "1:02:05"
+
+
+@pytest.mark.parametrize("dpi", [9.9, 1201.0, 20000.0, float("nan")])
+def test_a_dpi_out_of_range_is_refused_before_drawing(synthetic_run, dpi):
+    """Far beyond 1200 DPI the text and legend surfaces grow past what SDL survives."""
+    run = load_run(synthetic_run([Ship("a", 0.0, 0.0, 45.0, speed_kn=15.0)], 5))
+    with pytest.raises(ValueError, match="dots per inch"):
+        Renderer(run, FrameOptions(dpi=dpi))
+    assert st.Style(1200.0).font_px(12) == 200

@@ -49,11 +49,21 @@ def domain_colour(k: int) -> Colour:
     return shade(ship_colour(k), SEA, 0.5)
 
 
+#: dots per inch a frame may be drawn at (far beyond, text and legend surfaces of tens of
+#: thousands of pixels make SDL fail)
+DPI_RANGE = (10.0, 1200.0)
+
+
 @dataclass(frozen=True)
 class Style:
-    """Pixel sizes at a DPI."""
+    """Pixel sizes at a DPI (within :data:`DPI_RANGE`)."""
 
     dpi: float = BASE_DPI
+
+    def __post_init__(self) -> None:
+        if not DPI_RANGE[0] <= self.dpi <= DPI_RANGE[1]:
+            raise ValueError(f"expected {DPI_RANGE[0]:g} to {DPI_RANGE[1]:g} dots per inch, "
+                             f"got {self.dpi}")
 
     @property
     def scale(self) -> float:
@@ -64,7 +74,7 @@ class Style:
         return max(1, round(size_at_96 * self.scale))
 
     def font_px(self, points: float) -> int:
-        """Font height in pixels of a size in points (1 pt = 1/72 inch)."""
+        """Font height in pixels of a size in points (1 pt = 1/72 inch), at least 6."""
         return max(6, round(points * self.dpi / 72.0))
 
 
