@@ -160,6 +160,14 @@ def test_limits(tmp_path) -> None:
         load_scenario(_write(tmp_path, MINIMAL.format(extra="seed: -1\n")))
     with pytest.raises(ScenarioError, match=r"seed: expected a whole number, got 1.5"):
         load_scenario(_write(tmp_path, MINIMAL.format(extra="seed: 1.5\n")))
+    # positions in the flat local frame: within 1,000 km of the origin, route points too
+    far = MINIMAL.format(extra="").replace("north_m: 0,", "north_m: 1000001,")
+    with pytest.raises(ScenarioError, match=r"ships\[0\].north_m: must be <= 1000000, got 1000001"):
+        load_scenario(_write(tmp_path, far))
+    route = MINIMAL.format(extra="").replace("heading_deg: 0}",
+                                             "heading_deg: 0, route: [[0, -2000000]]}")
+    with pytest.raises(ScenarioError, match=r"route\[0\]\[1\]: must be >= -1000000"):
+        load_scenario(_write(tmp_path, route))
 
 
 def test_empty_optional_values_take_defaults(tmp_path) -> None:

@@ -16,8 +16,8 @@ A scenario places one or more ships in an environment for a fixed duration::
     ships:                         # required, at least one
       - name: own                  # required, unique within the scenario
         type: kvlcc2               # library name or path to a ship file (relative to this file)
-        north_m: 0                 # required
-        east_m: 0                  # required
+        north_m: 0                 # required, within 1,000 km of the origin (flat local frame)
+        east_m: 0                  # required, likewise (route points too)
         heading_deg: 0             # required, [0, 360)
         speed_kn: 12               # optional (default: the ship's service speed), [0, 60]
         route: [[5000, 0], [9000, 3000]]   # optional [north_m, east_m] waypoints
@@ -93,6 +93,13 @@ def known_schema_version(version: int) -> int:
 Direction = Annotated[Number, Field(ge=0.0, lt=360.0)]
 """A compass direction in degrees, clockwise from north, in [0, 360)."""
 
+MAX_OFFSET_M = 1.0e6
+"""Farthest position from the origin, each way: the earth frame is a flat local tangent plane
+(north-east-down), a fair model of the earth over hundreds of kilometres, not thousands."""
+
+Coordinate = Annotated[Number, Field(ge=-MAX_OFFSET_M, le=MAX_OFFSET_M)]
+"""A north or east position in metres of the local frame."""
+
 
 def _route_point(value: Any) -> Any:
     # A wrong count gets its own message: pydantic would say "Tuple should have at most 2 items".
@@ -104,7 +111,7 @@ def _route_point(value: Any) -> Any:
     return value
 
 
-RoutePoint = Annotated[tuple[Number, Number], BeforeValidator(_route_point)]
+RoutePoint = Annotated[tuple[Coordinate, Coordinate], BeforeValidator(_route_point)]
 """A waypoint ``(north_m, east_m)`` in metres."""
 
 
@@ -145,8 +152,8 @@ class ShipEntry(Strict):
 
     name: Text
     type: Text
-    north_m: Number
-    east_m: Number
+    north_m: Coordinate
+    east_m: Coordinate
     heading_deg: Direction
     speed_kn: Annotated[Number, Field(ge=0.0, le=60.0)] | None = None
     route: tuple[RoutePoint, ...] = ()
