@@ -83,6 +83,14 @@ def test_run_writes_trajectories_and_summary(tmp_path):
     (["render", "nodir", "--out", "o", "--dpi", "20000"],
      "expected 10 to 1200 dots per inch, got '20000'"),
     (["explain", "nodir", "--ship", "a", "--at-s", "nan"], "expected a finite number, got 'nan'"),
+    (["diagnose", "--self-test", "2", "--ship", "cargo"],
+     "--ship: applies only without --self-test"),
+    (["diagnose", "--ship", "cargo", "--data", "x.csv", "--out", "o", "--seed", "3"],
+     "--seed: applies only with --self-test"),
+    (["diagnose", "--ship", "nosuch", "--data", "x.csv", "--out", "o"],
+     "--ship: unknown ship 'nosuch'"),
+    (["identify", "--model", "response", "--base", "bulkcarrier", "--data", "x.csv", "--out",
+      "o"], "--base: unknown ship 'bulkcarrier' (did you mean 'bulk_carrier'?)"),
 ])
 def test_bad_flags_give_one_line_and_exit_2(args, expect):
     assert expect in one_line_error(cli(*args))

@@ -180,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
                       "candidate, the base included (no value: identify's default subset)")
     diag.add_argument("--self-test", type=_positive(int), default=None, metavar="N",
                       help="N trials with a random hidden effect; prints the confusion matrix")
-    diag.add_argument("--seed", type=int, default=0, help="self-test seed")
+    diag.add_argument("--seed", type=int, default=None, help="self-test seed (default 0)")
     diag.set_defaults(func=_cmd_diagnose)
 
     val = sub.add_parser("validate", help="check scenario, ship, rules or campaign files "
@@ -463,10 +463,18 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from trafficsim.diagnose import command
     from trafficsim.diagnose.report import parameter_text
 
-    if args.self_test is not None:
+    testing = args.self_test is not None
+    for flag, given in (("--ship", args.ship is not None), ("--data", bool(args.data)),
+                        ("--holdout", bool(args.holdout)), ("--effects", args.effects is not None),
+                        ("--horizon-s", args.horizon_s is not None),
+                        ("--dt-s", args.dt_s is not None), ("--refit", args.refit is not None)):
+        _only_with(flag, given, not testing, "without --self-test (the self-test makes its "
+                   "own ship and runs)")
+    _only_with("--seed", args.seed is not None, testing, "with --self-test")
+    if testing:
         from trafficsim.diagnose.selftest import confusion_text
 
-        res = command.self_test(args.self_test, args.out, args.seed)
+        res = command.self_test(args.self_test, args.out, 0 if args.seed is None else args.seed)
         print(confusion_text(res))
         print(f"{res['n']} trials in {res['elapsed_s']:.1f} s")
         return 0

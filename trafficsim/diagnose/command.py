@@ -38,7 +38,7 @@ def load_base(ship: str) -> dict[str, Any]:
         from trafficsim.diagnose.mmgfolder import read_folder
 
         return read_folder(path)
-    return dict(load_ship(ship))
+    return dict(load_ship(ship, flag="--ship"))
 
 
 def _candidates(names: Sequence[str] | None) -> tuple[str, ...]:

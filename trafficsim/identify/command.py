@@ -160,7 +160,8 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     if "ekf" in method and model != "response":
         raise InputError(f"the augmented EKF identifies the response model only, not {model}; "
                          "use --method oe", key="--method")
-    base_spec = load_ship(base)
+    base_spec = load_ship(base, flag="--base")
+    ref_spec = None if reference is None else load_ship(reference, flag="--reference")
     length = float(base_spec["particulars"]["length_m"])
     u_service = float(base_spec["service_speed_kn"]) * KNOT
     train_files, hold_files, trials = read_runs(data, holdout, columns)
@@ -231,8 +232,7 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     ref_name = None
     speed_kn = None
     comparison = None
-    if reference is not None:
-        ref_spec = load_ship(reference)
+    if ref_spec is not None:
         ref_name = ref_spec["name"]
         speed_kn = float(ref_spec["service_speed_kn"])
         ref_man = validation.standard_manoeuvres(ref_spec, speed_kn)

@@ -119,9 +119,18 @@ def find_ship(type_or_path: str, base_dir: Path | None = None) -> Path:
         "or give a path to a ship file")
 
 
-def load_ship(type_or_path: str, base_dir: Path | None = None) -> dict[str, Any]:
-    """Load and validate a ship file; returns it as a plain dict (plus ``path``)."""
-    return dict(_load_cached(str(find_ship(type_or_path, base_dir))))
+def load_ship(type_or_path: str, base_dir: Path | None = None,
+              flag: str | None = None) -> dict[str, Any]:
+    """Load and validate a ship file; returns it as a plain dict (plus ``path``).
+
+    ``flag``: the command-line flag that named the ship, for the message of an unknown one."""
+    try:
+        found = find_ship(type_or_path, base_dir)
+    except ShipLibraryError as err:
+        if flag is None:
+            raise
+        raise ShipLibraryError(err.message, key=flag) from None
+    return dict(_load_cached(str(found)))
 
 
 @lru_cache(maxsize=256)
