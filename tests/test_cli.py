@@ -83,6 +83,8 @@ def test_run_writes_trajectories_and_summary(tmp_path):
     (["render", "nodir", "--out", "o", "--dpi", "20000"],
      "expected 10 to 1200 dots per inch, got '20000'"),
     (["explain", "nodir", "--ship", "a", "--at-s", "nan"], "expected a finite number, got 'nan'"),
+    (["identify", "--model", "response", "--base", "cargo", "--data", "x.csv", "--out", "o",
+      "--bounds", "a1=nan:1"], "expected NAME=LOW:HIGH (numbers; -inf and inf for no bound)"),
     (["diagnose", "--self-test", "2", "--ship", "cargo"],
      "--ship: applies only without --self-test"),
     (["diagnose", "--ship", "cargo", "--data", "x.csv", "--out", "o", "--seed", "3"],

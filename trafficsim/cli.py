@@ -410,11 +410,12 @@ def _bound(text: str) -> tuple[str, float, float]:
     name, sep, rng = text.partition("=")
     lo, sep2, hi = rng.partition(":")
     try:
-        if not (sep and sep2 and name.strip()):
+        if not (sep and sep2 and name.strip()) or math.isnan(float(lo)) or math.isnan(float(hi)):
             raise ValueError
         return name.strip(), float(lo), float(hi)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected NAME=LOW:HIGH, got '{text}'") from None
+        raise argparse.ArgumentTypeError(f"expected NAME=LOW:HIGH (numbers; -inf and inf for "
+                                         f"no bound), got '{text}'") from None
 
 
 def _cmd_identify(args: argparse.Namespace) -> int:
