@@ -211,6 +211,6 @@ def test_trial_with_sensors_records_the_receiver_lag_of_seed_000(tmp_path):
 def test_frame_flags_without_frames_are_refused_not_ignored(tmp_path, flag):
     scenario = Path(__file__).parent.parent / "scenarios" / "head_on.yaml"
     line = one_line_error(cli("run", scenario, "--out", tmp_path / "o", *flag))
-    assert line == (f"trafficsim: error: {flag[0]}: applies to the frames of a run: add --frames "
-                    "(png, gif or mp4)")
+    assert line == (f"trafficsim: error: {flag[0]}: applies only with --frames (png, gif or "
+                    "mp4)")
     assert not (tmp_path / "o").exists()

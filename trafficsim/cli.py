@@ -253,6 +253,11 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+#: ``run``'s frame flags and their defaults: given without ``--frames`` they would do nothing
+_RUN_FRAME_FLAGS = {"--frames-every-s": None, "--size": (960, 720), "--dpi": 96.0,
+                    "--follow": None, "--range-nm": None, "--measurements": False, "--fps": None}
+
+
 def _frame_flags(group: argparse._ActionsContainer) -> None:
     """How frames look (``render`` and ``run --frames``)."""
     group.add_argument("--size", type=_size, default=_RUN_FRAME_FLAGS["--size"],
@@ -291,19 +296,12 @@ def _frame_options(args: argparse.Namespace) -> FrameOptions:
                         measurements=args.measurements)
 
 
-#: ``run``'s frame flags and their defaults: given without ``--frames`` they would do nothing
-_RUN_FRAME_FLAGS = {"--frames-every-s": None, "--size": (960, 720), "--dpi": 96.0,
-                    "--follow": None, "--range-nm": None, "--measurements": False, "--fps": None}
-
-
 def _cmd_run(args: argparse.Namespace) -> int:
     from trafficsim.run import run_scenario
 
-    if args.frames is None:
-        for flag, default in _RUN_FRAME_FLAGS.items():
-            if getattr(args, flag[2:].replace("-", "_")) != default:
-                raise InputError("applies to the frames of a run: add --frames (png, gif or "
-                                 "mp4)", key=flag)
+    for flag, default in _RUN_FRAME_FLAGS.items():
+        _only_with(flag, getattr(args, flag[2:].replace("-", "_")) != default,
+                   args.frames is not None, "with --frames (png, gif or mp4)")
     hook = None
     if args.frames is not None:
         from trafficsim.render.export import LiveFrames
