@@ -56,6 +56,10 @@ def test_unknown_model_family_suggests_the_right_one(tmp_path):
     ("  length_m: 320.0", "  length_m: long", "expected a number"),
     ("  rudder_max_deg: 35.0", "  rudder_max_deg: -35.0", "rudder_max_deg"),
     ("service_speed_kn: 15.5", "service_speed_kn: 15.5\nspeed: 3", "unknown key 'speed'"),
+    # values that set time steps: a tiny ship or sub-step never finished (or overflowed)
+    ("  length_m: 320.0", "  length_m: 1.0e-300", "length_m: must be >= 0.5"),
+    ("integration: {max_dt_s: 1.0}", "integration: {max_dt_s: 1.0e-9}",
+     "max_dt_s: must be >= 0.001"),
 ])
 def test_bad_values_and_keys_are_located(tmp_path, old, new, expect):
     path, line = _broken(tmp_path, old, new)

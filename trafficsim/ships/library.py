@@ -27,7 +27,7 @@ MMG_FOLDER_MARKER = "MMG_params.csv"
 
 
 class Particulars(Strict):
-    length_m: float = Field(gt=0, le=600)
+    length_m: float = Field(ge=0.5, le=600)  # (from tank models up; sets time steps)
     beam_m: float = Field(gt=0, le=100)
     draught_m: float = Field(gt=0, le=40)
     model_config = Strict.model_config | {"extra": "allow"}
@@ -58,7 +58,7 @@ class AutopilotSpec(Strict):
 
 
 class IntegrationSpec(Strict):
-    max_dt_s: float = Field(default=1.0, gt=0, le=60)
+    max_dt_s: float = Field(default=1.0, ge=0.001, le=60)  # (a step is dt / max_dt_s sub-steps)
 
 
 class ShipFile(Strict):
