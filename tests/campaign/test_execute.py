@@ -120,3 +120,18 @@ def test_dask_without_an_address_exits_2_before_anything_is_made(write_spec, tmp
     assert err.startswith("trafficsim: error: --executor dask needs --address")
     assert "chunk" not in err  # no progress bar began
     assert not out.exists()
+
+
+def test_a_damaged_chunk_is_run_again(write_spec, tmp_path):
+    """A chunk file that no longer reads (garbage, emptied) is redone, not a traceback."""
+    spec = write_spec(n=3, chunk=1, duration=300)
+    out = tmp_path / "o"
+    run_campaign(spec, out, workers=1, progress=False)
+    before = _table(out)
+    paths = sorted((out / "chunks").glob("*.parquet"))
+    paths[0].write_bytes(b"garbage")
+    paths[2].write_bytes(b"")
+    untouched = paths[1].stat().st_mtime_ns
+    run_campaign(spec, out, workers=1, progress=False)
+    _same(before, _table(out))
+    assert paths[1].stat().st_mtime_ns == untouched  # only the damaged ones ran again

@@ -2,7 +2,8 @@
 
 The encounters are cut into chunks of ``chunk_encounters``. Every finished chunk is written to
 ``OUT/chunks/NNNNNNNN-MMMMMMMM.parquet`` (temp file, fsync, rename), so a campaign killed at any
-point and started again with the same command runs only the missing chunks; ``OUT/campaign.json``
+point and started again with the same command runs only the missing chunks (and any chunk
+damaged from outside, which no longer reads); ``OUT/campaign.json``
 records the spec's hash, and a folder holding another spec's chunks is refused. When every chunk
 is there the rows are gathered in encounter order into ``encounters.parquet`` with
 ``summary.json`` and the figures. A chunk's rows do not depend on which executor, worker or
@@ -43,6 +44,20 @@ def chunks(spec: CampaignSpec) -> list[tuple[int, int]]:
 
 def _chunk_path(out: Path, start: int, stop: int) -> Path:
     return out / "chunks" / f"{start:08d}-{stop:08d}.parquet"
+
+
+def _chunk_done(path: Path) -> bool:
+    """Whether ``path`` holds a finished chunk. Chunks are written atomically, so only damage
+    from outside (a disk fault, an edit) makes one unreadable; such a chunk is run again, as
+    its rows are fixed by the spec."""
+    import pyarrow.parquet as pq
+
+    if not path.exists():
+        return False
+    try:
+        return b"ship_steps" in (pq.read_schema(path).metadata or {})
+    except (OSError, ValueError):  # (pyarrow's ArrowInvalid is a ValueError)
+        return False
 
 
 def _spec_hash(path: Path) -> str:
@@ -125,7 +140,7 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
         out.mkdir(parents=True, exist_ok=True)
         _check_folder(out, spec)
         every = chunks(spec)
-        todo = [c for c in every if not _chunk_path(out, *c).exists()]
+        todo = [c for c in every if not _chunk_done(_chunk_path(out, *c))]
         t0 = time.perf_counter()
         ship_steps_now = 0
         bar = tqdm(total=len(every), initial=len(every) - len(todo), unit="chunk",
