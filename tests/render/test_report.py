@@ -91,3 +91,13 @@ def test_report_errors_and_the_command(campaign, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["report", str(out), "--worst", "-1"])
     assert "expected a number >= 0" in capsys.readouterr().err
+
+
+def test_a_damaged_encounters_table_is_named_not_a_traceback(tmp_path, capsys):
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "encounters.parquet").write_bytes(b"junk")
+    assert main(["report", str(broken), "--out", str(tmp_path / "r"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"trafficsim: error: {broken / 'encounters.parquet'}: unreadable "
+                          "encounters table (") and "Traceback" not in err

@@ -15,22 +15,18 @@ import numpy as np
 from trafficsim.colregs import network
 from trafficsim.colregs.vocabulary import FEATURES, VOCABULARY
 from trafficsim.errors import DataError, InputError
+from trafficsim.io.results import read_parquet
 
 _STATE = ("decided_own_role", "decided_encounter", "decided_other_role", "decided_own_manoeuvre")
 
 
 def _read(run_dir: Path) -> dict[str, np.ndarray]:
-    import pyarrow.parquet as pq
-
     path = run_dir / "decisions.parquet"
     if not path.is_file():
-        raise InputError(f"{path}: no decisions recorded here (a run folder of a scenario in "
-                         "which some ship takes collision-avoidance decisions was expected)",
-                         path=str(run_dir))
-    try:
-        table = pq.read_table(path)
-    except Exception as err:  # pyarrow raises several types for damaged files
-        raise DataError(f"{path}: unreadable decisions file ({err})", path=str(path)) from None
+        raise InputError("no decisions recorded here (a run folder of a scenario in which some "
+                         "ship takes collision-avoidance decisions was expected)",
+                         path=str(path))
+    table = read_parquet(path, "decisions file")
     missing = [c for c in ("t_s", "ship", "other", "rules", "path", *_STATE, *FEATURES)
                if c not in table.column_names]
     if missing:

@@ -14,6 +14,8 @@ from typing import IO, Any
 
 import numpy as np
 
+from trafficsim.errors import DataError
+
 
 def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
     """Write ``path`` via ``write(fileobj)`` on a temp file, then rename over ``path``."""
@@ -66,6 +68,17 @@ def write_parquet(path: Path, columns: Mapping[str, Any]) -> None:
     table = pa.table({k: np.asarray(v) if not isinstance(v, list) else v
                       for k, v in columns.items()})
     atomic_write(path, lambda fh: pq.write_table(table, fh))
+
+
+def read_parquet(path: Path, what: str = "table") -> Any:
+    """The ``pyarrow.Table`` in ``path``; :class:`DataError` naming the file if it does not
+    read (pyarrow raises several types for damaged files)."""
+    import pyarrow.parquet as pq
+
+    try:
+        return pq.read_table(path)
+    except Exception as err:
+        raise DataError(f"unreadable {what} ({err})", path=str(path)) from None
 
 
 def write_csv(path: Path, columns: Mapping[str, np.ndarray], fmt: str = "%.6g") -> None:

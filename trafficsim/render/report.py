@@ -27,6 +27,7 @@ import numpy as np
 
 from trafficsim import __version__
 from trafficsim.errors import InputError
+from trafficsim.io.results import read_parquet
 from trafficsim.render.frame import FrameOptions
 from trafficsim.units import NM
 
@@ -63,9 +64,8 @@ def read_encounters(campaign_dir: Path) -> dict[str, np.ndarray]:
 
     Raises:
         InputError: no such folder, or a campaign that has not finished.
+        DataError: an ``encounters.parquet`` that does not read.
     """
-    import pyarrow.parquet as pq
-
     path = campaign_dir / "encounters.parquet"
     if not campaign_dir.is_dir():
         raise InputError("no such folder (the output folder of 'trafficsim "
@@ -74,7 +74,7 @@ def read_encounters(campaign_dir: Path) -> dict[str, np.ndarray]:
         raise InputError("no encounters.parquet here (the output folder of a "
                          "finished 'trafficsim campaign' was expected; run the campaign "
                          "command again to finish it)", path=str(campaign_dir))
-    table = pq.read_table(path)
+    table = read_parquet(path, "encounters table")
     return {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
 
 
