@@ -14,7 +14,7 @@ import numpy as np
 
 from trafficsim.colregs import network
 from trafficsim.colregs.vocabulary import FEATURES, VOCABULARY
-from trafficsim.errors import DataError, InputError
+from trafficsim.errors import InputError
 from trafficsim.io.results import read_parquet
 
 _STATE = ("decided_own_role", "decided_encounter", "decided_other_role", "decided_own_manoeuvre")
@@ -26,11 +26,8 @@ def _read(run_dir: Path) -> dict[str, np.ndarray]:
         raise InputError("no decisions recorded here (a run folder of a scenario in which some "
                          "ship takes collision-avoidance decisions was expected)",
                          path=str(path))
-    table = read_parquet(path, "decisions file")
-    missing = [c for c in ("t_s", "ship", "other", "rules", "path", *_STATE, *FEATURES)
-               if c not in table.column_names]
-    if missing:
-        raise DataError(f"{path}: columns missing: {', '.join(missing)}", path=str(path))
+    table = read_parquet(path, "decisions file",
+                         ("t_s", "ship", "other", "rules", "path", *_STATE, *FEATURES))
     return {c: np.asarray(table.column(c).to_pylist()) for c in table.column_names}
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
 
@@ -70,13 +70,24 @@ def write_parquet(path: Path, columns: Mapping[str, Any]) -> None:
     atomic_write(path, lambda fh: pq.write_table(table, fh))
 
 
-def read_parquet(path: Path, what: str = "table") -> Any:
-    """The ``pyarrow.Table`` in ``path``; :class:`DataError` naming the file if it does not
-    read (pyarrow raises several types for damaged files)."""
+def read_parquet(path: Path, what: str = "table", columns: Sequence[str] = (),
+                 only: bool = False) -> Any:
+    """The ``pyarrow.Table`` in ``path`` (with ``only``, just ``columns``).
+
+    Raises:
+        DataError: naming the file, if it does not read (pyarrow raises several types for
+            damaged files) or lacks any of ``columns``.
+    """
     import pyarrow.parquet as pq
 
     try:
-        return pq.read_table(path)
+        missing = [c for c in columns if c not in pq.read_schema(path).names]
+        if missing:
+            raise DataError(f"columns missing: {', '.join(missing)} (written by an older "
+                            "trafficsim? run it again)", path=str(path))
+        return pq.read_table(path, columns=list(columns) if only else None)
+    except DataError:
+        raise
     except Exception as err:
         raise DataError(f"unreadable {what} ({err})", path=str(path)) from None
 

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from trafficsim.errors import DataError, InputError
+from trafficsim.io.results import read_parquet
 from trafficsim.render.decisions import COLUMNS as DECISION_COLUMNS
 from trafficsim.render.decisions import DecisionSource, DecisionTable, LiveDecisions
 from trafficsim.units import KN
@@ -103,17 +104,7 @@ def _need_dir(run_dir: Path) -> None:
 
 
 def _table(path: Path, columns: tuple[str, ...]) -> dict[str, np.ndarray]:
-    import pyarrow.parquet as pq
-
-    try:
-        names = pq.read_schema(path).names
-    except Exception as err:  # pyarrow raises several types for damaged files
-        raise DataError(f"unreadable table ({err})", path=str(path)) from None
-    missing = [c for c in columns if c not in names]
-    if missing:
-        raise DataError(f"columns missing: {', '.join(missing)} (written by an older "
-                        "trafficsim? run it again)", path=str(path))
-    table = pq.read_table(path, columns=list(columns))
+    table = read_parquet(path, "table", columns, only=True)
     return {c: table.column(c).to_numpy(zero_copy_only=False) for c in columns}
 
 
