@@ -20,7 +20,7 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m ruff check trafficsim tests
-	$(PY) -m pytest
+	$(PY) -m pytest -n auto --benchmark-disable
 
 lint: $(STAMP)
 	$(PY) -m ruff check trafficsim tests
