@@ -58,8 +58,8 @@ def choose(base_course_rad: np.ndarray, route_speed_mps: np.ndarray, speed_facto
            current: np.ndarray, pair_ship: np.ndarray, rel_north_m: np.ndarray,
            rel_east_m: np.ndarray, oth_vn_mps: np.ndarray, oth_ve_mps: np.ndarray,
            required_m: np.ndarray, horizon_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Choose a candidate for each of ``s`` manoeuvring ships (one compiled loop over pairs and
-    candidates, one over ships).
+    """Choose a candidate for each of ``s`` manoeuvring ships (one compiled loop over the ships
+    and their pairs).
 
     Args:
         base_course_rad: ``(s,)`` course the offsets are taken from (the course over ground
@@ -133,70 +133,92 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
             ove: np.ndarray, required: np.ndarray, horizon_s: float, cos_off: np.ndarray,
             sin_off: np.ndarray, off_deg: np.ndarray, reduced: np.ndarray, chosen: np.ndarray,
             ok_out: np.ndarray) -> None:
-    """:func:`choose`: per ship and candidate, whether it keeps every pair's distance and whether
-    it runs alongside a ship; then the cheapest safe candidate by the preference cost of the
-    module docstring. Safety needs only the sign of each margin, told by the squares
-    (:func:`~trafficsim.geometry.hypot_below`); the worst margins themselves are worked out
-    only for the ships with no safe candidate, which take the largest."""
-    s, n_cand = base.shape[0], off_deg.shape[0]
-    safe = np.ones((s, n_cand), dtype=np.bool_)
-    alongside = np.zeros((s, n_cand), dtype=np.bool_)
-    for p in range(pair_ship.shape[0]):
-        i, req = pair_ship[p], required[p]
-        near = req > 0.0 and math.hypot(pn[p], pe[p]) < ALONGSIDE_RANGE_FACTOR * max(req, 1.0)
-        cb, sb = math.cos(base[i]), math.sin(base[i])
-        for k in range(n_cand):
-            vn, ve = _own_velocity(cb, sb, speed[i], factor[i], reduced[k], cos_off[k],
-                                   sin_off[k])
-            dvn, dve = ovn[p] - vn, ove[p] - ve
-            a, b = closest_offset(pn[p], pe[p], dvn, dve, horizon_s)
-            if hypot_below(a, b, req):  # closest_m - req < 0
-                safe[i, k] = False
-            if near and dvn * dvn + dve * dve < ALONGSIDE_SPEED_MPS * ALONGSIDE_SPEED_MPS:
-                alongside[i, k] = True
-    # worst margins of the ships with no safe candidate (row -1: not needed)
-    row = np.full(s, -1, dtype=np.int64)
-    n_stuck = 0
+    """:func:`choose`, ship by ship over the ship's pairs: a running manoeuvre that still keeps
+    every pair's distance without running alongside a ship is kept, the only candidate looked
+    at (most ships at most decision steps); otherwise, per candidate, whether it keeps every
+    pair's distance and whether it runs alongside a ship, then the cheapest safe candidate by
+    the preference cost of the module docstring. Safety needs only the sign of each margin,
+    told by the squares (:func:`~trafficsim.geometry.hypot_below`); the worst margins
+    themselves are worked out only for a ship with no safe candidate, which takes the
+    largest."""
+    s, n_cand, q = base.shape[0], off_deg.shape[0], pair_ship.shape[0]
+    first = np.zeros(s + 1, dtype=np.int64)  # the pairs of ship i: mine[first[i]:first[i + 1]]
+    for p in range(q):
+        first[pair_ship[p] + 1] += 1
     for i in range(s):
-        if not safe[i].any():
-            row[i] = n_stuck
-            n_stuck += 1
-    worst = np.full((n_stuck, n_cand), math.inf)
-    for p in range(pair_ship.shape[0]):
-        r = row[pair_ship[p]]
-        if r >= 0:
-            i = pair_ship[p]
-            cb, sb = math.cos(base[i]), math.sin(base[i])
+        first[i + 1] += first[i]
+    mine, fill = np.empty(q, dtype=np.int64), first[:s].copy()
+    for p in range(q):
+        mine[fill[pair_ship[p]]] = p
+        fill[pair_ship[p]] += 1
+    safe = np.empty(n_cand, dtype=np.bool_)
+    alongside = np.empty(n_cand, dtype=np.bool_)
+    worst = np.empty(n_cand)
+    for i in range(s):
+        cb, sb = math.cos(base[i]), math.sin(base[i])
+        pairs = mine[first[i]:first[i + 1]]
+        run = current[i]
+        if run >= 0:
+            keeps, beside = _verdict(cb, sb, speed[i], factor[i], reduced[run], cos_off[run],
+                                     sin_off[run], pairs, pn, pe, ovn, ove, required,
+                                     horizon_s)
+            if keeps and not beside:  # a running manoeuvre that still satisfies every pair
+                chosen[i], ok_out[i] = run, True
+                continue
+        stuck = True
+        for k in range(n_cand):
+            safe[k], alongside[k] = _verdict(cb, sb, speed[i], factor[i], reduced[k],
+                                             cos_off[k], sin_off[k], pairs, pn, pe, ovn, ove,
+                                             required, horizon_s)
+            stuck = stuck and not safe[k]
+        top = -math.inf
+        if stuck:  # nothing safe: the largest worst-case margin on an allowed side
             for k in range(n_cand):
+                worst[k] = math.inf
                 vn, ve = _own_velocity(cb, sb, speed[i], factor[i], reduced[k], cos_off[k],
                                        sin_off[k])
-                margin = closest_m(pn[p], pe[p], ovn[p] - vn, ove[p] - ve,
-                                   horizon_s) - required[p]
-                if margin < worst[r, k]:
-                    worst[r, k] = margin
-    for i in range(s):
-        r = row[i]
-        top = -math.inf
-        if r >= 0:  # nothing safe: the largest worst-case margin on an allowed side
-            for k in range(n_cand):
-                top = max(top, -math.inf if _wrong_side(side[i], off_deg[k]) else worst[r, k])
+                for p in pairs:
+                    margin = closest_m(pn[p], pe[p], ovn[p] - vn, ove[p] - ve,
+                                       horizon_s) - required[p]
+                    if margin < worst[k]:
+                        worst[k] = margin
+                top = max(top, -math.inf if _wrong_side(side[i], off_deg[k]) else worst[k])
         best_k, best_c = 0, math.inf  # the cheapest eligible candidate
         for k in range(n_cand):
-            if r < 0:
-                eligible = safe[i, k]
+            if not stuck:
+                eligible = safe[k]
             else:
                 eligible = (-math.inf if _wrong_side(side[i], off_deg[k])
-                            else worst[r, k]) >= top - 1e-6
+                            else worst[k]) >= top - 1e-6
             if eligible:
                 c = _cost(off_deg[k], reduced[k], side[i], least_deg[i], reduce_asked[i],
-                          alongside[i, k])
+                          alongside[k])
                 if c < best_c:
                     best_k, best_c = k, c
-        run = current[i]
-        if run >= 0 and safe[i, run] and not alongside[i, run]:
-            best_k = run  # a running manoeuvre that still satisfies every pair is kept
         chosen[i] = best_k
-        ok_out[i] = safe[i, best_k]
+        ok_out[i] = safe[best_k]
+
+
+@kernel
+def _verdict(cb: float, sb: float, speed: float, factor: float, reduced: bool, cos_off: float,
+             sin_off: float, pairs: np.ndarray, pn: np.ndarray, pe: np.ndarray,
+             ovn: np.ndarray, ove: np.ndarray, required: np.ndarray, horizon_s: float
+             ) -> tuple[bool, bool]:
+    """Whether one candidate of a ship keeps every one of its ``pairs``' distances, and whether
+    it runs alongside one of their ships (within ``ALONGSIDE_RANGE_FACTOR`` asked distances at
+    less than ``ALONGSIDE_SPEED_MPS`` relative speed)."""
+    vn, ve = _own_velocity(cb, sb, speed, factor, reduced, cos_off, sin_off)
+    keeps, beside = True, False
+    for p in pairs:
+        req = required[p]
+        dvn, dve = ovn[p] - vn, ove[p] - ve
+        a, b = closest_offset(pn[p], pe[p], dvn, dve, horizon_s)
+        if hypot_below(a, b, req):  # closest_m - req < 0
+            keeps = False
+        if (req > 0.0 and dvn * dvn + dve * dve < ALONGSIDE_SPEED_MPS * ALONGSIDE_SPEED_MPS
+                and math.hypot(pn[p], pe[p]) < ALONGSIDE_RANGE_FACTOR * max(req, 1.0)):
+            beside = True
+    return keeps, beside
 
 
 @kernel
