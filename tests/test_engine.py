@@ -96,3 +96,44 @@ def test_encounters_do_not_interact():
     ships = [_setup("a", "container", enc=0), _setup("b", "container", enc=1)]
     sim = Simulation.start(build_batch(ships, [EncounterEnv(), EncounterEnv()]), 1.0)
     assert sim.batch.pair_i.size == 0
+
+
+def _runaway_spec() -> dict:
+    """The library bulk carrier with its resistance coefficient a1 made a large thrust: its
+    speed runs away and leaves the finite numbers within a minute."""
+    spec = load_ship("bulk_carrier")
+    return {**spec, "name": "runaway", "coefficients": {**spec["coefficients"], "a1": 1e-2}}
+
+
+def _runaway_setup(name, enc, east=0.0):
+    spec = _runaway_spec()
+    return ShipSetup(name, spec, enc, 0.0, east, 0.0, from_kn(spec["service_speed_kn"]),
+                     np.zeros((0, 2)))
+
+
+def test_a_state_that_stops_being_finite_is_one_error_naming_ship_and_time():
+    from trafficsim.errors import SimulationError
+
+    sim = Simulation.start(build_batch([_runaway_setup("wild", 0)], [EncounterEnv()]), 1.0)
+    with pytest.raises(SimulationError, match=r"non-finite at t = \d+ s for ships wild"):
+        sim.run(600)
+
+
+def test_isolated_divergence_freezes_that_encounter_and_leaves_the_others_alone():
+    def calm(enc):
+        return [_setup("a", "container", enc=enc), _setup("b", "cargo", enc=enc, north=3000.0)]
+
+    alone = Simulation.start(build_batch(calm(0), [EncounterEnv(0.3, 1.0)]), 1.0)
+    alone.run(300)
+    wild = [_runaway_setup("wild", 0), _setup("near", "cargo", enc=0, east=2000.0)]
+    sim = Simulation.start(build_batch(wild + calm(1), [EncounterEnv(), EncounterEnv(0.3, 1.0)]),
+                           1.0, isolate_divergence=True)
+    sim.run(300)
+    np.testing.assert_array_equal(sim.batch.x[:, 2:], alone.batch.x)  # as if run alone
+    t = sim.diverged_at_s
+    assert 0.0 < t[0] < 120.0 and np.isnan(t[1])
+    assert np.isfinite(sim.batch.x).all()
+    frozen = sim.batch.x[:, :2].copy()
+    sim.run(5)
+    np.testing.assert_array_equal(sim.batch.x[:, :2], frozen)  # it stands where it stopped
+    assert sim.diverged_at_s[0] == t[0]

@@ -349,6 +349,11 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     print(f"  CPA P1/P5/P50: {s['cpa_nm']['p1']:.2f} / {s['cpa_nm']['p5']:.2f} / "
           f"{s['cpa_nm']['p50']:.2f} NM"
           + (f"; {rate:,.0f} ship-steps/s" if rate else " (all chunks were already done)"))
+    if s["diverged"]:
+        listed = ", ".join(str(i) for i in s["diverged_encounters"][:10])
+        print(f"  DIVERGED: {s['diverged']} encounters (a ship's state stopped being finite: "
+              f"check its ship file), left out of the figures above: {listed}"
+              + (" ..." if s["diverged"] > 10 else ""))
     print(f"results: {args.out / 'encounters.parquet'}, {args.out / 'summary.json'}, "
           f"{args.out / 'cpa_histogram.png'}, {args.out / 'rates_by_type.png'}")
     return 0

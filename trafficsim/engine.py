@@ -50,13 +50,23 @@ class Simulation:
     decision_steps: int = 10  # steps between decisions
     route_speed_mps: np.ndarray | None = None  # (n,) speed of each ship on its route
     step_index: int = 0
+    #: per encounter, the time from which it stood frozen after its state stopped being finite
+    #: (NaN: it has not); only with ``isolate_divergence``, else the first such step raises
+    diverged_at_s: np.ndarray | None = None
+    _x_good: np.ndarray | None = None  # the state before the step, kept to freeze from
 
     @classmethod
     def start(cls, batch: Batch, dt: float, seed: int = 0, decider: Decider | None = None,
-              decision_period_s: float = 10.0, domain: str = "coldwell") -> Simulation:
+              decision_period_s: float = 10.0, domain: str = "coldwell",
+              isolate_divergence: bool = False) -> Simulation:
         """Start at t = 0; ``seed`` keys every random stream (instruments); ``decider`` takes
         the collision-avoidance decisions every ``decision_period_s`` (a multiple of ``dt``);
-        ``domain`` is the ship-domain model of the domain-violation metric."""
+        ``domain`` is the ship-domain model of the domain-violation metric.
+
+        A step that leaves a ship's state not finite raises :class:`SimulationError`, or, with
+        ``isolate_divergence`` (campaigns: one bad encounter must not end the others), freezes
+        every ship of that ship's encounter at its last finite state and records the time in
+        :attr:`diverged_at_s`; the other encounters run on unchanged."""
         x = batch.x
         n = batch.n_ships
         speed = x[base.U].copy()
@@ -83,6 +93,9 @@ class Simulation:
         sim.decider = decider
         sim.decision_steps = max(1, round(decision_period_s / dt))
         sim.route_speed_mps = speed.copy()
+        if isolate_divergence:
+            sim.diverged_at_s = np.full(batch.n_encounters, np.nan)
+            sim._x_good = np.empty_like(x)
         sim._navigate_and_control()
         return sim
 
@@ -139,16 +152,28 @@ class Simulation:
     def step(self) -> None:
         """Advance all ships by one time step with the current orders, then navigate."""
         b, x, dt = self.batch, self.batch.x, self.dt
+        if self._x_good is not None:
+            np.copyto(self._x_good, x)
         kernels.step_ships(b.family_code, b.params, b.actuators, x, self.rudder_cmd_rad,
                            self.rps_cmd, b.env_rows, dt, self.substeps)
         self.step_index += 1
         if not np.isfinite(x).all():
-            bad = np.flatnonzero(~np.isfinite(x).all(axis=0))
+            self._diverged(np.flatnonzero(~np.isfinite(x).all(axis=0)))
+        self.metrics.accumulate(x, b.length_m, b.beam_m, b.pair_i, b.pair_j, self.t_s)
+        self._navigate_and_control()
+
+    def _diverged(self, bad: np.ndarray) -> None:
+        """Ships ``bad`` left the finite numbers in the step just taken: raise, or freeze their
+        encounters at the state before it (``substeps`` 0: the step kernel leaves them)."""
+        b = self.batch
+        if self.diverged_at_s is None or self._x_good is None:
             names = ", ".join(b.names[k] for k in bad[:5])
             raise SimulationError(f"state became non-finite at t = {self.t_s:g} s for ships "
                                   f"{names}; reduce dt_s or check the ship files")
-        self.metrics.accumulate(x, b.length_m, b.beam_m, b.pair_i, b.pair_j, self.t_s)
-        self._navigate_and_control()
+        frozen = np.isin(b.encounter, b.encounter[bad])
+        b.x[:, frozen] = self._x_good[:, frozen]
+        self.substeps[frozen] = 0
+        self.diverged_at_s[np.unique(b.encounter[bad])] = self.t_s - self.dt
 
     def run(self, n_steps: int, every: int = 0,
             callback: Callable[[Simulation], None] | None = None) -> None:

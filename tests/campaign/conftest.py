@@ -26,3 +26,18 @@ def write_spec(tmp_path: Path):
         return path
 
     return write
+
+
+@pytest.fixture
+def runaway_ship(tmp_path: Path) -> Path:
+    """A ship file whose model runs away: the library bulk carrier with its resistance
+    coefficient a1 made a large thrust, so its speed leaves the finite numbers within a
+    minute."""
+    from trafficsim.ships.library import LIBRARY_DIR
+
+    text = (LIBRARY_DIR / "bulk_carrier.yaml").read_text()
+    assert "  a1: -1.4347e-4\n" in text
+    path = tmp_path / "runaway.yaml"
+    path.write_text(text.replace("  a1: -1.4347e-4\n", "  a1: 1.0e-2\n")
+                    .replace("name: bulk_carrier", "name: runaway"))
+    return path

@@ -15,18 +15,20 @@ import numpy as np
 
 from trafficsim.campaign.compliance import R_COL_M, R_MIN_M, R_NM_M
 from trafficsim.campaign.spec import ENCOUNTER_TYPES
-from trafficsim.campaign.summary import per_encounter, wilson
+from trafficsim.campaign.summary import completed, per_encounter, wilson
 from trafficsim.units import NM
 
 
 def write_figures(rows: dict[str, np.ndarray], out: Path) -> list[Path]:
-    """Draw both figures into ``out``; return their paths."""
+    """Draw both figures into ``out`` from the encounters that ran to the end; return their
+    paths."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     paths = [out / "cpa_histogram.png", out / "rates_by_type.png"]
+    rows = completed(rows)
     rng_nm = np.asarray(rows["min_range_m"], dtype=float) / NM
     inside = np.asarray(rows["domain_violation"], dtype=bool)
     fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)

@@ -3,7 +3,9 @@
 :func:`run_chunk` draws encounters ``start .. stop - 1`` (:mod:`trafficsim.campaign.generator`),
 simulates them together, and returns one row per encounter and ship pair. Each encounter's
 random streams are keyed by its campaign index, and nothing couples the encounters of a batch,
-so a row is the same whatever chunk, batch or worker computed it.
+so a row is the same whatever chunk, batch or worker computed it. An encounter whose state
+stops being finite (a ship file whose model runs away) stands frozen from its last finite
+state and its rows say so (``diverged``, ``diverged_at_s``); the others run on.
 """
 
 from __future__ import annotations
@@ -47,7 +49,8 @@ def prepare(spec: CampaignSpec, start: int, stop: int) -> tuple[list[Encounter],
         decider = Decider.build(batch.behaviours, batch.pair_i, batch.pair_j, _rules_path(spec),
                                 spec.domain, spec.visibility_nm)
     sim = Simulation.start(batch, spec.dt_s, seed=spec.seed, decider=decider,
-                           decision_period_s=spec.decision_period_s, domain=spec.domain)
+                           decision_period_s=spec.decision_period_s, domain=spec.domain,
+                           isolate_divergence=True)
     return encounters, sim
 
 
@@ -118,6 +121,8 @@ def _rows(spec: CampaignSpec, encounters: list, sim: Simulation, observer: PairO
         "domain_violation": m.domain_violation,
         "blind_spot": np.array([b != "" for b in blind]),
         "blind_spot_role": blind,
+        "diverged_at_s": sim.diverged_at_s[enc_of_pair],
+        "diverged": np.isfinite(sim.diverged_at_s[enc_of_pair]),
         **observer.columns(),
         **scores,
     }

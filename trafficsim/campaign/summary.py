@@ -4,12 +4,16 @@ Rates are per encounter: an encounter counts as a collision when any of its pair
 near miss when its smallest range is below ``R_NM_M`` (800 m, the near-miss range of
 ``../shared/reference/colregs.md`` section 2.4) without a collision, and a domain violation
 when any ship entered another's domain. The 95 % interval of a rate ``k / n`` is Wilson's score
-interval (Wilson 1927, J. Am. Stat. Assoc. 22:209-212).
+interval (Wilson 1927, J. Am. Stat. Assoc. 22:209-212). An encounter that diverged (its
+state stopped being finite and it stood frozen from then on) has no outcome: it is counted
+and listed apart, and every rate, quantile and score is over the encounters that ran to the
+end.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -32,6 +36,23 @@ def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
     return min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half))
+
+
+def completed(table: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """The rows of the encounters that ran to the end: all but those that diverged (all of a
+    table from before the ``diverged`` column)."""
+    if "diverged" not in table:
+        return {k: np.asarray(v) for k, v in table.items()}
+    keep = ~np.asarray(table["diverged"], dtype=bool)
+    return {k: np.asarray(v)[keep] for k, v in table.items()}
+
+
+def diverged_encounters(table: Mapping[str, Any]) -> list[int]:
+    """Indices of the encounters that diverged, ascending."""
+    if "diverged" not in table:
+        return []
+    enc = np.asarray(table["encounter"], dtype=np.int64)
+    return np.unique(enc[np.asarray(table["diverged"], dtype=bool)]).tolist()
 
 
 def per_encounter(table: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -79,12 +100,18 @@ def _mean(values: np.ndarray) -> float | None:
 
 def summarise(table: dict[str, np.ndarray]) -> dict[str, Any]:
     """``summary.json`` content (without the timing keys the runner adds)."""
+    diverged = diverged_encounters(table)
+    n_all = int(np.unique(np.asarray(table["encounter"])).shape[0])
+    table = completed(table)
     enc = per_encounter(table)
     types = np.asarray(table["encounter_type"], dtype=object)
     overall = _stats(enc, table)
     compliant = enc["all_compliant"]
     summary: dict[str, Any] = {
-        "n_encounters": overall["n_encounters"],
+        "n_encounters": n_all,
+        "n_completed": overall["n_encounters"],
+        "diverged": len(diverged),
+        "diverged_encounters": diverged,
         "collisions": overall["collision"]["count"],
         "collisions_all_compliant": int(np.sum(enc["collision"] & compliant)),
         "encounters_all_compliant": int(np.sum(compliant)),

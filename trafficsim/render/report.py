@@ -141,7 +141,7 @@ def write_report(campaign_dir: str | Path, out_dir: str | Path | None = None, wo
 
     from trafficsim.campaign.figures import write_figures
     from trafficsim.campaign.replay import campaign_spec, replay_encounter
-    from trafficsim.campaign.summary import summarise
+    from trafficsim.campaign.summary import completed, summarise
     from trafficsim.render.export import render_frame, render_run
 
     t0 = time.perf_counter()
@@ -149,7 +149,7 @@ def write_report(campaign_dir: str | Path, out_dir: str | Path | None = None, wo
     rows = read_encounters(campaign_dir)
     out = Path(out_dir) if out_dir is not None else campaign_dir / "report"
     out.mkdir(parents=True, exist_ok=True)
-    picks = worst_encounters(rows, worst)
+    picks = worst_encounters(completed(rows), worst)
     spec = campaign_spec(campaign_dir) if picks else None
     figures = write_figures(rows, out)
     _drop_stale(out / "encounters", {p.encounter for p in picks})
@@ -212,6 +212,12 @@ def _page(campaign_dir: Path, spec: Any, summary: dict[str, Any], figures: list[
             f"<p>{summary['n_encounters']} encounters from <code>{e(str(campaign_dir))}</code>"
             + (f", seed {spec.seed}, policy {e(spec.policy)}, domain {e(spec.domain)}"
                if spec is not None else "") + f"; report by trafficsim {e(__version__)}.</p>"]
+    if summary.get("diverged"):
+        listed = ", ".join(str(i) for i in summary["diverged_encounters"][:20])
+        more = " ..." if summary["diverged"] > 20 else ""
+        head.append(f"<p class='warn'>{summary['diverged']} encounters diverged (a ship's state "
+                    f"stopped being finite: check its ship file) and are left out of "
+                    f"everything below: {listed}{more}.</p>")
     body = ["<h2>Summary</h2>", "<table><tr><th>outcome</th><th>encounters</th>"
             "<th>rate (95 % interval)</th></tr>"]
     for key, label in (("collision", "collision"), ("near_miss", "near miss (< 800 m)"),
@@ -276,4 +282,5 @@ def _page(campaign_dir: Path, spec: Any, summary: dict[str, Any], figures: list[
 _CSS = ("body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}"
         "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;"
         "padding:4px 8px;text-align:left;vertical-align:top}th{background:#f0f3f7}"
-        ".figs img{width:49%}code{font-size:85%;background:#f4f4f4;padding:1px 3px}")
+        ".figs img{width:49%}code{font-size:85%;background:#f4f4f4;padding:1px 3px}"
+        ".warn{background:#fff3cd;border:1px solid #e0c36c;padding:6px 10px}")
