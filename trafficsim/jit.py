@@ -9,13 +9,18 @@ same to the bit.
 Compiled code is cached in a folder named after a hash of all of trafficsim's sources: numba's
 own cache notices edits to a kernel's own file only, not to the functions it calls in other
 modules, so keying the folder on every source makes a stale kernel impossible. Set
-``NUMBA_CACHE_DIR`` to choose the parent folder (default ``~/.cache/trafficsim``).
+``NUMBA_CACHE_DIR`` to choose the parent folder (default ``~/.cache/trafficsim``). Each import
+marks its folder as used; folders of other sources (older versions, edits) unused for
+:data:`STALE_DAYS` days are deleted, so the cache does not grow with every upgrade.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import shutil
+import time
 from pathlib import Path
 
 import numba
@@ -34,7 +39,29 @@ def kernel_cache_dir() -> Path:
     return Path(parent) / f"kernels-{digest.hexdigest()[:16]}"
 
 
+#: a kernel folder of other sources unused for this long is deleted
+STALE_DAYS = 30.0
+
+
+def prune_stale(current: Path, now: float | None = None) -> None:
+    """Mark ``current`` as used now, and delete the other ``kernels-*`` folders beside it that
+    have not been used for :data:`STALE_DAYS` (best effort: a folder in use by another process
+    or not ours to delete stays)."""
+    now = time.time() if now is None else now
+    try:
+        current.mkdir(parents=True, exist_ok=True)
+        os.utime(current, (now, now))
+        folders = list(current.parent.glob("kernels-*"))
+    except OSError:  # a read-only home: numba then caches nothing, as before
+        return
+    for folder in folders:
+        with contextlib.suppress(OSError):  # (another process may be deleting it too)
+            if folder != current and now - folder.stat().st_mtime > STALE_DAYS * 86400.0:
+                shutil.rmtree(folder)
+
+
 numba.config.CACHE_DIR = str(kernel_cache_dir())
+prune_stale(Path(numba.config.CACHE_DIR))
 
 #: decorator for every compiled function of the package
 kernel = numba.njit(cache=True, error_model="numpy")
