@@ -1,6 +1,7 @@
 """The command line as a user meets it: exit codes, one-line errors, files on disk."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -9,6 +10,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from tests.conftest import SCENARIOS
+from trafficsim.ships.library import LIBRARY_DIR
 
 
 def cli(*args, cwd=None):
@@ -110,6 +112,18 @@ def test_bad_scenario_names_file_line_and_key(tmp_path):
     line = one_line_error(cli("run", bad, "--out", tmp_path / "o"))
     expected_line = text.splitlines().index("    speed_kn: fast") + 1
     assert f"bad.yaml:{expected_line}:" in line and "speed_kn" in line
+
+
+def test_a_run_that_diverges_is_one_line_naming_ship_and_time_with_exit_1(tmp_path):
+    ship = (LIBRARY_DIR / "bulk_carrier.yaml").read_text()
+    (tmp_path / "runaway.yaml").write_text(ship.replace("  a1: -1.4347e-4\n", "  a1: 1.0e-2\n"))
+    scenario = (SCENARIOS / "head_on.yaml").read_text().replace("type: container",
+                                                                 "type: runaway.yaml")
+    (tmp_path / "s.yaml").write_text(scenario)
+    res = cli("run", tmp_path / "s.yaml", "--out", tmp_path / "o")
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert re.fullmatch(r"trafficsim: error: state became non-finite at t = \d+ s for ships "
+                        r"boxer; reduce dt_s or check the ship files", res.stderr.strip())
 
 
 def test_unknown_ship_type_suggests_the_right_one():

@@ -1,7 +1,8 @@
 """One exception root for every error a user can cause.
 
 Every leaf also inherits the matching built-in type, so callers may catch either.
-The CLI turns any :class:`TrafficsimError` into one line on stderr and exit code 2.
+The CLI turns any :class:`TrafficsimError` into one line on stderr, with exit code 2 for an
+:class:`InputError` and 1 for a :class:`SimulationError`.
 """
 
 from __future__ import annotations
