@@ -122,8 +122,16 @@ def test_a_run_that_diverges_is_one_line_naming_ship_and_time_with_exit_1(tmp_pa
     (tmp_path / "s.yaml").write_text(scenario)
     res = cli("run", tmp_path / "s.yaml", "--out", tmp_path / "o")
     assert res.returncode == 1 and "Traceback" not in res.stderr
-    assert re.fullmatch(r"trafficsim: error: state became non-finite at t = \d+ s for ships "
-                        r"boxer; reduce dt_s or check the ship files", res.stderr.strip())
+    found = re.fullmatch(r"trafficsim: error: state became non-finite at t = (\d+) s for ships "
+                         r"boxer; reduce dt_s or check the ship files \(the run up to then is "
+                         r"in (.+)\)", res.stderr.strip())
+    assert found and Path(found[2]) == tmp_path / "o"
+    # the run up to then is written, to render and look at: it ends at the step that diverged,
+    # the ships standing frozen at their last finite state (one step before)
+    t = pq.read_table(tmp_path / "o" / "trajectories.parquet").column("t_s").to_numpy()
+    assert t.max() == int(found[1])
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["diverged_at_s"] == t.max() - 1.0
 
 
 def test_unknown_ship_type_suggests_the_right_one():

@@ -30,6 +30,12 @@ def earth_velocity(x: np.ndarray, env: Env) -> np.ndarray:
                      x[base.U] * s + x[base.V] * c + env.current_east_mps])
 
 
+def divergence_message(t_s: float, names: list[str]) -> str:
+    """What to tell a user whose ships' state stopped being finite in the step to ``t_s``."""
+    return (f"state became non-finite at t = {t_s:g} s for ships {', '.join(names[:5])}; "
+            f"reduce dt_s or check the ship files")
+
+
 @dataclass
 class Simulation:
     """A running batch. Orders (course from guidance, speed) and controller memory per ship."""
@@ -53,6 +59,7 @@ class Simulation:
     #: per encounter, the time from which it stood frozen after its state stopped being finite
     #: (NaN: it has not); only with ``isolate_divergence``, else the first such step raises
     diverged_at_s: np.ndarray | None = None
+    diverged_ships: np.ndarray | None = None  # (n,) bool: the ships whose state did
     _x_good: np.ndarray | None = None  # the state before the step, kept to freeze from
 
     @classmethod
@@ -95,6 +102,7 @@ class Simulation:
         sim.route_speed_mps = speed.copy()
         if isolate_divergence:
             sim.diverged_at_s = np.full(batch.n_encounters, np.nan)
+            sim.diverged_ships = np.zeros(n, dtype=bool)
             sim._x_good = np.empty_like(x)
         sim._navigate_and_control()
         return sim
@@ -166,14 +174,18 @@ class Simulation:
         """Ships ``bad`` left the finite numbers in the step just taken: raise, or freeze their
         encounters at the state before it (``substeps`` 0: the step kernel leaves them)."""
         b = self.batch
-        if self.diverged_at_s is None or self._x_good is None:
-            names = ", ".join(b.names[k] for k in bad[:5])
-            raise SimulationError(f"state became non-finite at t = {self.t_s:g} s for ships "
-                                  f"{names}; reduce dt_s or check the ship files")
+        if self.diverged_at_s is None or self._x_good is None or self.diverged_ships is None:
+            raise SimulationError(divergence_message(self.t_s, [b.names[k] for k in bad]))
         frozen = np.isin(b.encounter, b.encounter[bad])
         b.x[:, frozen] = self._x_good[:, frozen]
         self.substeps[frozen] = 0
         self.diverged_at_s[np.unique(b.encounter[bad])] = self.t_s - self.dt
+        self.diverged_ships[bad] = True
+
+    @property
+    def all_diverged(self) -> bool:
+        """Whether every encounter stands frozen (only with ``isolate_divergence``)."""
+        return self.diverged_at_s is not None and bool(np.isfinite(self.diverged_at_s).all())
 
     def run(self, n_steps: int, every: int = 0,
             callback: Callable[[Simulation], None] | None = None) -> None:

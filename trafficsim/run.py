@@ -18,7 +18,8 @@ import numpy as np
 from trafficsim import __version__
 from trafficsim.batch import Batch, EncounterEnv, ShipSetup, build_batch
 from trafficsim.colregs.decider import Decider
-from trafficsim.engine import Simulation, earth_velocity
+from trafficsim.engine import Simulation, divergence_message, earth_velocity
+from trafficsim.errors import SimulationError
 from trafficsim.io.results import write_json, write_parquet
 from trafficsim.io.scenario import Scenario, load_scenario
 from trafficsim.navigation import merge_sensors
@@ -230,9 +231,23 @@ def record_run(sim: Simulation, n_steps: int, every: int, on_record: RecordHook 
     wall = time.perf_counter()
     for k in range(2, n_steps + 1):
         sim.step()
+        if sim.all_diverged:  # nothing moves any more: its last state ends the record
+            if k % every and rec.count < rec.t.shape[0]:
+                record()
+            break
         if k % every == 0:
             record()
     return rec, time.perf_counter() - wall - hook_s
+
+
+def raise_if_diverged(sim: Simulation, out_dir: Path) -> None:
+    """After a run is written: a run whose state stopped being finite is an error naming the
+    ships and the time, and where the run up to then is."""
+    if sim.diverged_ships is not None and sim.diverged_ships.any():
+        names = [sim.batch.names[k] for k in np.flatnonzero(sim.diverged_ships)]
+        t = float(np.nanmin(sim.diverged_at_s)) + sim.dt
+        raise SimulationError(f"{divergence_message(t, names)} (the run up to then is in "
+                              f"{out_dir})")
 
 
 def write_run(out_dir: Path, rec: Recorder, sim: Simulation, summary: dict[str, Any]) -> None:
@@ -256,7 +271,7 @@ def run_scenario(path: Path, out_dir: Path, on_record: RecordHook | None = None
     batch = build_batch(ships, [env])
     decider = scenario_decider(scn, batch)
     sim = Simulation.start(batch, scn.dt_s, scn.seed, decider, scn.decision_period_s,
-                           scn.domain)
+                           scn.domain, isolate_divergence=True)
     n_steps = round(scn.duration_s / scn.dt_s)
     every = record_steps(scn)
     rec, wall = record_run(sim, n_steps, every, on_record)
@@ -265,6 +280,7 @@ def run_scenario(path: Path, out_dir: Path, on_record: RecordHook | None = None
     summary = run_summary(header, sim, n_steps, wall, max(n_steps - 1, 1), every * scn.dt_s,
                           scn.domain)
     write_run(out_dir, rec, sim, summary)
+    raise_if_diverged(sim, out_dir)
     return summary
 
 
@@ -302,6 +318,9 @@ def run_summary(header: dict[str, Any], sim: Simulation, n_steps: int, wall_s: f
         "domain": domain,
         "domain_violations": int(m.domain_violation.sum()),
         "blind_spots": [] if sim.decider is None else sim.decider.blind_spot_report(b.names),
+        "diverged_at_s": (float(np.nanmin(sim.diverged_at_s))
+                          if sim.diverged_ships is not None and sim.diverged_ships.any()
+                          else None),
         "pairs": pairs,
         "ships": ships,
         "wall_time_s": wall_s,

@@ -71,3 +71,9 @@ def test_diverged_encounters_are_named_and_left_out_of_the_outcomes(runaway_ship
     report = write_report(out, worst=0, progress=False)
     page = report.path.read_text()
     assert f"{len(gone)} encounters diverged" in page
+    # its replay is written up to the divergence, then ends as a diverged run does
+    replay = tmp_path / "replay"
+    assert main(["replay", str(out), "--encounter", str(gone[0]), "--out", str(replay)]) == 1
+    assert "state became non-finite" in capsys.readouterr().err
+    at = np.asarray(rows["diverged_at_s"])[enc == gone[0]][0]
+    assert json.loads((replay / "summary.json").read_text())["diverged_at_s"] == at

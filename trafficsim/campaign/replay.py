@@ -68,7 +68,7 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
             record period that is not a positive multiple of the campaign's step.
     """
     from trafficsim.campaign.runner import prepare
-    from trafficsim.run import record_run, run_summary, write_run
+    from trafficsim.run import raise_if_diverged, record_run, run_summary, write_run
 
     spec = campaign_spec(campaign_dir)
     if not 0 <= encounter < spec.n_encounters:
@@ -95,4 +95,5 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
     summary = run_summary(header, sim, n_steps, wall, max(n_steps - 1, 1), every * spec.dt_s,
                           spec.domain)
     write_run(Path(out_dir), rec, sim, summary)
+    raise_if_diverged(sim, Path(out_dir))
     return summary
