@@ -32,26 +32,21 @@ def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
         raise
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
+def _unknown(value: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
 def write_json(path: Path, data: Mapping[str, Any]) -> None:
-    """Atomically write ``data`` as indented JSON (NaN/inf become null)."""
-    text = json.dumps(_clean(data), indent=2, default=_jsonable, allow_nan=False) + "\n"
+    """Atomically write ``data`` as indented JSON (NaN/inf become null, also inside numpy
+    arrays; numpy scalars become plain numbers)."""
+    text = json.dumps(_clean(data), indent=2, default=_unknown, allow_nan=False) + "\n"
     atomic_write(path, lambda fh: fh.write(text.encode()))
 
 
 def _clean(value: Any) -> Any:
+    if isinstance(value, (np.ndarray, np.generic)):
+        value = value.tolist()  # plain Python values, nested lists for arrays
     if isinstance(value, float) and not np.isfinite(value):
-        return None
-    if isinstance(value, np.floating) and not np.isfinite(value):
         return None
     if isinstance(value, dict):
         return {k: _clean(v) for k, v in value.items()}
