@@ -213,9 +213,6 @@ def test_without_instruments_the_estimate_columns_repeat_the_truth(tmp_path):
     assert not col["gnss_valid"].any()
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: without a filter est_sog_kn/est_cog_deg are the "
-                   "speed and course through the water: run.py _navigation_columns rotates "
-                   "est u, v (relative to the water) and leaves out the current")
 def test_without_instruments_the_estimated_sog_and_cog_include_the_current(tmp_path):
     scn = _scenario(tmp_path, [_ship("a", "cargo", 0, 0, 0, 12)],
                     head="environment:\n  current: {speed_kn: 1, towards_deg: 90}\n")
@@ -488,9 +485,6 @@ def test_a_diverging_run_ends_its_record_with_the_frozen_state(tmp_path):
     np.testing.assert_array_equal(sim.batch.x, last_finite)  # frozen there
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: run.py record_run records the diverged step only "
-                   "when k % every != 0 and there is a free slot, so the record ends early (and "
-                   "loses the last finite state) when step k is a record step or the last step")
 @pytest.mark.parametrize("case", ["every step", "record step", "last step"])
 def test_a_diverging_run_ends_its_record_at_the_step_that_diverged(tmp_path, case):
     k, last_finite = _diverge_step(tmp_path)

@@ -248,9 +248,6 @@ def test_trial_with_sensors_appends_the_instrument_columns(tmp_path):
                   ["gnss_fix_north_m"]).max() > 0.5
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: trial.py sensor_columns sets gnss sigma_m = 2.0 "
-                   "by setdefault even when the ship file gives drms_m, and the receiver then "
-                   "rejects the config: 'give sigma_m (per axis) or drms_m, not both'")
 def test_trial_with_sensors_takes_a_receiver_given_by_drms(tmp_path):
     ship = tmp_path / "boxer.yaml"
     ship.write_text((LIBRARY_DIR / "container.yaml").read_text()

@@ -138,12 +138,7 @@ class Simulation:
         directed pair, its track of the other ship (the truth where it has no radar or AIS)."""
         b, x, d = self.batch, self.batch.x, self.decider
         true_vel = earth_velocity(x, b.env) if self.nav is None or self.obs is None else None
-        if self.nav is None:
-            own_vel = true_vel
-        else:  # the filter's ground velocity, rotated back from the body frame
-            c, s = np.cos(est[PSI]), np.sin(est[PSI])
-            own_vel = np.stack([est[base.U] * c - est[base.V] * s,
-                                est[base.U] * s + est[base.V] * c])
+        own_vel = true_vel if self.nav is None else self.nav.ground_velocity(x, b.env)
         if self.obs is not None:
             xp, active = self.obs.predicted_tracks(self.t_s)
             other = np.where(active[None, :], xp.T, np.nan)

@@ -372,6 +372,23 @@ class Navigation:
             self.est[:, self.ekf_idx] = self._ekf_update(x, env)
         return self.est
 
+    def ground_velocity(self, x: np.ndarray, env: Env) -> np.ndarray:
+        """``(2, n)`` each ship's estimate of its velocity over ground, north and east, m/s:
+        the ``pv`` filter's (its ``u, v`` are over ground), the ``ekf``'s velocity through the
+        water plus its estimate of the current, the truth (with the current) without a
+        filter."""
+        est = self.est
+        c, s = np.cos(est[PSI]), np.sin(est[PSI])
+        vel = np.stack([est[U] * c - est[V] * s, est[U] * s + est[V] * c])
+        none = ~self.filter_pv
+        if self.ekf_idx is not None and self.ekf_idx.size:
+            none[self.ekf_idx] = False
+            vel[0, self.ekf_idx] += self.ekf_s.x[:, ekf.XCN]
+            vel[1, self.ekf_idx] += self.ekf_s.x[:, ekf.XCE]
+        vel[0, none] += _take(env.current_north_mps, none)
+        vel[1, none] += _take(env.current_east_mps, none)
+        return vel
+
     def _step_tables(self) -> _StepTables:
         """Per-ship constants of the compiled step, gathered once (again only if a parameter
         set is replaced)."""

@@ -84,6 +84,7 @@ class Recorder:
     t: np.ndarray  # (n_records,)
     meas: np.ndarray  # (n_records, 4, n) GNSS fix north, east, fix valid, compass heading
     est: np.ndarray  # (n_records, 6, n) the estimate used by guidance and autopilot
+    est_vel: np.ndarray  # (n_records, 2, n) estimated ground velocity north/east
     tracks: np.ndarray | None = None  # (n_records, 5, m) tracks of other ships and "tracked"
     count: int = 0
 
@@ -92,7 +93,8 @@ class Recorder:
         z = np.zeros
         return cls(z((n_records, n_state, n_ships)), z((n_records, n_ships)),
                    z((n_records, n_ships)), z((n_records, 2, n_ships)), z(n_records),
-                   np.full((n_records, 4, n_ships), np.nan), z((n_records, 6, n_ships)))
+                   np.full((n_records, 4, n_ships), np.nan), z((n_records, 6, n_ships)),
+                   z((n_records, 2, n_ships)))
 
     def __call__(self, sim: Simulation) -> None:
         k = self.count
@@ -104,6 +106,7 @@ class Recorder:
         self.t[k] = sim.t_s
         nav = sim.nav
         self.est[k] = x[:6] if nav is None else nav.est
+        self.est_vel[k] = self.vel[k] if nav is None else nav.ground_velocity(x, sim.batch.env)
         if nav is not None and nav.fix is not None:
             self.meas[k] = (nav.fix.north_m, nav.fix.east_m, nav.fix.valid, nav.heading_meas)
         if sim.obs is not None:
@@ -168,9 +171,7 @@ class Recorder:
         """Measurements and the estimate beside the truth (estimate = truth without a filter)."""
         k = self.count
         est, meas = self.est[:k], self.meas[:k]
-        c, s = np.cos(est[:, PSI]), np.sin(est[:, PSI])
-        vn = est[:, U] * c - est[:, V] * s
-        ve = est[:, U] * s + est[:, V] * c
+        vn, ve = self.est_vel[:k, 0], self.est_vel[:k, 1]
         return {
             "gnss_north_m": meas[:, 0].ravel(),
             "gnss_east_m": meas[:, 1].ravel(),
@@ -212,7 +213,8 @@ def record_run(sim: Simulation, n_steps: int, every: int, on_record: RecordHook 
     Returns the recorder and the wall time of steps 2 .. n (the first step compiles any kernel
     not yet in the cache; time spent in ``on_record`` is not counted)."""
     batch = sim.batch
-    rec = Recorder.allocate(n_steps // every + 1, batch.n_ships, batch.x.shape[0])
+    # (one record more than the period gives, for the state a diverged run ends on)
+    rec = Recorder.allocate(n_steps // every + 2, batch.n_ships, batch.x.shape[0])
     hook_s = 0.0
 
     def record() -> None:
@@ -232,8 +234,7 @@ def record_run(sim: Simulation, n_steps: int, every: int, on_record: RecordHook 
     for k in range(2, n_steps + 1):
         sim.step()
         if sim.all_diverged:  # nothing moves any more: its last state ends the record
-            if k % every and rec.count < rec.t.shape[0]:
-                record()
+            record()
             break
         if k % every == 0:
             record()
@@ -277,8 +278,8 @@ def run_scenario(path: Path, out_dir: Path, on_record: RecordHook | None = None
     rec, wall = record_run(sim, n_steps, every, on_record)
     header = {"scenario": scn.name, "scenario_file": str(scn.path), "seed": scn.seed,
               "duration_s": scn.duration_s, "dt_s": scn.dt_s}
-    summary = run_summary(header, sim, n_steps, wall, max(n_steps - 1, 1), every * scn.dt_s,
-                          scn.domain)
+    summary = run_summary(header, sim, n_steps, wall, max(sim.step_index - 1, 1),
+                          every * scn.dt_s, scn.domain)
     write_run(out_dir, rec, sim, summary)
     raise_if_diverged(sim, out_dir)
     return summary

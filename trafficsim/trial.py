@@ -78,7 +78,9 @@ def sensor_columns(track: Mapping[str, np.ndarray], spec: Mapping[str, Any],
     x[U], x[V], x[R] = track["u_mps"], track["v_mps"], np.radians(track["r_degps"])
     x[RUDDER], x[RPS] = np.radians(track["rudder_deg"]), np.asarray(track["rpm"]) / 60.0
     config = merge_sensors(spec.get("sensors"), {"navigation": {"pv_sp_m2ps3": sp_m2ps3}})
-    config.setdefault("gnss", {}).setdefault("sigma_m", 2.0)
+    receiver = config.setdefault("gnss", {})
+    if "sigma_m" not in receiver and "drms_m" not in receiver:
+        receiver["sigma_m"] = 2.0
     nav = Navigation.build([config], ["ekf"], x[:, :1], seed, [0], [0], dt, [spec])
     receiver_p = pv.build([{"sigma_m": float(nav.gnss_p.sigma_m[0]), "sp_m2ps3": sp_m2ps3,
                             "dt_s": dt}])
@@ -91,12 +93,11 @@ def sensor_columns(track: Mapping[str, np.ndarray], spec: Mapping[str, Any],
         "est_sog_kn", "est_cog_deg", "est_r_degps")}
     for k in range(t.size):  # a recorded track is replayed in time order, one ship
         est = nav.update(x[:, k:k + 1], Env())
+        (vn,), (ve,) = nav.ground_velocity(x[:, k:k + 1], Env())  # with the ekf's current
         fix = nav.fix
         receiver = pv.step(receiver_p, receiver, np.nan_to_num(fix.north_m),
                            np.nan_to_num(fix.east_m), fix.valid)
         sog, cog = pv.velocity_over_ground(receiver)
-        vn = est[U] * np.cos(est[PSI]) - est[V] * np.sin(est[PSI])
-        ve = est[U] * np.sin(est[PSI]) + est[V] * np.cos(est[PSI])
         row = {
             "gnss_fix_north_m": fix.north_m, "gnss_fix_east_m": fix.east_m,
             "gnss_north_m": receiver.x[:, 0], "gnss_east_m": receiver.x[:, 1],

@@ -200,11 +200,6 @@ def test_a_campaign_whose_encounters_all_diverged_still_gets_both_figures(tmp_pa
     assert len(bars) == 3 and all(len(bar[0][1]) == 0 for bar in bars)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "BUG: trafficsim/campaign/figures.py:35-37 ends the histogram's bins at max(2 NM, 99th "
-    "percentile of the ranges) and passes the ranges unclipped, so pairs beyond the last edge "
-    "are not drawn; the module promises the smallest range of every ship pair (here 1 of 100 "
-    "pairs, the one at 10 NM, is lost)"))
 def test_the_histogram_counts_every_pair(tmp_path):
     ranges_nm = np.linspace(0.1, 10.0, 100)
     pairs = [(k, "head_on", r * NM, False, False, False) for k, r in enumerate(ranges_nm)]

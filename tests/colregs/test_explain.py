@@ -203,11 +203,6 @@ def test_a_decisions_file_lacking_a_feature_is_an_error_naming_it(tmp_path):
     assert err.value.path == str(tmp_path / "decisions.parquet")
 
 
-@pytest.mark.xfail(strict=True, raises=KeyError, reason=(
-    "BUG: explain._read (trafficsim/colregs/explain.py:29-30) does not list "
-    "'course_order_deg' among the columns read_parquet must check, but _changes and timeline "
-    "read it; a decisions file without it ends in KeyError instead of the DataError naming "
-    "the file"))
 def test_a_decisions_file_lacking_the_course_order_is_an_error_naming_it(tmp_path):
     write_parquet(tmp_path / "decisions.parquet", _columns(ROWS, drop="course_order_deg"))
     with pytest.raises(DataError, match="columns missing: course_order_deg"):

@@ -409,9 +409,6 @@ def test_a_long_present_range_is_labelled_left_of_its_middle(pg, range_px):
     assert label[:, 1].max() < middle_y + 30
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: layers.draw_cpa labels the present range only "
-                   "when its line is longer than RANGE_LABEL_PX (>), while RANGE_LABEL_PX is "
-                   "documented as 'labelled when its line is at least this long' (>=)")
 def test_a_present_range_of_exactly_80_px_is_labelled(pg):
     assert _range_label_px(pg, layers.RANGE_LABEL_PX).size > 0
 

@@ -34,13 +34,14 @@ def write_figures(rows: dict[str, np.ndarray], out: Path) -> list[Path]:
     fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)
     bins = np.linspace(0.0, max(2.0, float(np.percentile(rng_nm, 99)) if rng_nm.size else 2.0),
                        41)
-    ax.hist([rng_nm[~inside], rng_nm[inside]], bins=bins, stacked=True,
+    shown = np.minimum(rng_nm, bins[-1])  # the last bin holds every pair beyond it
+    ax.hist([shown[~inside], shown[inside]], bins=bins, stacked=True,
             label=["domain kept", "domain entered"], color=["#4c72b0", "#dd8452"])
     for r, name in ((R_COL_M, "collision range"), (R_NM_M, "near miss"),
                     (R_MIN_M, "safe passing")):
         ax.axvline(r / NM, color="k", ls="--", lw=0.8)
         ax.text(r / NM, ax.get_ylim()[1] * 0.95, f" {name}", rotation=90, va="top", fontsize=8)
-    ax.set_xlabel("smallest range of the pair (NM)")
+    ax.set_xlabel(f"smallest range of the pair (NM; the last bin: {bins[-1]:.1f} NM and more)")
     ax.set_ylabel("ship pairs")
     ax.legend()
     fig.tight_layout()

@@ -92,8 +92,8 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
               "duration_s": spec.duration_s, "dt_s": spec.dt_s,
               "campaign_dir": str(Path(campaign_dir).resolve()), "encounter": encounter,
               "encounter_type": encounters[0].kind}
-    summary = run_summary(header, sim, n_steps, wall, max(n_steps - 1, 1), every * spec.dt_s,
-                          spec.domain)
+    summary = run_summary(header, sim, n_steps, wall, max(sim.step_index - 1, 1),
+                          every * spec.dt_s, spec.domain)
     write_run(Path(out_dir), rec, sim, summary)
     raise_if_diverged(sim, Path(out_dir))
     return summary

@@ -27,7 +27,8 @@ def _read(run_dir: Path) -> dict[str, np.ndarray]:
                          "ship takes collision-avoidance decisions was expected)",
                          path=str(path))
     table = read_parquet(path, "decisions file",
-                         ("t_s", "ship", "other", "rules", "path", *_STATE, *FEATURES))
+                         ("t_s", "ship", "other", "rules", "path", *_STATE, "course_order_deg",
+                          *FEATURES))
     return {c: np.asarray(table.column(c).to_pylist()) for c in table.column_names}
 
 

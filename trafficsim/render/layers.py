@@ -231,7 +231,7 @@ def draw_cpa(pg: Any, surf: Any, view: View, style: st.Style, text: Text, data: 
         x1, y1 = view.to_px(n1, e1)
         colour = st.CPA_NEAR if dcpa < CPA_NEAR_M else st.CPA_FAR
         pg.draw.line(surf, st.FAINT, (x0[0], y0[0]), (x0[1], y0[1]), 1)
-        if math.hypot(x0[1] - x0[0], y0[1] - y0[0]) > RANGE_LABEL_PX:
+        if math.hypot(x0[1] - x0[0], y0[1] - y0[0]) >= RANGE_LABEL_PX:
             rng = math.hypot(n0[1] - n0[0], e0[1] - e0[0])
             label = text.render(f"{rng / NM:.2f} NM", st.FAINT, "small")
             surf.blit(label, (0.5 * (x0[0] + x0[1]) - label.get_width() - style.px(4),
