@@ -76,3 +76,14 @@ def test_names_and_paths():
         find_ship("nowhere/ship.yaml")
     spec = load_ship(str(LIBRARY_DIR / "catfish.yaml"))
     assert spec["model"] == "modular"
+
+
+def test_a_loaded_ship_is_the_callers_own():
+    """Files are parsed once and cached; what a caller changes in the dict it got (nested
+    tables included) changes nothing for the next caller."""
+    first = load_ship("cargo")
+    k = first["coefficients"]["K_prime"]
+    first["coefficients"]["K_prime"] = 99.0
+    first["particulars"]["length_m"] = 1.0
+    again = load_ship("cargo")
+    assert again["coefficients"]["K_prime"] == k and again["particulars"]["length_m"] > 1.0

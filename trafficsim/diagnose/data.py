@@ -67,9 +67,10 @@ def phases(rudder_rad: np.ndarray, r_radps: np.ndarray, dt_s: float) -> np.ndarr
 
 
 def noise_sigma(values: np.ndarray, angle: bool = False) -> float:
-    """White-noise standard deviation of one measured series (third differences)."""
+    """White-noise standard deviation of one measured series (third differences); NaN where
+    fewer than ten third differences are known (too little to tell noise from motion)."""
     v = unwrap_finite(values) if angle else np.asarray(values, float)
-    if np.sum(np.isfinite(v)) < 8:
+    if np.sum(np.isfinite(np.diff(v, 3))) < 10:
         return float("nan")
     return preprocess.noise_from_data(v, 1e-9)
 

@@ -51,7 +51,7 @@ class ShipDecision:
     def line(self, ship: str) -> str:
         """``own -> TS2: give way, crossing; alter course to 030 deg  [colregs.yaml: node]``."""
         order = ("" if math.isnan(self.course_order_deg)
-                 else f" to {self.course_order_deg % 360.0:03.0f} deg")
+                 else f" to {round(self.course_order_deg) % 360:03d} deg")
         state = (f"{words(self.role)}, {words(self.encounter)}" if self.has_role
                  else "no role")
         return (f"{ship} -> {self.other}: {state}; {words(self.manoeuvre)}{order}  "

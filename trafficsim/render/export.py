@@ -3,6 +3,7 @@ drawn while the run goes), as PNG frames, an animated GIF or an MP4."""
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,7 +39,7 @@ def frame_stride(every_s: float | None, record_every_s: float, key: str = "--eve
     if every_s is None:
         return 1
     ratio = every_s / record_every_s
-    if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
+    if not math.isfinite(ratio) or ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
         raise InputError(f"expected a whole multiple of the run's record period "
                          f"({record_every_s:g} s), got {every_s:g} s", key=key)
     return round(ratio)

@@ -11,6 +11,7 @@ format of Miyauchi et al. 2022): it is read at run time as an ``mmg_berthing`` s
 
 from __future__ import annotations
 
+import copy
 import difflib
 from functools import lru_cache
 from pathlib import Path
@@ -121,7 +122,9 @@ def find_ship(type_or_path: str, base_dir: Path | None = None) -> Path:
 
 def load_ship(type_or_path: str, base_dir: Path | None = None,
               flag: str | None = None) -> dict[str, Any]:
-    """Load and validate a ship file; returns it as a plain dict (plus ``path``).
+    """Load and validate a ship file; returns it as a plain dict (plus ``path``), the caller's
+    own: files are parsed once and cached, and each call gets a deep copy, so changing what it
+    returns changes nothing for the next caller.
 
     ``flag``: the command-line flag that named the ship, for the message of an unknown one."""
     try:
@@ -130,7 +133,7 @@ def load_ship(type_or_path: str, base_dir: Path | None = None,
         if flag is None:
             raise
         raise ShipLibraryError(err.message, key=flag) from None
-    return dict(_load_cached(str(found)))
+    return copy.deepcopy(_load_cached(str(found)))
 
 
 @lru_cache(maxsize=256)

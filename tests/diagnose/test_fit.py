@@ -1,0 +1,402 @@
+"""Fitting and ranking effects (trafficsim.diagnose.fit) on small exact data: runs replayed
+from the KVLCC2 and measured through an effect's measurement model without noise, so the cost
+of the right effect is zero and the cost of a known error is known in closed form."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+import pytest
+
+from trafficsim import effects
+from trafficsim.diagnose import fit
+from trafficsim.diagnose.data import CHANNELS, PHASES, Dataset, dataset
+from trafficsim.identify import replay
+from trafficsim.identify.preprocess import Kinematics
+from trafficsim.io.trialdata import TrialData
+from trafficsim.ships import base
+from trafficsim.ships.library import load_ship
+
+DT = 2.0
+N = 61  # 120 s; windows of 30 s: 16 samples from 0, 30, 60, 90 s
+HORIZON = 30.0
+SPEC = load_ship("kvlcc2")
+LENGTH = float(SPEC["particulars"]["length_m"])
+SPEED = float(SPEC["service_speed_kn"]) * 1852.0 / 3600.0
+_T = np.arange(N) * DT
+ZIGZAG = np.where(_T < 20, 0.0, np.where(_T < 80, 20.0, -20.0))
+TURN = np.where(_T < 20, 0.0, -30.0)
+
+
+def _rps() -> float:
+    family = base.families()[SPEC["model"]]
+    return float(base.steady_rps_for_speed(family, family.build([SPEC]),
+                                           base.Actuators.from_specs([SPEC]),
+                                           np.array([SPEED]))[0])
+
+
+def run(name: str, rudder_deg: np.ndarray, psi0: float = 0.0,
+        hidden: Mapping[str, Mapping[str, float]] | None = None) -> Kinematics:
+    """The KVLCC2 replayed through ``rudder_deg`` (in the ``hidden`` current), measured through
+    the ``hidden`` effects without noise; the "smoothed" state is the measured one."""
+    hidden = dict(hidden or {})
+    rud = np.radians(np.asarray(rudder_deg, float))
+    rps = np.full(N, _rps())
+    off = effects.environment_offset(hidden)
+    x0 = np.zeros((base.N_STATE, 1))
+    x0[2, 0], x0[3, 0] = psi0, SPEED
+    env = np.zeros((1, N, 4))
+    env[..., 0], env[..., 1] = off[0], off[1]
+    win = replay.Windows(x0, np.stack([rud, rps], -1)[None], env, np.array([DT]),
+                         np.array([N]), np.full((1, N, 6), np.nan), np.array([0]),
+                         np.array([0.0]), (name,))
+    truth, _ = replay.simulate(replay.model_rows([SPEC]), win)
+    m = {k: v[0, 0] for k, v in effects.measure(truth, np.array([DT]), [hidden]).items()}
+    trial = TrialData(name, "", _T.copy(), m["north"], m["east"], np.mod(m["psi"], 2 * np.pi),
+                      rud, rps, u_mps=m["u"], v_mps=m["v"], r_radps=m["r"], sog_mps=m["sog"],
+                      cog_rad=m["cog"])
+    smooth = {"north_m": m["north"], "east_m": m["east"], "psi_rad": m["psi"],
+              "u_mps": m["u"], "v_mps": m["v"], "r_radps": m["r"]}
+    return Kinematics(trial, smooth, {}, {})
+
+
+def bias(deg: float) -> dict[str, dict[str, float]]:
+    return {"compass_bias": {"bias_deg": deg, "deviation_b_deg": 0.0, "deviation_c_deg": 0.0}}
+
+
+def current(north: float, east: float) -> dict[str, dict[str, float]]:
+    return {"current": {"north_mps": north, "east_mps": east}}
+
+
+def exact(hidden: Mapping[str, Any] | None = None, rudder: np.ndarray = ZIGZAG,
+          name: str = "a", psi0: float = 6.0) -> Dataset:
+    """One run cut into 4 windows (the heading passes 2 pi on the way)."""
+    return dataset([run(name, rudder, psi0, hidden)], HORIZON)
+
+
+def _shifted(data: Dataset, channel: str, offset: float) -> Dataset:
+    target = data.target.copy()
+    target[..., CHANNELS.index(channel)] += offset
+    return Dataset(data.runs, data.windows, target, data.phase, data.sigma, data.channels)
+
+
+def _scored(data: Dataset) -> np.ndarray:
+    """Samples an EffectResiduals scores: in the window, after its first sample."""
+    valid = data.windows.valid().copy()
+    valid[:, 0] = False
+    return valid
+
+
+# --- EffectSet --------------------------------------------------------------------------------
+
+
+def test_effect_set_lays_out_base_global_then_per_run_by_effect_key_run() -> None:
+    param = fit.EffectSet.of(SPEC, ("current", "lever_arm", "wind"), refit=("R0",),
+                             runs=("r1", "r2"))
+    assert param.names == ("base.R0", "lever_arm.x_m", "lever_arm.y_m",
+                           "current.north_mps@r1", "current.north_mps@r2",
+                           "current.east_mps@r1", "current.east_mps@r2",
+                           "wind.north_mps@r1", "wind.north_mps@r2",
+                           "wind.east_mps@r1", "wind.east_mps@r2")
+    assert param.p == 11 and param.n_global == 3 and param.per_run == ("current", "wind")
+    # lever arm bounds are fractions of the length (0.5 L ahead, 0.25 L abeam)
+    assert param.lower[1:3].tolist() == [-0.5 * LENGTH, -0.25 * LENGTH]
+    assert param.upper[1:3].tolist() == [0.5 * LENGTH, 0.25 * LENGTH]
+    assert param.start[0] == SPEC["coefficients"]["R0"]
+    assert param.start[7:].tolist() == [0.5] * 4  # the wind's start value
+    groups = param.columns()
+    assert [g.tolist() for g, _ in groups] == [[0], [1], [2], [3, 4], [5, 6], [7, 8], [9, 10]]
+    assert [per for _, per in groups] == [False] * 3 + [True] * 4
+
+
+def test_effect_set_without_environment_has_no_free_runs() -> None:
+    param = fit.EffectSet.of(SPEC, ("resistance",), runs=("r1", "r2"))
+    assert param.free_runs == () and param.names == ("resistance.scale",)
+    assert param.n_global == 1 and [g.tolist() for g, _ in param.columns()] == [[0]]
+
+
+def test_effect_set_starts_are_given_per_run_and_clipped_into_bounds() -> None:
+    param = fit.EffectSet.of(SPEC, ("compass_bias", "current"), {**bias(50.0), **current(1, 2)},
+                             runs=("r1", "r2"), run_start={"r2": current(-9.0, 0.25)})
+    assert param.start.tolist() == [20.0, 0.0, 0.0, 1.0, -3.0, 2.0, 0.25]
+
+
+def test_effect_set_values_map_theta_with_fixed_and_run_fixed() -> None:
+    param = fit.EffectSet.of(SPEC, ("current", "compass_bias", "resistance"),
+                             runs=("r1", "r2"), fixed={"resistance": {"scale": 1.4}},
+                             run_fixed={"r0": current(0.1, 0.2)})
+    assert "resistance.scale" not in param.names
+    theta = np.arange(1.0, param.p + 1.0)
+    assert param.values(theta) == {
+        "resistance": {"scale": 1.4},
+        "compass_bias": {"bias_deg": 1.0, "deviation_b_deg": 2.0, "deviation_c_deg": 3.0}}
+    assert param.run_values(theta) == {"r0": current(0.1, 0.2), "r1": current(4.0, 6.0),
+                                       "r2": current(5.0, 7.0)}
+
+
+def test_effect_set_ship_takes_refitted_coefficients_on_a_copy() -> None:
+    param = fit.EffectSet.of(SPEC, ("resistance",), refit=("R0", "N_r"))
+    ship = param.ship(np.array([0.03, -0.06, 1.2]))
+    assert ship["coefficients"]["R0"] == 0.03 and ship["coefficients"]["N_r"] == -0.06
+    assert SPEC["coefficients"]["R0"] == 0.022  # the base spec is untouched
+    plain = fit.EffectSet.of(SPEC, ("resistance",)).ship(np.array([1.2]))
+    assert plain["coefficients"] == SPEC["coefficients"]
+
+
+# --- small pure helpers -----------------------------------------------------------------------
+
+
+def test_alternate_takes_even_windows_of_each_run_in_time_order() -> None:
+    windows = SimpleNamespace(run=np.array([1, 0, 1, 0, 1, 0, 0]),
+                              t0_s=np.array([20.0, 30.0, 0.0, 0.0, 10.0, 10.0, 20.0]))
+    first = fit.alternate(SimpleNamespace(windows=windows))
+    # run 0 in time order: windows 3, 5, 6, 1; run 1: windows 2, 4, 0
+    assert first.tolist() == [True, False, True, True, False, False, True]
+
+
+def test_penalised_cost() -> None:
+    assert fit.penalised(10.0, 3, 60) == pytest.approx(11.0)
+    assert fit.penalised(10.0, 0, 60) == 10.0
+    assert fit.penalised(2.0, 1, 0) == pytest.approx(6.0)  # n_eff counted at least once
+
+
+def test_candidate_shrinkage_train_holdout_and_in_sample() -> None:
+    base_c = fit.Candidate((), {}, {}, 8.0, 10.0, 0)
+    c = fit.Candidate(("wind",), {}, {}, 2.0, 4.0, 4, cost_hold_insample=3.0)
+    assert c.shrinkage(base_c) == pytest.approx((0.75, 0.6))
+    assert c.shrinkage_insample(base_c) == pytest.approx(0.7)
+    c.cost_hold_insample = None
+    assert c.shrinkage_insample(base_c) == pytest.approx(0.6)
+
+
+def test_candidate_mean_value_global_or_mean_over_runs() -> None:
+    c = fit.Candidate(("current", "resistance"), {"resistance": {"scale": 1.3}}, {}, 0.0, 0.0,
+                      0, run_values={"a": current(1.0, 2.0), "b": current(3.0, -2.0),
+                                     "c": current(100.0, 100.0)})
+    assert c.mean_value("resistance", ["a"]) == {"scale": 1.3}
+    assert c.mean_value("current", ["a", "b", "missing"]) == {"north_mps": 2.0,
+                                                              "east_mps": 0.0}
+
+
+def test_mean_start_averages_the_folds_that_have_the_run() -> None:
+    folds = ({"a": current(1.0, 2.0), "b": current(5.0, 5.0)}, {"a": current(3.0, 4.0)})
+    assert fit._mean_start(folds, ["a", "b", "c"]) == {"a": current(2.0, 3.0),
+                                                       "b": current(5.0, 5.0)}
+
+
+def test_scales_from_the_data_speed_and_ship_length() -> None:
+    data = exact()
+    valid = data.windows.valid()
+    u, v = data.windows.target[..., 3][valid], data.windows.target[..., 4][valid]
+    speed = np.sqrt(np.mean(u * u + v * v))
+    sc = fit.scales(data, LENGTH)
+    assert sc["north"] == sc["east"] == pytest.approx(32.0)
+    assert sc["psi"] == sc["cog_psi"] == 0.05
+    assert sc["u"] == sc["v"] == sc["sog"] == pytest.approx(0.05 * speed)
+    assert sc["r"] == pytest.approx(0.05 * speed / LENGTH)
+
+
+# --- EffectResiduals on exact data ------------------------------------------------------------
+
+
+def test_exact_data_has_zero_cost_and_every_scored_sample_counted() -> None:
+    data = exact()
+    assert data.channels == CHANNELS and data.windows.w == 4
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
+    assert res.m == 4 * 15 * 8  # the first sample of each window is the start state
+    assert res.cost(np.zeros(0)) < 1e-20
+
+
+def test_position_offset_costs_its_closed_form() -> None:
+    data = exact()
+    sc = fit.scales(data, LENGTH)
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), _shifted(data, "north", 5.0), sc)
+    n_north = int(_scored(data).sum())
+    assert res.cost(np.zeros(0)) == pytest.approx(0.5 * n_north * (5.0 / sc["north"]) ** 2)
+    by_channel = res.by_channel(np.zeros(0))
+    assert by_channel["north"] == pytest.approx(5.0)
+    assert by_channel["east"] < 1e-9
+    # the error is uniform, so each phase's share of the cost is its share of the samples
+    by_phase = res.by_phase(np.zeros(0))
+    scored = _scored(data)
+    for k, name in enumerate(PHASES):
+        count = int(np.sum((data.phase == k) & scored))
+        if count == 0:
+            assert name not in by_phase
+            continue
+        assert by_phase[name]["samples"] == count
+        assert by_phase[name]["cost_share"] == pytest.approx(count / n_north)
+        assert by_phase[name]["north"] == pytest.approx(5.0)
+    assert sum(p["cost_share"] for p in by_phase.values()) == pytest.approx(1.0)
+
+
+def test_heading_residual_wraps_and_reads_in_degrees() -> None:
+    data = exact()
+    sc = fit.scales(data, LENGTH)
+    delta = np.radians(0.5)
+    # a measured heading one turn (plus half a degree) off differs by half a degree
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()),
+                              _shifted(data, "psi", 2 * np.pi + delta), sc)
+    n = int(_scored(data).sum())
+    assert res.cost(np.zeros(0)) == pytest.approx(0.5 * n * (delta / 0.05) ** 2, rel=1e-6)
+    assert res.by_channel(np.zeros(0))["psi"] == pytest.approx(0.5, rel=1e-6)
+
+
+def test_floor_is_half_the_weighted_noise_per_scored_sample() -> None:
+    data = exact()
+    sigma = np.array([1.0, 2.0, 0.001, 0.01, 0.02, 1e-4, 0.03, np.nan])
+    data = Dataset(data.runs, data.windows, data.target, data.phase, sigma, data.channels)
+    sc = fit.scales(data, LENGTH)
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, sc)
+    n = int(_scored(data).sum())
+    expected = 0.5 * n * sum((s / sc[c]) ** 2 for s, c in zip(sigma[:7], CHANNELS, strict=False))
+    assert res.floor() == pytest.approx(expected)
+
+
+def test_ahead_interpolates_the_smoothed_state_after_each_window_start() -> None:
+    data = exact()
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
+    sm = data.runs[0].smooth
+    keys = ("north_m", "east_m", "psi_rad", "u_mps", "v_mps", "r_radps")
+    assert np.allclose(res.ahead(0.0)[:6], data.windows.x0[:6])
+    later = res.ahead(3.0)  # 1.5 samples after each start (0, 15, 30, 45)
+    for i, s in enumerate((0, 15, 30, 45)):
+        for j, k in enumerate(keys):
+            assert later[j, i] == pytest.approx(0.5 * (sm[k][s + 1] + sm[k][s + 2]))
+
+
+def test_gear_start_follows_the_logged_rudder_at_the_rate_limit() -> None:
+    data = exact()
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
+    logged = data.windows.inputs[:, 0, 0]
+    # tau 0.2 s (stable Euler at 0.2 s), rate 0.5 deg/s: the gear ramps from the 20 deg step at
+    # 20 s and reaches 20 deg at 60 s; the window starting at 30 s finds it at 5 deg, and from
+    # 80 s, with the order at -20 deg, it has come back 5 deg by 90 s
+    steer = np.array([[0.0, 0.0], [0.2, np.radians(0.5)]])
+    start = res.gear_start(steer)
+    assert np.degrees(logged).tolist() == pytest.approx([0.0, 20.0, 20.0, -20.0])
+    assert np.array_equal(start[0], logged)  # no gear: the logged angle
+    assert np.degrees(start[1]).tolist() == pytest.approx([0.0, 5.0, 20.0, 15.0], abs=1e-6)
+
+
+def test_env_offsets_give_every_window_its_run_current() -> None:
+    a, b = run("a", ZIGZAG, 0.0), run("b", TURN, 0.0)
+    data = dataset([a, b], HORIZON)
+    param = fit.EffectSet.of(SPEC, ("current",), runs=("a", "b"))
+    res = fit.EffectResiduals(param, data, fit.scales(data, LENGTH))
+    theta = np.array([0.1, 0.2, 0.3, 0.4])  # north a, north b, east a, east b
+    off = res.env_offsets(theta[None])[0]
+    assert off.shape == (8, 4)
+    assert np.allclose(off[:4], [0.1, 0.3, 0.0, 0.0]) and np.allclose(off[4:], [0.2, 0.4, 0, 0])
+    no_env = fit.EffectResiduals(fit.EffectSet.of(SPEC, ("compass_bias",)), data,
+                                 fit.scales(data, LENGTH))
+    assert not no_env.env_offsets(np.zeros((2, 3))).any()
+
+
+def test_per_run_jacobian_equals_one_column_at_a_time_differences() -> None:
+    data = dataset([run("a", ZIGZAG, 0.0, current(0.1, 0.2)),
+                    run("b", TURN, 1.0, current(-0.2, 0.1))], HORIZON)
+    param = fit.EffectSet.of(SPEC, ("current", "compass_bias"), runs=("a", "b"))
+    res = fit.EffectResiduals(param, data, fit.scales(data, LENGTH))
+    x = np.array([0.5, 0.0, 0.0, 0.05, 0.05, 0.05, 0.05])
+    h = np.array([1e-3, 2e-3, 3e-3, 1e-3, 2e-3, 1e-3, 1e-3])
+    r0 = res(x[None])[0]
+    jac = res.jacobian(x, r0, h)
+    for j in range(x.size):
+        xp = x.copy()
+        xp[j] += h[j]
+        assert np.allclose(jac[:, j], (res(xp[None])[0] - r0) / h[j], rtol=1e-9, atol=1e-9), j
+    assert jac[res._row_run == "b", 3:5].any() and not jac[res._row_run == "a", 4].any()
+
+
+def test_cross_fitted_scores_each_fold_with_the_other_folds_values() -> None:
+    data = exact()
+    sc = fit.scales(data, LENGTH)
+    params = (fit.EffectSet.of(SPEC, ("compass_bias",), fixed=bias(1.0)),
+              fit.EffectSet.of(SPEC, ("compass_bias",), fixed=bias(-2.0)))
+    first = fit.alternate(data)
+    assert first.tolist() == [True, False, True, False]
+    errs = fit.CrossFitted(params, data, sc, first).errors(np.zeros(0))[0]
+    e_a = fit.EffectResiduals(params[0], data, sc).errors(np.zeros(0))[0]
+    e_b = fit.EffectResiduals(params[1], data, sc).errors(np.zeros(0))[0]
+    assert np.array_equal(errs[[0, 2]], e_b[[0, 2]]) and np.array_equal(errs[[1, 3]], e_a[[1, 3]])
+    assert not np.allclose(e_a, e_b)
+
+
+# --- fits -------------------------------------------------------------------------------------
+
+
+def test_coherent_compass_bias_removes_the_whole_gap() -> None:
+    data = exact(bias(3.0))
+    sc = fit.scales(data, LENGTH)
+    right = fit.EffectResiduals(fit.EffectSet.of(SPEC, ("compass_bias",), fixed=bias(3.0)),
+                                data, sc)
+    wrong = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, sc)
+    assert right.cost(np.zeros(0)) < 1e-20 < 1.0 < wrong.cost(np.zeros(0))
+
+
+def test_grid_start_picks_the_grid_point_of_a_global_effect() -> None:
+    data = exact(bias(-2.5))
+    param = fit.EffectSet.of(SPEC, ("compass_bias",))
+    res = fit.EffectResiduals(param, data, fit.scales(data, LENGTH))
+    assert fit._grid_start(param, res, "compass_bias", param.initial()).tolist() == [-2.5, 0, 0]
+
+
+def test_grid_start_picks_each_runs_own_grid_point() -> None:
+    r1, r2 = 0.03 * SPEED, 0.075 * SPEED  # the grid's radii
+    c45 = np.sqrt(0.5)
+    data = dataset([run("a", ZIGZAG, 0.0, current(0.0, r1)),
+                    run("b", TURN, 2.0, current(-r2 * c45, -r2 * c45))], HORIZON)
+    param = fit.EffectSet.of(SPEC, ("current",), runs=("a", "b"))
+    res = fit.EffectResiduals(param, data, fit.scales(data, LENGTH))
+    x = fit._grid_start(param, res, "current", param.initial())
+    assert x == pytest.approx([0.0, -r2 * c45, r1, -r2 * c45], abs=1e-9)
+
+
+def test_fit_set_recovers_a_compass_bias_off_the_grid() -> None:
+    train, hold = exact(bias(3.2)), exact(bias(3.2), TURN, "b", 1.0)
+    sc = fit.scales(train, LENGTH)
+    cand = fit.fit_set(SPEC, ("compass_bias",), train, hold, sc)
+    base_c = fit.fit_set(SPEC, (), train, hold, sc)
+    # the run sails headings within 20 deg of north, so bias and deviation trade off: what is
+    # determined is the compass error over those headings
+    psi = train.runs[0].smooth["psi_rad"]
+    error = effects.compass_error(psi, cand.values["compass_bias"])
+    assert np.degrees(error) == pytest.approx(np.full(N, 3.2), abs=2e-3)
+    assert cand.p == 3 and cand.run_values == {} and cand.fold_run_values == ()
+    assert base_c.effects == () and base_c.p == 0 and base_c.cost_hold > 1.0
+    assert cand.shrinkage(base_c) == pytest.approx((1.0, 1.0), abs=1e-3)
+    assert cand.table["compass_bias.bias_deg"]["value"] == cand.values["compass_bias"]["bias_deg"]
+
+
+def test_fit_set_cross_fits_the_current_of_a_held_out_run() -> None:
+    train = exact(current(0.1, 0.25), ZIGZAG, "a", 0.0)
+    hold = exact(current(0.15, -0.05), TURN, "b", 1.0)
+    cand = fit.fit_set(SPEC, ("current",), train, hold, fit.scales(train, LENGTH))
+    for name, (north, east) in (("a", (0.1, 0.25)), ("b", (0.15, -0.05))):
+        got = cand.run_values[name]["current"]
+        assert got["north_mps"] == pytest.approx(north, abs=1e-3), name
+        assert got["east_mps"] == pytest.approx(east, abs=1e-3), name
+    assert len(cand.fold_run_values) == 2
+    for fold in cand.fold_run_values:  # each half of run b alone finds its current too
+        assert fold["b"]["current"]["east_mps"] == pytest.approx(-0.05, abs=1e-3)
+    assert cand.p == 2  # two parameters per held-out run
+    assert cand.cost_hold < 1e-8 and cand.cost_hold_insample is not None
+    assert "current.north_mps@b" in cand.table and "current.north_mps@a" in cand.table
+
+
+def test_phase_shrinkage_of_the_right_effect_is_complete_in_every_phase() -> None:
+    train, hold = exact(bias(2.0)), exact(bias(2.0), TURN, "b", 1.0)
+    sc = fit.scales(train, LENGTH)
+    cand = fit.Candidate(("compass_bias",), bias(2.0), {}, 0.0, 0.0, 3)
+    half = fit.Candidate(("compass_bias",), bias(1.0), {}, 0.0, 0.0, 3)
+    full = fit.phase_shrinkage(SPEC, cand, hold, sc)
+    present = {PHASES[k] for k in np.unique(hold.phase[_scored(hold)])}
+    assert set(full) == present and len(present) >= 2
+    assert all(v == pytest.approx(1.0, abs=1e-9) for v in full.values())
+    # against a candidate as its own base nothing shrinks
+    assert all(v == pytest.approx(0.0, abs=1e-12)
+               for v in fit.phase_shrinkage(SPEC, half, hold, sc, half).values())

@@ -1,0 +1,168 @@
+"""Reports of a diagnosis (trafficsim.diagnose.report): the JSON summary of a hand-made
+diagnosis on small exact data, the one-page markdown and parameter text of a hand-made report,
+and the files written."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tests.diagnose.test_fit import LENGTH, SPEC, TURN, bias, exact
+from trafficsim.diagnose import fit, report
+
+
+def _table(**values: tuple[float, float]) -> dict[str, dict[str, float]]:
+    """Fit table rows ``name=(value, half width)`` (``__`` for ``.``, ``_at_`` for ``@``)."""
+    return {k.replace("__", ".").replace("_at_", "@"):
+            {"value": v, "ci95_low": v - h, "ci95_high": v + h} for k, (v, h) in values.items()}
+
+
+def _diagnosis(chosen_effect: bool = True) -> tuple[fit.Diagnosis, Any, Any]:
+    train, hold = exact(bias(2.0)), exact(bias(2.0), TURN, "b", 1.0)
+    base_c = fit.Candidate((), {}, {}, 8.0, 10.0, 0)
+    right = fit.Candidate(("compass_bias",), bias(2.0), _table(compass_bias__bias_deg=(2.0, 0.1)),
+                          2.0, 1.0, 3)
+    # resistance at its off value: the base ship itself, nothing shrinks in any phase
+    idle = fit.Candidate(("resistance",), {"resistance": {"scale": 1.0}},
+                         _table(resistance__scale=(1.0, 0.02)), 6.0, 9.0, 1,
+                         cost_hold_insample=7.0)
+    residuals = {"holdout": {"before": {"by_phase": {
+        "approach": {"samples": 3, "cost_share": 0.2}, "execute": {"samples": 4, "cost_share": 0.7},
+        "steady": {"samples": 5, "cost_share": 0.1}}}}}
+    chosen = right if chosen_effect else base_c
+    diag = fit.Diagnosis(base_c, [right, idle], chosen, [{"added": "compass_bias"}], 0.5, 2.0,
+                         30, chosen_effect, "verdict text", 1.5, residuals)
+    return diag, train, hold
+
+
+def test_summary_scores_and_gap_of_a_hand_made_diagnosis() -> None:
+    diag, train, hold = _diagnosis()
+    rep = report.summary(SPEC, diag, train, hold, {"refit": ["R0"]})
+    first, second = rep["ranking"]
+    assert first["effect"] == "compass_bias" and second["effect"] == "resistance"
+    assert first["shrinkage_train"] == pytest.approx(0.75)
+    assert first["shrinkage_holdout"] == pytest.approx(0.9)
+    assert first["shrinkage_holdout_insample"] == pytest.approx(0.9)
+    assert second["shrinkage_holdout_insample"] == pytest.approx(0.3)
+    # 1 - J (1 + 2 p / n_eff) / J_base
+    assert first["penalised_score"] == pytest.approx(1 - 1.0 * (1 + 6 / 30) / 10.0)
+    assert second["penalised_score"] == pytest.approx(1 - 9.0 * (1 + 2 / 30) / 10.0)
+    # per phase on the held-out data: the right bias removes everything, the idle effect nothing
+    assert len(first["per_phase"]) >= 2 and set(first["per_phase"]) == set(second["per_phase"])
+    assert all(v == pytest.approx(1.0, abs=1e-9) for v in first["per_phase"].values())
+    assert all(v == pytest.approx(0.0, abs=1e-9) for v in second["per_phase"].values())
+    ch = rep["chosen"]
+    assert ch["effects"] == ["compass_bias"] and ch["per_phase"] == first["per_phase"]
+    assert (ch["shrinkage_train"], ch["shrinkage_holdout"]) == pytest.approx((0.75, 0.9))
+    g = rep["gap"]
+    assert g["holdout_gap_over_floor"] == pytest.approx(5.0)
+    assert g["phases_by_share"] == ["execute", "approach", "steady"]
+    assert (g["cost_holdout_before"], g["cost_holdout_after"]) == (10.0, 1.0)
+    assert rep["windows"] == {"train": 4, "holdout": 4, "samples_per_window": 16}
+    assert rep["channel_scales"]["north"] == pytest.approx(0.1 * LENGTH)
+    assert rep["refit"] == ["R0"] and rep["verdict"] == "verdict text"
+
+
+def test_summary_with_nothing_chosen() -> None:
+    diag, train, hold = _diagnosis(chosen_effect=False)
+    ch = report.summary(SPEC, diag, train, hold)["chosen"]
+    assert ch["effects"] == [] and ch["per_phase"] == {}
+    assert ch["shrinkage_train"] == ch["shrinkage_holdout"] == 0.0
+    assert ch["shrinkage_holdout_insample"] == 0.0
+
+
+def test_parameter_text_global_with_half_width_and_runs_counted() -> None:
+    table = _table(compass_bias__bias_deg=(2.0, 0.1), base__R0=(0.03, 0.001),
+                   current__north_mps_at_a=(0.1, 0.01), current__east_mps_at_a=(0.2, 0.01),
+                   current__north_mps_at_b=(0.3, 0.01))
+    assert report.parameter_text(table) == ("bias_deg 2 +- 0.1; "
+                                            "one value per run (2 runs, report.json)")
+    assert report.parameter_text(_table(resistance__scale=(1.23456, 0.0456))) == \
+        "scale 1.235 +- 0.046"
+    assert report.parameter_text({}) == ""
+
+
+def test_confirmation_lines() -> None:
+    row = {"run": "a", "role": "training", "fitted_speed_mps": 12.345, "fitted_towards_deg": 90.4,
+           "logged_vector_speed_mps": 11.111, "logged_mean_speed_mps": 12.0,
+           "logged_towards_deg": 100.6, "direction_error_deg": -10.2}
+    conf = {"text": "Winds agree.", "wind": {"runs": [row, {**row, "run": "b",
+                                                             "direction_error_deg": 4.6}],
+                                             "n_runs": 2}}
+    lines = report.confirmation_lines(conf)
+    assert lines[0] == "## Confirmation (logged wind, not used by the diagnosis)"
+    assert lines[2] == "Winds agree."
+    assert "Fitted `wind` per run (air or water velocity towards):" in lines
+    assert "| a | training | 12.3 | 90 | 11.11 / 12.00 | 101 | -10 |" in lines
+    assert "| b | training | 12.3 | 90 | 11.11 / 12.00 | 101 | +5 |" in lines
+
+
+def _rep(chosen: tuple[str, ...] = ("compass_bias",)) -> dict[str, Any]:
+    nan = float("nan")
+    before = {"approach": {"samples": 3, "cost_share": 0.25, "north": 12.345, "psi": 2.0},
+              "steady": {"samples": 7, "cost_share": 0.75, "north": 0.5, "psi": 1.0}}
+    after = {"approach": {"samples": 3, "cost_share": 0.5, "north": 0.01234, "psi": nan},
+             "steady": {"samples": 7, "cost_share": 0.5, "north": 0.02, "psi": 0.1}}
+    return {
+        "ship": "kvlcc2", "verdict": "compass_bias: held-out gap 90 % smaller",
+        "ranking": [{"effect": "compass_bias", "parameters": _table(
+            compass_bias__bias_deg=(2.0, 0.1)), "shrinkage_train": 0.754,
+            "shrinkage_holdout": 0.9, "shrinkage_holdout_insample": 0.926,
+            "penalised_score": 0.88}],
+        "chosen": {"effects": list(chosen), "shrinkage_holdout": 0.9 if chosen else 0.0,
+                   "per_phase": {"approach": 0.999, "steady": 0.5} if chosen else {}},
+        "gap": {"cost_train_before": 8.0, "cost_holdout_before": 10.0, "cost_train_after": 2.0,
+                "cost_holdout_after": 1.0, "noise_floor_train": 0.5, "noise_floor_holdout": 2.0,
+                "holdout_gap_over_floor": 5.0, "phases_by_share": ["steady", "approach"]},
+        "residuals": {"holdout": {"before": {"by_phase": before},
+                                  "after": {"by_phase": after}}},
+        "channels": ["north", "psi"],
+    }
+
+
+def test_markdown_where_which_and_how_far() -> None:
+    lines = report.markdown(_rep()).splitlines()
+    assert lines[0] == "# Sim-to-real gap diagnosis: kvlcc2"
+    assert "**Verdict:** compass_bias: held-out gap 90 % smaller" in lines
+    assert ("Held-out gap 5.0 times the data's noise floor. Phases by share of the held-out "
+            "gap: steady 75 %, approach 25 %.") in lines
+    assert "| phase | samples | north (m) before / after | psi (deg) before / after |" in lines
+    # phases in their manoeuvre order, absent ones left out
+    rows = [ln for ln in lines if ln.startswith(("| approach", "| execute", "| steady"))]
+    assert rows == ["| approach | 3 | 12.3 / 0.0123 | 2 / nan |",
+                    "| steady | 7 | 0.5 / 0.02 | 1 / 0.1 |"]
+    assert "| 1 | compass_bias | bias_deg 2 +- 0.1 | 75 % | 90 % | 93 % | 88 % |" in lines
+    assert ("Chosen (forward selection): compass_bias. Held-out cost 10 -> 1 (90 % smaller; "
+            "noise floor 2); training 8 -> 2.") in lines
+    assert "Held-out shrinkage per phase: approach 100 %, steady 50 %." in lines
+    assert "![residuals by phase](residuals_by_phase.png)" in lines
+    assert not any(ln.startswith(("## Confirmation", "## Notes")) for ln in lines)
+
+
+def test_markdown_with_nothing_chosen_confirmation_and_notes() -> None:
+    rep = _rep(chosen=())
+    rep["notes"] = "ignored entries: x"
+    rep["confirmation"] = {"text": "conf text", "wind": {"runs": []}}
+    text = report.markdown(rep)
+    assert "Chosen (forward selection): nothing." in text
+    assert "Held-out shrinkage per phase" not in text
+    assert text.index("## Confirmation") < text.index("## Notes\n\nignored entries: x")
+
+
+def test_write_puts_json_markdown_and_plot_in_a_new_folder(tmp_path: Path) -> None:
+    rep = _rep()
+    out = tmp_path / "deep" / "out"
+    report.write(out, rep)
+    saved = json.loads((out / "report.json").read_text())
+    assert saved["residuals"]["holdout"]["after"]["by_phase"]["approach"]["psi"] is None  # NaN
+    assert saved["ranking"][0]["parameters"]["compass_bias.bias_deg"]["value"] == 2.0
+    assert (out / "report.md").read_text() == report.markdown(rep)
+    png = (out / "residuals_by_phase.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 1000
+    assert sorted(p.name for p in out.iterdir()) == ["report.json", "report.md",
+                                                     "residuals_by_phase.png"]
+    assert np.isnan(rep["residuals"]["holdout"]["after"]["by_phase"]["approach"]["psi"])
