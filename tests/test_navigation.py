@@ -338,7 +338,7 @@ def test_every_filter_gives_the_velocity_over_ground_decisions_use():
     sim, *_ = _run(ships, seconds=900)
     b = sim.batch
     truth = earth_velocity(b.x, b.env)
-    got = sim.nav.ground_velocity(b.x, b.env)
+    got = sim.nav.ground_velocity(b.env)
     np.testing.assert_array_equal(got[:, 0], truth[:, 0])  # no filter: the truth itself
     err = np.hypot(*(got - truth))
     # both filters within the current's 0.4 m/s: the ekf closely; the pv filter lags the

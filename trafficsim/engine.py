@@ -138,7 +138,7 @@ class Simulation:
         directed pair, its track of the other ship (the truth where it has no radar or AIS)."""
         b, x, d = self.batch, self.batch.x, self.decider
         true_vel = earth_velocity(x, b.env) if self.nav is None or self.obs is None else None
-        own_vel = true_vel if self.nav is None else self.nav.ground_velocity(x, b.env)
+        own_vel = true_vel if self.nav is None else self.nav.ground_velocity(b.env)
         if self.obs is not None:
             xp, active = self.obs.predicted_tracks(self.t_s)
             other = np.where(active[None, :], xp.T, np.nan)

@@ -372,11 +372,11 @@ class Navigation:
             self.est[:, self.ekf_idx] = self._ekf_update(x, env)
         return self.est
 
-    def ground_velocity(self, x: np.ndarray, env: Env) -> np.ndarray:
-        """``(2, n)`` each ship's estimate of its velocity over ground, north and east, m/s:
-        the ``pv`` filter's (its ``u, v`` are over ground), the ``ekf``'s velocity through the
-        water plus its estimate of the current, the truth (with the current) without a
-        filter."""
+    def ground_velocity(self, env: Env) -> np.ndarray:
+        """``(2, n)`` each ship's estimate of its velocity over ground at the last
+        :meth:`update`, north and east, m/s: the ``pv`` filter's (its ``u, v`` are over
+        ground), the ``ekf``'s velocity through the water plus its estimate of the current, the
+        truth (``est`` is the true state) plus ``env``'s current without a filter."""
         est = self.est
         c, s = np.cos(est[PSI]), np.sin(est[PSI])
         vel = np.stack([est[U] * c - est[V] * s, est[U] * s + est[V] * c])

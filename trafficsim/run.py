@@ -106,7 +106,7 @@ class Recorder:
         self.t[k] = sim.t_s
         nav = sim.nav
         self.est[k] = x[:6] if nav is None else nav.est
-        self.est_vel[k] = self.vel[k] if nav is None else nav.ground_velocity(x, sim.batch.env)
+        self.est_vel[k] = self.vel[k] if nav is None else nav.ground_velocity(sim.batch.env)
         if nav is not None and nav.fix is not None:
             self.meas[k] = (nav.fix.north_m, nav.fix.east_m, nav.fix.valid, nav.heading_meas)
         if sim.obs is not None:

@@ -93,7 +93,7 @@ def sensor_columns(track: Mapping[str, np.ndarray], spec: Mapping[str, Any],
         "est_sog_kn", "est_cog_deg", "est_r_degps")}
     for k in range(t.size):  # a recorded track is replayed in time order, one ship
         est = nav.update(x[:, k:k + 1], Env())
-        (vn,), (ve,) = nav.ground_velocity(x[:, k:k + 1], Env())  # with the ekf's current
+        (vn,), (ve,) = nav.ground_velocity(Env())  # with the ekf's current
         fix = nav.fix
         receiver = pv.step(receiver_p, receiver, np.nan_to_num(fix.north_m),
                            np.nan_to_num(fix.east_m), fix.valid)
