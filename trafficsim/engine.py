@@ -178,6 +178,14 @@ class Simulation:
         self.diverged_ships[bad] = True
 
     @property
+    def first_diverged_s(self) -> float | None:
+        """Time of the last finite state of the first encounter that diverged (None: none
+        did, or not ``isolate_divergence``)."""
+        if self.diverged_at_s is None or not np.isfinite(self.diverged_at_s).any():
+            return None
+        return float(np.nanmin(self.diverged_at_s))
+
+    @property
     def all_diverged(self) -> bool:
         """Whether every encounter stands frozen (only with ``isolate_divergence``)."""
         return self.diverged_at_s is not None and bool(np.isfinite(self.diverged_at_s).all())

@@ -244,11 +244,11 @@ def record_run(sim: Simulation, n_steps: int, every: int, on_record: RecordHook 
 def raise_if_diverged(sim: Simulation, out_dir: Path) -> None:
     """After a run is written: a run whose state stopped being finite is an error naming the
     ships and the time, and where the run up to then is."""
-    if sim.diverged_ships is not None and sim.diverged_ships.any():
+    since = sim.first_diverged_s
+    if since is not None and sim.diverged_ships is not None:
         names = [sim.batch.names[k] for k in np.flatnonzero(sim.diverged_ships)]
-        t = float(np.nanmin(sim.diverged_at_s)) + sim.dt
-        raise SimulationError(f"{divergence_message(t, names)} (the run up to then is in "
-                              f"{out_dir})")
+        raise SimulationError(f"{divergence_message(since + sim.dt, names)} (the run up to "
+                              f"then is in {out_dir})")
 
 
 def write_run(out_dir: Path, rec: Recorder, sim: Simulation, summary: dict[str, Any]) -> None:
@@ -319,9 +319,7 @@ def run_summary(header: dict[str, Any], sim: Simulation, n_steps: int, wall_s: f
         "domain": domain,
         "domain_violations": int(m.domain_violation.sum()),
         "blind_spots": [] if sim.decider is None else sim.decider.blind_spot_report(b.names),
-        "diverged_at_s": (float(np.nanmin(sim.diverged_at_s))
-                          if sim.diverged_ships is not None and sim.diverged_ships.any()
-                          else None),
+        "diverged_at_s": sim.first_diverged_s,
         "pairs": pairs,
         "ships": ships,
         "wall_time_s": wall_s,
