@@ -69,6 +69,13 @@ def test_heading_is_wrapped_into_zero_two_pi():
                                rtol=0, atol=1e-15)
 
 
+def test_heading_just_below_zero_wraps_to_zero_not_two_pi():
+    """np.mod(-1e-17, 2 pi) rounds to 2 pi itself, outside [0, 2 pi); the stored heading is 0."""
+    assert np.mod(-1e-17, 2 * math.pi) == 2 * math.pi
+    b = _batch([_setup("a", "cargo", heading=-1e-17)])
+    assert b.x[PSI, 0] == 0.0
+
+
 def test_particulars_gains_and_service_speed_come_from_each_ship_file():
     b = _batch([_setup("a", "catfish"), _setup("b", "kvlcc2")])
     for k, name in enumerate(("catfish", "kvlcc2")):

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from trafficsim.sensors import wrap_2pi
 from trafficsim.ships import base
 from trafficsim.ships.base import PSI, RPS, Actuators, Env, U
 from trafficsim.units import from_kn
@@ -127,7 +128,7 @@ def build_batch(ships: Sequence[ShipSetup], envs: Sequence[EncounterEnv]) -> Bat
     x = np.zeros((base.N_STATE, n))
     x[base.NORTH] = [s.north_m for s in ships]
     x[base.EAST] = [s.east_m for s in ships]
-    x[PSI] = np.mod([s.heading_rad for s in ships], 2 * np.pi)
+    x[PSI] = wrap_2pi(np.array([s.heading_rad for s in ships], dtype=float))
     x[U] = [s.speed_mps for s in ships]
 
     codes = np.array([FAMILY_CODE[s["model"]] for s in specs], dtype=np.int64)
