@@ -1,13 +1,17 @@
 """Woerner-style grades on constructed encounters, through the engine."""
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from trafficsim.batch import EncounterEnv, ShipSetup, build_batch
-from trafficsim.campaign.compliance import PairObserver, grade
+from trafficsim.campaign.compliance import MIRROR, RULE_OF_KIND, PairObserver, grade
+from trafficsim.campaign.compliance import _observe as _observe_kernel
+from trafficsim.colregs.vocabulary import MANOEUVRES
 from trafficsim.engine import Simulation
+from trafficsim.ships.base import EAST, N_STATE, NORTH, PSI, U
 from trafficsim.ships.library import load_ship
 from trafficsim.units import from_kn
 
@@ -56,3 +60,439 @@ def test_head_on_port_to_port_beats_starboard_to_starboard():
     sts = grade(_observe([(0.0, 0.0, 0.0, None), (8000.0, 800.0, 180.0, None)]))
     assert ptp[14][0] == pytest.approx(0.1, abs=0.01)
     assert sts[14][0] == 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# grade() on observers built field by field: every term of colregs.md section 2.4 by hand
+# --------------------------------------------------------------------------------------------
+
+U0 = 6.0
+
+
+def _fields(m=1, **over):
+    """A PairObserver of ``m`` directed pairs whose own ship sails at ``U0`` and which, unless
+    overridden, saw: start range 8000 m, closest 1500 m, both ships abeam of each other at the
+    closest point (alpha = beta = 90 deg), a first manoeuvre at the start range, and a 40 deg
+    starboard turn (so P_delay = 0 and P_na = 0)."""
+    x0 = np.zeros((N_STATE, 2 * m))
+    x0[U] = U0
+    own, tgt = np.arange(m), np.arange(m, 2 * m)
+
+    def full(v):
+        return np.full(m, float(v))
+
+    values = dict(range0_m=full(8000.0), closest_m=full(1500.0),
+                  alpha_cpa=full(math.pi / 2), beta_cpa=full(math.pi / 2),
+                  stbd_rad=full(math.radians(40)), port_rad=full(0.0), faster_mps=full(0.0),
+                  slower_mps=full(0.0), stbd_cpa=full(math.radians(40)), port_cpa=full(0.0),
+                  faster_cpa=full(0.0), slower_cpa=full(0.0),
+                  range_at_manoeuvre_m=full(8000.0), manoeuvre_cpa_m=full(8000.0),
+                  side=full(1.0), ahead=full(0.0),
+                  crossed_ahead=np.zeros(m, dtype=bool))
+    for k, v in over.items():
+        values[k] = np.broadcast_to(np.asarray(v, dtype=values[k].dtype), (m,)).copy()
+    return PairObserver(own, tgt, x0, **values, asked=np.zeros((m, len(MANOEUVRES)), bool),
+                        fired=np.zeros((m, 0), bool), node_names=[],
+                        net_of_pair=np.full(m, -1))
+
+
+@pytest.mark.parametrize("r_cpa, s_r", [
+    (5000.0, 1.0), (1000.0, 1.0),
+    (900.0, 0.8),  # 1 - 0.4 (1000 - 900) / (1000 - 800)
+    (800.0, 0.6),  # 1 - 0.4, both branches agree at R_nm
+    (500.0, 0.3),  # 1 - 0.4 - 0.6 (800 - 500) / (800 - 200)
+    (200.0, 0.0), (199.0, 0.0), (0.0, 0.0),
+])
+def test_range_term_is_the_piecewise_linear_woerner_ramp(r_cpa, s_r):
+    """With P_delay = P_na = 0, S16 is the safety score 0.5 s_r + 0.5 s_theta; abeam of each
+    other (alpha = beta = 90 deg) s_theta = (1 - cos 90)(1 - cos 90) / 2 = 0.5."""
+    g = grade(_fields(closest_m=r_cpa))
+    assert g[16][0] == pytest.approx(0.5 * s_r + 0.25, abs=1e-12)
+
+
+def test_range_term_is_continuous_at_its_breakpoints():
+    """Just above and below R_min, R_nm and R_col the score differs by O(eps) only."""
+    eps = 1e-6
+    r = np.array([b + d for b in (1000.0, 800.0, 200.0) for d in (-eps, eps)])
+    g = grade(_fields(m=r.size, closest_m=r))[16]
+    assert np.all(np.abs(g[0::2] - g[1::2]) < 1e-5)
+
+
+def test_pose_term_extremes():
+    """Each ship astern of the other's beam at the closest point: (1 - cos 90)(1 - cos 180)
+    / 2 = 1, so safety 1; each ship dead ahead of the other (bows pointing at each other):
+    1 - cos 0 = 0, so safety = 0.5 s_r = 0.5."""
+    g = grade(_fields(m=2, alpha_cpa=[math.pi, 0.0], beta_cpa=[math.pi, 0.0]))[16]
+    assert g == pytest.approx([1.0, 0.5], abs=1e-12)
+
+
+def test_own_ship_dead_ahead_of_the_other_at_cpa_has_no_pose_credit():
+    """colregs.md 2.4: s_theta = (1 - cos alpha)(1 - cos beta) with alpha = bearing of the own
+    ship from the other's bow, clipped at 90 deg. Own ship dead ahead of the other's bow at the
+    closest point (``alpha_cpa`` = 0, the other on the own starboard beam) gives
+    1 - cos 0 = 0, so S16 = 0.5 s_r + 0 = 0.5 (NTNU's AutoVerification also gives 0); the
+    mirror case, the other ship dead ahead of the own bow and the own ship on her starboard
+    beam, has beta clipped up to 90 deg: (1 - cos 90)(1 - cos 90) / 2 = 0.5, S16 = 0.75."""
+    g = grade(_fields(m=2, alpha_cpa=[0.0, math.pi / 2], beta_cpa=[math.pi / 2, 0.0]))
+    assert g[16] == pytest.approx([0.5, 0.75], abs=1e-12)
+
+
+def test_pose_angles_are_taken_modulo_a_turn():
+    """alpha and beta are stored unwrapped (atan2 minus heading): adding whole turns must not
+    change any score."""
+    a = _fields(m=3, alpha_cpa=[0.3, 2.0, -2.5], beta_cpa=[4.0, -1.0, 2.8],
+                closest_m=[900.0, 1200.0, 300.0])
+    b = _fields(m=3, alpha_cpa=[0.3 + 2 * np.pi, 2.0 - 4 * np.pi, -2.5 + 2 * np.pi],
+                beta_cpa=[4.0 - 2 * np.pi, -1.0 + 2 * np.pi, 2.8 + 6 * np.pi],
+                closest_m=[900.0, 1200.0, 300.0])
+    ga, gb = grade(a), grade(b)
+    for r in (13, 14, 15, 16, 17):
+        np.testing.assert_allclose(ga[r], gb[r], atol=1e-12)
+
+
+def test_give_way_early_and_substantial_beats_late_and_small():
+    """Start 8000 m, closest 1500 m (s_r = 1), abeam (s_theta = 0.5): safety 0.75.
+    Early, 35 deg at 7600 m: P_delay = 400 / 6500, P_na = 0 -> 0.75 (1 - 400/6500).
+    Late, 10 deg at 2000 m, speed kept: P_delay = 6000 / 6500; P_na_course =
+    0.5 (1 - 100/900) = 4/9 and P_na_speed = 0.5, both >= 0.3, P_na = 2/9
+    -> 0.75 (500/6500)(7/9)."""
+    obs = _fields(m=2, stbd_cpa=np.radians([35.0, 10.0]), manoeuvre_cpa_m=[7600.0, 2000.0])
+    g = grade(obs)
+    early = 0.75 * (1 - 400 / 6500)
+    late = 0.75 * (500 / 6500) * (7 / 9)
+    assert g[16] == pytest.approx([early, late], abs=1e-12)
+    assert g[15] == pytest.approx([early, late], abs=1e-12)  # neither crossed ahead
+    assert g[13] == pytest.approx([early, late], abs=1e-12)
+
+
+def test_no_manoeuvre_gives_full_delay_penalty():
+    """No manoeuvre at all: r_man is taken as r_cpa, P_delay = 1 and S16 = 0 whatever the
+    range."""
+    g = grade(_fields(manoeuvre_cpa_m=np.nan, stbd_cpa=0.0, stbd_rad=0.0))
+    assert g[16][0] == 0.0 and g[15][0] == 0.0 and g[13][0] == 0.0
+
+
+@pytest.mark.parametrize("course_deg, kept, p_na", [
+    (10.0, 1.0, (4 / 9) * 0.5),  # both terms >= 0.3
+    (19.0, 1.0, 0.0),  # P_na_course = 0.5 (1 - 361/900) = 0.2994 < 0.3 -> 0
+    (10.0, 0.79, 0.0),  # P_na_speed = 0.29 < 0.3 -> 0
+    (10.0, 0.9, (4 / 9) * 0.4),
+    (30.0, 1.0, 0.0),  # a 30 deg turn is readily apparent
+])
+def test_non_apparent_manoeuvre_penalty(course_deg, kept, p_na):
+    """P_na = P_na_course P_na_speed unless either is below 0.3 (Minne's variant);
+    P_na_course = 0.5 max(0, 1 - dchi^2 / 30^2), P_na_speed = kept - 0.5 for the share of the
+    start speed kept above a half."""
+    obs = _fields(stbd_cpa=math.radians(course_deg), slower_cpa=U0 * (1 - kept))
+    assert grade(obs)[16][0] == pytest.approx(0.75 * (1 - p_na), abs=1e-12)
+
+
+def test_a_port_turn_counts_as_a_course_change_for_the_apparent_test():
+    """Rule 16 asks for a substantial change, not a side: Delta chi_max is the larger of the
+    starboard and port changes."""
+    a = grade(_fields(stbd_cpa=0.0, port_cpa=math.radians(40)))
+    assert a[16][0] == pytest.approx(0.75, abs=1e-12)
+
+
+def test_crossing_ahead_penalties_and_clipping():
+    """S13 = S16 - 0.3 and S15 = S16 - 0.5 when the own ship crossed ahead; clipped at 0."""
+    g = grade(_fields(m=2, crossed_ahead=[True, True], closest_m=[1500.0, 200.0]))
+    # safety 0.75 for the first; 0.5 * 0 + 0.25 = 0.25 for the second
+    assert g[16] == pytest.approx([0.75, 0.25], abs=1e-12)
+    assert g[13] == pytest.approx([0.45, 0.0], abs=1e-12)
+    assert g[15] == pytest.approx([0.25, 0.0], abs=1e-12)
+
+
+def test_head_on_grades_by_hand():
+    """S14 = (1 - 0.6 P_nsb - 0.2 P_delay - P_sts)(1 - P_na_course), port to port at the
+    closest point (alpha = beta = 270 deg clockwise: sin of the ccw angle 90 deg is 1, so
+    P_sts = 0):
+    * 25 deg to starboard at the start: P_nsb = 0, P_delay = 0,
+      P_na_course = 0.5 (1 - 625/900) -> 1 - 0.5 * 275/900;
+    * 10 deg to starboard: P_nsb = (1 - 10/20)^4 = 1/16, P_na_course = 4/9
+      -> (1 - 0.6/16)(5/9);
+    * 25 deg to port: no starboard change, P_nsb = 1 -> 0.4 (1 - 0.5 * 275/900);
+    * 20 deg to starboard exactly: P_nsb = 0 -> 1 - 0.5 (1 - 400/900)."""
+    stbd = np.radians([25.0, 10.0, 0.0, 20.0])
+    port = np.radians([0.0, 0.0, 25.0, 0.0])
+    obs = _fields(m=4, alpha_cpa=1.5 * math.pi, beta_cpa=1.5 * math.pi, stbd_cpa=stbd,
+                  port_cpa=port)
+    pna25 = 0.5 * 275 / 900
+    expected = [1 - pna25, (1 - 0.6 / 16) * (5 / 9), 0.4 * (1 - pna25), 1 - 0.5 * 500 / 900]
+    assert grade(obs)[14] == pytest.approx(expected, abs=1e-12)
+
+
+def test_head_on_starboard_to_starboard_and_delay():
+    """Starboard to starboard (alpha = beta = 90 deg clockwise, ccw -90: sin = -1): P_sts = 1,
+    the score is 0 even after a good turn; port to port with no manoeuvre at all:
+    (1 - 0.6 - 0.2)(1 - 0.5) = 0.1 (the value the engine test reaches)."""
+    sts = _fields(alpha_cpa=math.pi / 2, beta_cpa=math.pi / 2, stbd_cpa=math.radians(40))
+    assert grade(sts)[14][0] == 0.0
+    idle = _fields(alpha_cpa=-math.pi / 2, beta_cpa=-math.pi / 2, stbd_cpa=0.0,
+                   manoeuvre_cpa_m=np.nan)
+    assert grade(idle)[14][0] == pytest.approx(0.1, abs=1e-12)
+
+
+@pytest.mark.parametrize("over, expected", [
+    ({}, 0.75),  # keeps course and speed: S17 = safety
+    ({"stbd_cpa": math.radians(1.9)}, 0.75),  # under the 2 deg detectable change
+    ({"stbd_cpa": math.radians(16.0)}, 0.75 - 0.25),  # 0.5 (16 - 2) / 28
+    ({"port_cpa": math.radians(30.0)}, 0.75 - 0.5),
+    ({"stbd_cpa": math.radians(60.0)}, 0.25),  # capped at 0.5
+    ({"faster_cpa": 2.0}, 0.75 * (6 / 8) ** 2),  # P_up = (v0 / v_max)^2, v_max = 8
+    ({"faster_cpa": 0.2}, 0.75),  # 0.2 m/s is not over the threshold
+    ({"slower_cpa": 3.0}, 0.75 - 0.5 * 3 / 6),  # P_down = 0.5 dv / v0
+    ({"slower_cpa": 0.19}, 0.75),
+    ({"stbd_cpa": math.radians(16.0), "faster_cpa": 2.0, "slower_cpa": 1.0},
+     (0.75 - 0.25) * (6 / 8) ** 2 - 0.5 / 6),
+])
+def test_stand_on_grades_by_hand(over, expected):
+    """S17 = (S - P_course) P_up - P_down (Woerner), own speed 6 m/s, safety 0.75."""
+    obs = _fields(**{"stbd_cpa": 0.0, **over})
+    assert grade(obs)[17][0] == pytest.approx(expected, abs=1e-12)
+
+
+def test_stand_on_keeping_course_is_graded_on_safety_alone_and_give_way_not():
+    """A ship that never manoeuvres keeps the Rule 17 score of its safety while its Rule 16
+    score is 0 (full delay): the same track, judged for the two roles."""
+    obs = _fields(m=2, stbd_cpa=0.0, manoeuvre_cpa_m=np.nan, closest_m=[1500.0, 900.0])
+    g = grade(obs)
+    assert g[17] == pytest.approx([0.75, 0.5 * 0.8 + 0.25], abs=1e-12)
+    assert np.all(g[16] == 0.0)
+
+
+def test_every_score_lies_in_the_unit_interval():
+    """Random observations, including collisions, big speed changes and NaN manoeuvre ranges:
+    every rule's score stays in [0, 1]."""
+    rng = np.random.default_rng(3)
+    m = 2000
+    obs = _fields(m=m, closest_m=rng.uniform(0, 3000, m),
+                  range0_m=rng.uniform(500, 12000, m),
+                  alpha_cpa=rng.uniform(-10, 10, m), beta_cpa=rng.uniform(-10, 10, m),
+                  stbd_cpa=rng.uniform(0, 3, m), port_cpa=rng.uniform(0, 3, m),
+                  faster_cpa=rng.uniform(0, 5, m), slower_cpa=rng.uniform(0, 8, m),
+                  manoeuvre_cpa_m=np.where(rng.random(m) < 0.3, np.nan,
+                                                rng.uniform(0, 12000, m)),
+                  crossed_ahead=rng.random(m) < 0.5)
+    for r, s in grade(obs).items():
+        assert s.shape == (m,) and np.all((s >= 0.0) & (s <= 1.0)), r
+
+
+# --------------------------------------------------------------------------------------------
+# scores(): which directed pair's grade each column holds
+# --------------------------------------------------------------------------------------------
+
+def _pair(**over):
+    """One undirected pair as two directed pairs (i -> j, j -> i) with different grades."""
+    base = dict(closest_m=[1500.0, 1500.0], stbd_cpa=np.radians([40.0, 12.0]),
+                manoeuvre_cpa_m=[8000.0, 5000.0], faster_cpa=[0.0, 1.0])
+    base.update(over)
+    return _fields(m=2, **base)
+
+
+@pytest.mark.parametrize("kind", ["crossing_give_way", "crossing_stand_on", "overtaking",
+                                  "overtaken", "head_on"])
+def test_scores_take_each_ship_by_the_rule_of_its_part(kind):
+    """Ship i is graded by the rule of ``kind``, ship j by the rule of the mirrored kind
+    (give-way <-> stand-on, overtaking <-> overtaken, head-on both Rule 14); each
+    ``score_ruleN`` column holds the ship the rule binds, head-on the lower of the two."""
+    obs = _pair()
+    g = grade(obs)
+    out = obs.scores([kind])
+    ri, rj = RULE_OF_KIND[kind], RULE_OF_KIND[MIRROR[kind]]
+    assert out["compliance_i"][0] == pytest.approx(g[ri][0])
+    assert out["compliance_j"][0] == pytest.approx(g[rj][1])
+    for r in (13, 15, 17):
+        bound = [s for s, rule in ((0, ri), (1, rj)) if rule == r]
+        if bound:
+            assert out[f"score_rule{r}"][0] == pytest.approx(g[r][bound[0]])
+        else:
+            assert np.isnan(out[f"score_rule{r}"][0])
+    if kind == "head_on":
+        assert out["score_rule14"][0] == pytest.approx(min(g[14]))
+    else:
+        assert np.isnan(out["score_rule14"][0])
+
+
+def test_scores_of_an_unknown_kind_are_nan():
+    out = _pair().scores(["no_such_kind"])
+    assert np.isnan(out["compliance_i"][0]) and np.isnan(out["compliance_j"][0])
+    assert all(np.isnan(out[f"score_rule{r}"][0]) for r in (13, 14, 15, 16, 17))
+
+
+# --------------------------------------------------------------------------------------------
+# PairObserver.observe on hand-made kinematic tracks (no engine)
+# --------------------------------------------------------------------------------------------
+
+def _track(n0, e0, legs, t):
+    """North, east, heading (rad) and speed at time ``t`` of a ship starting at (n0, e0) and
+    sailing ``legs`` = [(from_s, heading_deg, speed_mps), ...] (the first from 0)."""
+    n, e = n0, e0
+    ends = [leg[0] for leg in legs[1:]] + [math.inf]
+    psi, speed = math.radians(legs[0][1]), legs[0][2]
+    for (start, heading, u), end in zip(legs, ends, strict=True):
+        if t < start or (t == start and start > 0):
+            break
+        psi, speed = math.radians(heading), u
+        run = min(t, end) - start
+        n += u * run * math.cos(psi)
+        e += u * run * math.sin(psi)
+    return n, e, psi, speed
+
+
+def _state(ships, t):
+    x = np.zeros((N_STATE, len(ships)))
+    for k, (n0, e0, legs) in enumerate(ships):
+        x[NORTH, k], x[EAST, k], x[PSI, k], x[U, k] = _track(n0, e0, legs, t)
+    return x
+
+
+def _sim(x):
+    return SimpleNamespace(batch=SimpleNamespace(x=x, pair_i=np.array([0]),
+                                                 pair_j=np.array([1])), decider=None)
+
+
+def _run(ships, end_s=2000, every_s=10):
+    obs = PairObserver.start(_sim(_state(ships, 0.0)))
+    times = np.arange(every_s, end_s + every_s / 2, every_s, dtype=float)
+    states = [_state(ships, t) for t in times]
+    for x in states:
+        obs.observe(_sim(x))
+    return obs, times, states
+
+
+# own ship north-bound from the origin at 6 m/s; a ship crossing from starboard, west-bound
+# at 6 m/s from (6000, 6000): both reach (6000, 0) at t = 1000 s if nobody manoeuvres
+OWN_STRAIGHT = (0.0, 0.0, [(0.0, 0.0, 6.0)])
+CROSSER = (6000.0, 6000.0, [(0.0, 270.0, 6.0)])
+
+
+def _bearings(x, o, t):
+    dn, de = x[NORTH, t] - x[NORTH, o], x[EAST, t] - x[EAST, o]
+    return math.atan2(de, dn) - x[PSI, o], math.atan2(-de, -dn) - x[PSI, t], math.hypot(dn, de)
+
+
+def test_observer_records_the_closest_sample_and_the_first_manoeuvre():
+    """Own ship turns 40 deg to starboard at t = 95 s and slows from 6 to 4 m/s at 300 s:
+    every recorded quantity is checked against the sampled tracks directly."""
+    own = (0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, 40.0, 6.0), (300.0, 40.0, 4.0)])
+    obs, times, states = _run([own, CROSSER])
+    ranges = [_bearings(x, 0, 1)[2] for x in states]
+    k = int(np.argmin(ranges))
+    assert obs.closest_m[0] == pytest.approx(ranges[k]) == obs.closest_m[1]
+    assert obs.range0_m[0] == pytest.approx(math.hypot(6000.0, 6000.0))
+    a, b, _ = _bearings(states[k], 0, 1)
+    # alpha: the own ship seen from the other's bow; beta: the other seen from the own bow
+    assert math.remainder(obs.alpha_cpa[0] - b, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
+    assert math.remainder(obs.beta_cpa[0] - a, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
+    # the turn is first seen at the sample t = 100 s
+    assert obs.range_at_manoeuvre_m[0] == pytest.approx(ranges[list(times).index(100.0)])
+    assert obs.manoeuvre_cpa_m[0] == obs.range_at_manoeuvre_m[0]  # made before the CPA
+    assert math.degrees(obs.stbd_cpa[0]) == pytest.approx(40.0)
+    assert obs.port_cpa[0] == 0.0 and obs.faster_cpa[0] == 0.0
+    assert obs.slower_cpa[0] == pytest.approx(2.0 if times[k] >= 300 else 0.0)
+    # the crossing ship held course and speed
+    assert math.isnan(obs.range_at_manoeuvre_m[1])
+    assert obs.stbd_cpa[1] == obs.port_cpa[1] == obs.slower_cpa[1] == 0.0
+
+
+def test_give_way_turning_early_grades_higher_than_turning_late():
+    """The same 40 deg starboard turn at 100 s and at 700 s: later means a larger P_delay and a
+    closer CPA, never a better Rule 16/15 score; standing on into the collision scores 0."""
+    early = (0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, 40.0, 6.0)])
+    late = (0.0, 0.0, [(0.0, 0.0, 6.0), (695.0, 40.0, 6.0)])
+    g_early = grade(_run([early, CROSSER])[0])
+    g_late = grade(_run([late, CROSSER])[0])
+    g_none = grade(_run([OWN_STRAIGHT, CROSSER])[0])
+    assert g_early[16][0] > g_late[16][0] > g_none[16][0] == 0.0
+    assert g_early[15][0] > g_late[15][0]
+
+
+def test_crossing_ahead_is_seen_for_the_ship_that_crossed_only():
+    """Crosser west-bound at 6 m/s from (4000, 4500): the own ship reaches the crosser's bow
+    line (north 4000) at 667 s with the crosser 500 m east of her, heading west: the own ship
+    crossed ahead. From (6000, 3000) the crosser reaches the own track (east 0) at 500 s with
+    the own ship at north 3000, 3 km astern of her: the crosser crossed ahead; the own ship
+    later passes 3 km behind the crosser's stern."""
+    own_ahead, _, _ = _run([OWN_STRAIGHT, (4000.0, 4500.0, [(0.0, 270.0, 6.0)])], end_s=1500)
+    assert own_ahead.crossed_ahead.tolist() == [True, False]
+    other_ahead, _, _ = _run([OWN_STRAIGHT, (6000.0, 3000.0, [(0.0, 270.0, 6.0)])],
+                             end_s=1500)
+    assert other_ahead.crossed_ahead.tolist() == [False, True]
+
+
+def test_observer_is_symmetric_in_the_pair_order():
+    """Swapping which ship is ``pair_i`` swaps the halves of every per-directed-pair array."""
+    obs, _, _ = _run([OWN_STRAIGHT, CROSSER], end_s=1200)
+    swapped, _, _ = _run([CROSSER, OWN_STRAIGHT], end_s=1200)
+    for name in ("closest_m", "alpha_cpa", "beta_cpa", "stbd_cpa", "range_at_manoeuvre_m",
+                 "crossed_ahead"):
+        a, b = getattr(obs, name), getattr(swapped, name)
+        np.testing.assert_array_equal(a, b[::-1], err_msg=name)
+
+
+def test_observe_kernel_is_the_method():
+    """The compiled loop called directly on the same samples gives the same fields."""
+    own = (0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, 30.0, 6.0)])
+    obs, _, states = _run([own, CROSSER], end_s=800)
+    ref = PairObserver.start(_sim(_state([own, CROSSER], 0.0)))
+    for x in states:
+        _observe_kernel(x, ref.x0, ref.own, ref.tgt, ref.closest_m, ref.alpha_cpa,
+                        ref.beta_cpa, ref.stbd_rad, ref.port_rad, ref.faster_mps,
+                        ref.slower_mps, ref.stbd_cpa, ref.port_cpa, ref.faster_cpa,
+                        ref.slower_cpa, ref.range_at_manoeuvre_m, ref.manoeuvre_cpa_m,
+                        ref.side, ref.ahead, ref.crossed_ahead)
+    for name in ("closest_m", "alpha_cpa", "stbd_cpa", "range_at_manoeuvre_m", "manoeuvre_cpa_m",
+                 "side", "ahead", "crossed_ahead"):
+        np.testing.assert_array_equal(getattr(obs, name), getattr(ref, name))
+
+
+def test_a_manoeuvre_after_the_cpa_does_not_lessen_the_delay_penalty():
+    """The own ship stands on through the CPA (range ~1 km at t = 1000 s with a slower
+    crosser) and turns only afterwards: the whole range from the start to the CPA was run
+    before its first manoeuvre, so P_delay = 1 and S16 = S15 = 0, as for no manoeuvre."""
+    crosser = (5000.0, 6000.0, [(0.0, 270.0, 6.0)])
+    idle = grade(_run([OWN_STRAIGHT, crosser])[0])
+    after = (0.0, 0.0, [(0.0, 0.0, 6.0), (1495.0, 40.0, 6.0)])
+    obs = _run([after, crosser])[0]
+    assert obs.range_at_manoeuvre_m[0] > obs.closest_m[0]  # turned after the closest sample
+    assert idle[16][0] == 0.0
+    assert grade(obs)[16][0] == 0.0
+
+
+def test_head_on_starboard_turn_beats_port_turn():
+    """Reciprocal courses, the other ship 300 m on the own port bow at 8 km: a 30 deg turn to
+    starboard at 95 s passes port to port (alpha and beta near 270 deg, P_sts ~ 0, P_nsb = 0),
+    a 30 deg turn to port crosses the other's bow (P_nsb = 1 and a starboard-to-starboard or
+    close passing)."""
+    other = (8000.0, -300.0, [(0.0, 180.0, 6.0)])
+    stbd = (0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, 30.0, 6.0)])
+    port = (0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, 330.0, 6.0)])
+    obs_s, _, _ = _run([stbd, other], end_s=1200)
+    obs_p, _, _ = _run([port, other], end_s=1200)
+    assert math.degrees(obs_s.stbd_cpa[0]) == pytest.approx(30.0)
+    assert obs_p.stbd_cpa[0] == 0.0 and math.degrees(obs_p.port_cpa[0]) == pytest.approx(30.0)
+    b = math.degrees(obs_s.beta_cpa[0]) % 360.0
+    assert 200.0 < b < 340.0  # the other ship passes on the own port side
+    g_s, g_p = grade(obs_s)[14][0], grade(obs_p)[14][0]
+    # 30 deg is apparent (P_na_course = 0) and made at the start (P_delay ~ 0)
+    p_sts = 1 - ((np.sin(-obs_s.alpha_cpa[0]) + 1) / 2) ** 2 * (
+        (np.sin(-obs_s.beta_cpa[0]) + 1) / 2) ** 2
+    p_delay = (obs_s.range0_m[0] - obs_s.range_at_manoeuvre_m[0]) / (
+        obs_s.range0_m[0] - obs_s.closest_m[0])
+    assert g_s == pytest.approx(1.0 - 0.2 * p_delay - p_sts, abs=1e-9)
+    assert g_s > 0.8 and g_p <= 0.4 + 1e-12  # 1 - 0.6 P_nsb at best
+
+
+def test_crossing_ahead_between_two_samples_is_still_seen():
+    """Both ships at 10 m/s, samples every 60 s (a decision period a spec may set). The own
+    ship reaches the crosser's bow line (north 3000) at t = 305 s with the crosser 250 m east
+    of her, heading west: she crosses 250 m ahead of the crosser. Sampled at 300 s (own short
+    of the line) and 360 s (own past it, the crosser 300 m beyond the own track): the sign of
+    the side changes between the two, and the crossing point was ahead of the crosser."""
+    own = (-50.0, 0.0, [(0.0, 0.0, 10.0)])
+    crosser = (3000.0, 3300.0, [(0.0, 270.0, 10.0)])
+    dense, _, _ = _run([own, crosser], end_s=720, every_s=1)
+    assert dense.crossed_ahead[0]
+    coarse, _, _ = _run([own, crosser], end_s=720, every_s=60)
+    assert coarse.crossed_ahead[0]

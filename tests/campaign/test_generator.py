@@ -6,6 +6,7 @@ import pytest
 
 from trafficsim.campaign.generator import _weighted, classify, draw
 from trafficsim.campaign.spec import load_spec
+from trafficsim.errors import InputError
 from trafficsim.geometry import cpa
 from trafficsim.units import NM
 
@@ -90,3 +91,328 @@ def test_ship_types_rogues_and_policy(write_spec):
     assert types["cargo"] > types["fishing"]  # weights 2 : 1
     baseline = load_spec(write_spec(extra="policy: no_avoidance", name="b.yaml", rogue=0.5))
     assert {s.behaviour for i in range(50) for s in draw(baseline, i).ships} == {"keep_course"}
+
+
+# --------------------------------------------------------------------------------------------
+# start geometry, worked out independently of trafficsim.geometry
+# --------------------------------------------------------------------------------------------
+
+SPEC = """schema_version: 1
+name: gen
+n_encounters: {n}
+seed: {seed}
+duration_s: 1200
+chunk_encounters: {chunk}
+ship_types: {{cargo: 1, container: 1, fishing: 1}}
+{extra}
+"""
+
+
+def _spec(tmp_path, extra="", n=50, seed=7, chunk=10, name="g.yaml"):
+    path = tmp_path / name
+    path.write_text(SPEC.format(extra=extra, n=n, seed=seed, chunk=chunk))
+    return load_spec(path)
+
+
+def _deg(angle):
+    return math.degrees(angle) % 360.0
+
+
+def _relative(own, other):
+    """Bearing of ``other`` from the own bow, of the own ship from the other's bow, and the
+    other's course minus the own course, all in degrees [0, 360)."""
+    bearing = _deg(math.atan2(other.east_m - own.east_m, other.north_m - own.north_m)
+                   - own.heading_rad)
+    aspect = _deg(math.atan2(own.east_m - other.east_m, own.north_m - other.north_m)
+                  - other.heading_rad)
+    return bearing, aspect, _deg(other.heading_rad - own.heading_rad)
+
+
+def _dcpa_tcpa(own, other):
+    """Closed form: t = -(p . w) / |w|^2 and d = |p x w| / |w| (colregs.md section 4)."""
+    pn, pe = other.north_m - own.north_m, other.east_m - own.east_m
+    wn = other.speed_mps * math.cos(other.heading_rad) - own.speed_mps * math.cos(
+        own.heading_rad)
+    we = other.speed_mps * math.sin(other.heading_rad) - own.speed_mps * math.sin(
+        own.heading_rad)
+    w2 = wn * wn + we * we
+    return abs(pn * we - pe * wn) / math.sqrt(w2), -(pn * wn + pe * we) / w2, (pn, pe, wn, we)
+
+
+@pytest.mark.parametrize("dcpa, tcpa", [((0.0, 0.0), (15.0, 15.0)), ((0.5, 2.0), (5.0, 8.0)),
+                                        ((3.0, 3.0), (20.0, 40.0))])
+def test_start_dcpa_tcpa_fall_in_the_spec_ranges(tmp_path, dcpa, tcpa):
+    """DCPA and TCPA computed from the drawn positions and velocities by the closed form lie in
+    the spec's ranges and equal the recorded ones; a single-valued range gives that value
+    exactly (DCPA 0: a collision course)."""
+    spec = _spec(tmp_path, extra=f"dcpa_nm: [{dcpa[0]}, {dcpa[1]}]\n"
+                                 f"tcpa_min: [{tcpa[0]}, {tcpa[1]}]")
+    for index in range(60):
+        enc = draw(spec, index)
+        own = enc.ships[0]
+        for k, other in enumerate(enc.ships[1:]):
+            d, t, _ = _dcpa_tcpa(own, other)
+            assert dcpa[0] * NM - 1e-6 <= d <= dcpa[1] * NM + 1e-6
+            assert tcpa[0] * 60 * (1 - 1e-12) <= t <= tcpa[1] * 60 * (1 + 1e-12)
+            assert d == pytest.approx(enc.dcpa_m[k], abs=1e-6)
+            assert t == pytest.approx(enc.tcpa_s[k], rel=1e-12)
+            if dcpa[0] == dcpa[1]:
+                assert d == pytest.approx(dcpa[0] * NM, abs=1e-6)
+
+
+def test_the_dcpa_side_is_drawn_on_both_sides(tmp_path):
+    """``n`` is a unit vector across ``w`` "either side": the sign of p x w (which side of the
+    relative track the own ship passes) takes both values about equally."""
+    spec = _spec(tmp_path, extra="dcpa_nm: [0.5, 0.5]")
+    signs = []
+    for index in range(200):
+        enc = draw(spec, index)
+        for other in enc.ships[1:]:
+            _, _, (pn, pe, wn, we) = _dcpa_tcpa(enc.ships[0], other)
+            signs.append(np.sign(pn * we - pe * wn))
+    share = np.mean(np.array(signs) > 0)
+    assert 0.35 < share < 0.65
+
+
+SECTORS = {
+    # bearing of the other ship from the own bow, aspect (own ship from the other's bow) and
+    # the other's course relative to the own, by the generator's sectors (Rules 13-15)
+    "head_on": lambda b, a, c: 174.0 <= c <= 186.0 and min(b, 360.0 - b) <= 10.0
+    and min(a, 360.0 - a) <= 10.0,
+    "crossing_give_way": lambda b, a, c: 0.0 <= b <= 112.5 and not 112.5 < a < 247.5
+    and 190.0 <= c <= 345.0,
+    "crossing_stand_on": lambda b, a, c: 247.5 <= b < 360.0 and not 112.5 < a < 247.5
+    and 15.0 <= c <= 170.0,
+    "overtaking": lambda b, a, c: 112.5 < a < 247.5 and (c <= 30.0 or c >= 330.0),
+    "overtaken": lambda b, a, c: 112.5 < b < 247.5 and not 112.5 < a < 247.5
+    and (c <= 30.0 or c >= 330.0),
+}
+
+
+@pytest.mark.parametrize("kind", list(SECTORS))
+def test_each_type_has_its_rule_sectors_and_relative_course(tmp_path, kind):
+    """A spec with one encounter type draws only that type, and every drawn pair has the
+    relative bearing, aspect and course of the type, computed from the positions directly:
+    give-way has the other on the own starboard side (bearing 0-112.5 deg) heading across to
+    port, stand-on the mirror image, overtaking the own ship more than 22.5 deg abaft the
+    other's beam, overtaken the other ship abaft the own beam, head-on nearly reciprocal."""
+    spec = _spec(tmp_path, extra=f"encounter_types: {{{kind}: 1}}")
+    for index in range(40):
+        enc = draw(spec, index)
+        assert enc.kind == kind and enc.pair_kinds == [kind] and len(enc.ships) == 2
+        b, a, c = _relative(enc.ships[0], enc.ships[1])
+        assert SECTORS[kind](b, a, c), (index, b, a, c)
+
+
+def test_overtaking_means_coming_up_from_astern(tmp_path):
+    """Overtaking: the other ship is ahead of the own ship (bearing within 90 deg of the bow),
+    the own ship sails towards her (v_own . p > 0) and the range closes (TCPA > 0)."""
+    spec = _spec(tmp_path, extra="encounter_types: {overtaking: 1}")
+    for index in range(40):
+        own, other = draw(spec, index).ships
+        b, _, _ = _relative(own, other)
+        assert b < 90.0 or b > 270.0
+        _, tcpa, (pn, pe, _, _) = _dcpa_tcpa(own, other)
+        assert pn * math.cos(own.heading_rad) + pe * math.sin(own.heading_rad) > 0.0
+        assert tcpa > 0.0
+
+
+def test_head_on_needs_the_other_ship_ahead(tmp_path):
+    """Rule 14(b): head-on when nearly reciprocal and each ship sees the other ahead or nearly
+    ahead (within 10 deg). On reciprocal courses 10 km apart, 1 km to the side is 5.7 deg off
+    the bow (head-on), 2 km is 11.3 deg (a crossing, the other on the own starboard bow), and a
+    ship on the beam is no head-on situation. With DCPA 3 NM and TCPA 1 min the other ship
+    would start nearly abeam (atan(3 NM / (closing speed x 1 min)) ~ 80 deg): no head-on
+    geometry exists, and the draw says so."""
+    assert classify(0.0, math.pi, 10000.0, 1000.0) == "head_on"
+    assert classify(0.0, math.pi, 10000.0, 2000.0) == "crossing_give_way"
+    assert classify(0.0, math.pi, 10000.0, -2000.0) == "crossing_stand_on"
+    assert classify(0.0, math.pi, 500.0, 2836.0) != "head_on"  # bearing 80 deg, reciprocal
+    spec = _spec(tmp_path, extra="encounter_types: {head_on: 1}\ndcpa_nm: [3, 3]\n"
+                                 "tcpa_min: [1, 1]")
+    with pytest.raises(InputError, match="no geometry for head_on"):
+        draw(spec, 0)
+
+
+@pytest.mark.parametrize("own_psi", [0.0, 1.0, math.pi, 5.5, 2 * math.pi - 1e-9])
+def test_classify_is_invariant_under_rotating_the_whole_picture(own_psi):
+    """Rotating both headings and the relative position by the same angle changes no type
+    (the sectors are relative bearings; no wrap problem at 0 / 2 pi)."""
+    cases = [(math.pi, 5000.0, 100.0), (math.radians(260), 4000.0, 4000.0),
+             (math.radians(100), 4000.0, -4000.0), (0.0, 3000.0, 0.0), (0.0, -3000.0, 0.0)]
+    for other_rel, n, e in cases:
+        ref = classify(0.0, other_rel, n, e)
+        c, s = math.cos(own_psi), math.sin(own_psi)
+        rot = classify(own_psi, own_psi + other_rel, n * c - e * s, n * s + e * c)
+        assert rot == ref
+        assert classify(own_psi - 2 * math.pi, own_psi + other_rel + 4 * math.pi,
+                        n * c - e * s, n * s + e * c) == ref
+
+
+def test_classify_mirrors_between_two_closing_ships():
+    """Seen from the other ship of a closing pair, overtaking and overtaken swap (two closing
+    ships can never both be abaft each other's beam, nor neither when one is), and a meeting
+    (head-on or crossing) stays a meeting."""
+    mirror = {"overtaking": "overtaken", "overtaken": "overtaking"}
+    meeting = {"head_on", "crossing_give_way", "crossing_stand_on"}
+    rng = np.random.default_rng(1)
+    seen = set()
+    for _ in range(4000):
+        psi_a, psi_b = rng.uniform(0, 2 * math.pi, 2)
+        n, e = rng.uniform(-5000, 5000, 2)
+        ua, ub = rng.uniform(2, 10, 2)
+        wn = ub * math.cos(psi_b) - ua * math.cos(psi_a)
+        we = ub * math.sin(psi_b) - ua * math.sin(psi_a)
+        if n * wn + e * we >= 0.0:  # opening: no encounter
+            continue
+        ab = classify(psi_a, psi_b, n, e)
+        ba = classify(psi_b, psi_a, -n, -e)
+        if ab in mirror:
+            assert ba == mirror[ab], (psi_a, psi_b, n, e)
+        else:
+            assert ab in meeting and ba in meeting, (psi_a, psi_b, n, e)
+        seen.add(ab)
+    assert seen == meeting | set(mirror)
+
+
+def test_classify_sector_boundaries():
+    """Own ship north-bound. 112.5 deg is the limit of the overtaking sector (Rule 13: *more*
+    than 22.5 deg abaft the beam): just inside it is overtaken, just outside crossing."""
+    r = 3000.0
+
+    def at(bearing_deg, other_deg):
+        b = math.radians(bearing_deg)
+        return classify(0.0, math.radians(other_deg), r * math.cos(b), r * math.sin(b))
+
+    assert at(112.6, 300.0) == "overtaken" and at(247.4, 60.0) == "overtaken"
+    assert at(112.4, 300.0) == "crossing_give_way"
+    assert at(247.6, 60.0) == "crossing_stand_on"
+    # reciprocal within 6 deg ahead: head-on; 7 deg off reciprocal: crossing
+    assert at(2.0, 185.9) == "head_on" and at(2.0, 174.1) == "head_on"
+    assert at(2.0, 187.0) == "crossing_give_way"
+
+
+# --------------------------------------------------------------------------------------------
+# reproducibility, weights, rogues, environment
+# --------------------------------------------------------------------------------------------
+
+def _same(a, b):
+    assert (a.index, a.kind, a.pair_kinds, a.dcpa_m, a.tcpa_s, a.env) == (
+        b.index, b.kind, b.pair_kinds, b.dcpa_m, b.tcpa_s, b.env)
+    for s, t in zip(a.ships, b.ships, strict=True):
+        assert (s.name, s.spec["name"], s.north_m, s.east_m, s.heading_rad, s.speed_mps,
+                s.behaviour, s.ship_in_encounter, s.filter) == (
+            t.name, t.spec["name"], t.north_m, t.east_m, t.heading_rad, t.speed_mps,
+            t.behaviour, t.ship_in_encounter, t.filter)
+        np.testing.assert_array_equal(s.route_m, t.route_m)
+        assert dict(s.sensors) == dict(t.sensors)
+
+
+def test_an_encounter_is_fixed_by_seed_and_index_only(tmp_path):
+    """Campaign size, chunking, the order of drawing and a shared ship cache change nothing;
+    another seed changes the encounter."""
+    sensors = "sensors: {gnss_sigma_m: [1, 5]}\nrogue_fraction: 0.3\ncurrent_kn: [0, 2]"
+    a = _spec(tmp_path, extra=sensors, n=50, chunk=10, name="a.yaml")
+    b = _spec(tmp_path, extra=sensors, n=5000, chunk=999, name="b.yaml")
+    cache: dict = {}
+    forward = [draw(a, i) for i in range(12)]
+    backward = [draw(b, i, cache) for i in reversed(range(12))][::-1]
+    for x, y in zip(forward, backward, strict=True):
+        _same(x, y)
+    other_seed = _spec(tmp_path, extra=sensors, seed=8, name="c.yaml")
+    assert [draw(other_seed, i).ships[0].heading_rad for i in range(12)] != [
+        e.ships[0].heading_rad for e in forward]
+
+
+def test_the_own_ship_is_never_a_rogue(tmp_path):
+    """rogue_fraction 1: every other ship breaks the rules (turn_port or late_action, both
+    used), the own ship always runs the policy."""
+    spec = _spec(tmp_path, extra="rogue_fraction: 1.0")
+    behaviours = set()
+    for index in range(60):
+        enc = draw(spec, index)
+        assert enc.ships[0].behaviour == "colregs" and enc.ships[0].name == "own"
+        behaviours |= {s.behaviour for s in enc.ships[1:]}
+    assert behaviours == {"turn_port", "late_action"}
+
+
+def test_multi_ship_counts_and_fallback_pair_types(tmp_path):
+    """multi_ships [4, 4]: always 4 ships. With multi the only type, the other ships take
+    every pair type (equal weights); with multi and head-on only, every pair is head-on."""
+    spec = _spec(tmp_path, extra="encounter_types: {multi: 1}\nmulti_ships: [4, 4]")
+    kinds = Counter()
+    for index in range(40):
+        enc = draw(spec, index)
+        assert enc.kind == "multi" and len(enc.ships) == 4 and len(enc.pair_kinds) == 3
+        assert [s.ship_in_encounter for s in enc.ships] == [0, 1, 2, 3]
+        kinds.update(enc.pair_kinds)
+    assert set(kinds) == set(SECTORS)
+    only = _spec(tmp_path, extra="encounter_types: {multi: 1, head_on: 1}\n"
+                                 "multi_ships: [3, 5]", name="o.yaml")
+    sizes = set()
+    for index in range(60):
+        enc = draw(only, index)
+        assert set(enc.pair_kinds) == {"head_on"}
+        sizes.add(len(enc.ships))
+    assert sizes == {2, 3, 4, 5}
+
+
+def test_encounter_type_weights_set_the_frequencies(tmp_path):
+    """Weights 3 : 1 : 0 give about 75 % / 25 % / none over 400 encounters."""
+    spec = _spec(tmp_path, extra="encounter_types: {head_on: 3, overtaken: 1, multi: 0}",
+                 n=400)
+    kinds = Counter(draw(spec, i).kind for i in range(400))
+    assert set(kinds) == {"head_on", "overtaken"}
+    assert 0.68 < kinds["head_on"] / 400 < 0.82
+
+
+def test_speeds_routes_environment_and_sensors_within_the_spec(tmp_path):
+    """Speed = service speed x a fraction in speed_fraction; a straight route along the
+    initial course, longer than the run; current and wind speeds in their ranges; sensor
+    sigmas in their ranges and the filter of the spec."""
+    from trafficsim.units import from_kn
+
+    spec = _spec(tmp_path, extra="speed_fraction: [0.5, 0.7]\ncurrent_kn: [1, 2]\n"
+                                 "wind_mps: [5, 6]\nsensors: {gnss_sigma_m: [2, 3], "
+                                 "compass_sigma_deg: [0.2, 0.3], filter: ekf}")
+    for index in range(40):
+        enc = draw(spec, index)
+        assert from_kn(1.0) - 1e-12 <= enc.env.current_speed_mps <= from_kn(2.0) + 1e-12
+        assert 5.0 <= enc.env.wind_speed_mps <= 6.0
+        assert 0.0 <= enc.env.current_towards_rad < 2 * math.pi
+        for s in enc.ships:
+            frac = s.speed_mps / from_kn(s.spec["service_speed_kn"])
+            assert 0.5 - 1e-12 <= frac <= 0.7 + 1e-12
+            assert s.route_m.shape == (1, 2)
+            dn, de = s.route_m[0, 0] - s.north_m, s.route_m[0, 1] - s.east_m
+            assert math.atan2(de, dn) == pytest.approx(
+                math.remainder(s.heading_rad, 2 * math.pi), abs=1e-9)
+            assert math.hypot(dn, de) > s.speed_mps * spec.duration_s
+            assert 2.0 <= s.sensors["gnss"]["sigma_m"] <= 3.0
+            assert 0.2 <= s.sensors["compass"]["sigma_deg"] <= 0.3
+            assert "radar" in s.sensors and "ais" in s.sensors and s.filter == "ekf"
+
+
+def test_without_sensors_ships_have_perfect_knowledge(tmp_path):
+    spec = _spec(tmp_path)
+    for s in draw(spec, 0).ships:
+        assert s.filter == "none"
+
+
+def test_an_impossible_geometry_is_an_input_error_naming_the_key(tmp_path, monkeypatch):
+    """Overtaking between ships of the same speed on a collision course cannot be drawn: with
+    equal speeds w is square to the mean course, so each ship sees the other within 15 deg of
+    the beam, never abaft it. The draw gives up with an InputError at encounter_types."""
+    from trafficsim.campaign import generator as gen
+    from trafficsim.errors import InputError
+
+    monkeypatch.setattr(gen, "MAX_TRIES", 3)
+    monkeypatch.setattr(gen, "TRIES_PER_SHIP", 20)
+    path = tmp_path / "x.yaml"
+    path.write_text(SPEC.format(n=5, seed=1, chunk=5, extra="").replace(
+        "{cargo: 1, container: 1, fishing: 1}", "{cargo: 1}")
+        + "encounter_types: {overtaking: 1}\nspeed_fraction: [1, 1]\ndcpa_nm: [0, 0]\n")
+    with pytest.raises(InputError) as info:
+        gen.draw(load_spec(path), 3)
+    assert info.value.key == "encounter_types"
+    assert "encounter 3" in str(info.value) and "overtaking" in str(info.value)

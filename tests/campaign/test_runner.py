@@ -3,14 +3,18 @@ and frozen while the others run on, whatever the chunking; the summary, the figu
 report and the command line leave it out of the outcomes and name it."""
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from trafficsim.campaign.runner import run_chunk
+from trafficsim.campaign.generator import classify, draw
+from trafficsim.campaign.runner import _rules_path, compliant, run_chunk
 from trafficsim.campaign.spec import load_spec
 from trafficsim.cli import main
 from trafficsim.render.report import write_report
+from trafficsim.units import NM
 
 SPEC = """schema_version: 1
 name: runaway
@@ -77,3 +81,137 @@ def test_diverged_encounters_are_named_and_left_out_of_the_outcomes(runaway_ship
     assert "state became non-finite" in capsys.readouterr().err
     at = np.asarray(rows["diverged_at_s"])[enc == gone[0]][0]
     assert json.loads((replay / "summary.json").read_text())["diverged_at_s"] == at
+
+
+# --------------------------------------------------------------------------------------------
+# rows checked against the generator and straight-line kinematics
+# --------------------------------------------------------------------------------------------
+
+ROWS_SPEC = """schema_version: 1
+name: rows
+n_encounters: 8
+seed: 3
+duration_s: {duration}
+ship_types: {{cargo: 1, container: 1}}
+dcpa_nm: [0.2, 0.6]
+{extra}
+"""
+
+
+def _rows_spec(tmp_path, extra="", duration=400, name="r.yaml"):
+    if "tcpa_min" not in extra:
+        extra += "\ntcpa_min: [2, 4]"
+    path = tmp_path / name
+    path.write_text(ROWS_SPEC.format(extra=extra, duration=duration))
+    return load_spec(path)
+
+
+@pytest.fixture
+def straight(tmp_path):
+    """A no-avoidance chunk: every ship holds course and speed in calm water."""
+    spec = _rows_spec(tmp_path, extra="policy: no_avoidance")
+    return spec, run_chunk(spec, 0, 8)
+
+
+def test_rows_are_the_pairs_of_each_encounter(straight):
+    """n ships give n (n - 1) / 2 rows, in encounter order, with the campaign index and seed,
+    and the pair type of the generator for the own ship's pairs (the sector rule from the
+    start state for the others)."""
+    spec, rows = straight
+    encs = [draw(spec, i) for i in range(8)]
+    expected_enc, expected_kind = [], []
+    for enc in encs:
+        n = len(enc.ships)
+        for i in range(n):
+            for j in range(i + 1, n):
+                expected_enc.append(enc.index)
+                if i == 0:
+                    expected_kind.append(enc.pair_kinds[j - 1])
+                else:
+                    a, b = enc.ships[i], enc.ships[j]
+                    expected_kind.append(classify(a.heading_rad, b.heading_rad,
+                                                  b.north_m - a.north_m, b.east_m - a.east_m))
+    assert np.asarray(rows["encounter"]).tolist() == expected_enc
+    assert list(rows["pair_type"]) == expected_kind
+    assert np.all(np.asarray(rows["seed"]) == 3)
+    assert list(rows["encounter_type"]) == [encs[e].kind for e in expected_enc]
+    assert rows["_ship_steps"] == sum(len(e.ships) for e in encs) * 400
+
+
+def test_straight_runs_meet_at_the_drawn_dcpa_and_tcpa(straight):
+    """Nobody manoeuvres, no current or wind: the smallest range of an own-ship pair is the
+    drawn DCPA (to a metre: the closest sample is within half a step of the CPA) at the drawn
+    TCPA (to a step), and the start columns repeat the draw."""
+    spec, rows = straight
+    own_rows = [k for k, s in enumerate(rows["ship_i"]) if s == "own"]
+    encs = {i: draw(spec, i) for i in range(8)}
+    enc_col = np.asarray(rows["encounter"])
+    for k in own_rows:
+        enc = encs[int(enc_col[k])]
+        j = int(rows["ship_j"][k].removeprefix("ship"))
+        dcpa, tcpa = enc.dcpa_m[j - 1], enc.tcpa_s[j - 1]
+        other = enc.ships[j]
+        assert rows["dcpa0_nm"][k] * NM == pytest.approx(dcpa, abs=1e-6)
+        assert rows["tcpa0_min"][k] * 60 == pytest.approx(tcpa, abs=1e-6)
+        assert rows["range0_nm"][k] * NM == pytest.approx(math.hypot(other.north_m,
+                                                                     other.east_m))
+        assert rows["min_range_m"][k] == pytest.approx(dcpa, abs=1.0)
+        assert abs(rows["t_cpa_s"][k] - tcpa) <= 1.0
+        assert not rows["collision"][k] or dcpa < 100.0
+
+
+def test_no_avoidance_ships_do_nothing_and_are_not_compliant(straight):
+    """Keep-course ships ask for no manoeuvre, fire no rule and change course by nothing; as
+    they do not run the rules, no pair counts as compliant."""
+    _, rows = straight
+    for side in ("_i", "_j"):
+        assert set(rows["manoeuvres" + side]) == {""}
+        assert set(rows["rules_fired" + side]) == {""}
+        assert np.all(np.abs(rows["course_change_stbd_deg" + side]) < 1e-9)
+        assert np.all(np.abs(rows["course_change_port_deg" + side]) < 1e-9)
+    assert set(rows["behaviour_i"]) | set(rows["behaviour_j"]) == {"keep_course"}
+    assert not compliant(rows).any()
+    assert not np.asarray(rows["diverged"]).any()
+    assert np.all(np.isnan(np.asarray(rows["diverged_at_s"])))
+
+
+def test_compliant_needs_both_ships_on_the_rules():
+    rows = {"behaviour_i": ["colregs", "colregs", "turn_port", "keep_course"],
+            "behaviour_j": ["colregs", "late_action", "colregs", "colregs"]}
+    assert compliant(rows).tolist() == [True, False, False, False]
+
+
+def test_a_run_that_ends_between_decisions_is_observed_to_its_end(tmp_path):
+    """95 s with 10 s decisions: the chunk runs 95 steps, not a whole number of decision
+    periods (90 or 100): with a TCPA of 10 min the range still falls at the end, so the
+    closest point is the last step, 95 s; the ship-steps are 95 per ship."""
+    spec = _rows_spec(tmp_path, extra="policy: no_avoidance\ntcpa_min: [10, 10]", duration=95,
+                 name="short.yaml")
+    rows = run_chunk(spec, 0, 2)
+    own = [k for k, s in enumerate(rows["ship_i"]) if s == "own"]
+    assert all(rows["t_cpa_s"][k] == pytest.approx(95.0) for k in own)
+    n_ships = sum(len(draw(spec, i).ships) for i in range(2))
+    assert rows["_ship_steps"] == n_ships * 95
+
+
+def test_rows_do_not_depend_on_the_chunk_with_rules_rogues_sensors_and_weather(tmp_path):
+    """Encounters 2..5 run as one chunk or as 2..3 and 4..5 give the same rows, with the
+    rules, rogues, noisy instruments, current and wind all drawing random numbers."""
+    spec = _rows_spec(tmp_path, duration=120, extra="rogue_fraction: 0.5\ncurrent_kn: [0, 1]\n"
+                 "wind_mps: [0, 10]\nsensors: {gnss_sigma_m: [1, 3]}")
+    whole = run_chunk(spec, 2, 6)
+    parts = [run_chunk(spec, 2, 4), run_chunk(spec, 4, 6)]
+    for key, value in whole.items():
+        if key.startswith("_"):
+            continue
+        joined = [v for p in parts for v in np.asarray(p[key]).tolist()]
+        np.testing.assert_array_equal(np.asarray(value).tolist(), joined, err_msg=key)
+
+
+def test_rules_are_found_relative_to_the_spec(tmp_path):
+    """``rules:`` is relative to the spec file's folder, not the working directory."""
+    sub = tmp_path / "a" / "b"
+    sub.mkdir(parents=True)
+    spec = _rows_spec(sub, extra="rules: ../rules.yaml")
+    assert _rules_path(spec) == sub / "../rules.yaml"
+    assert _rules_path(_rows_spec(sub, name="n.yaml")) is None

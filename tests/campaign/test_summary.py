@@ -1,11 +1,20 @@
 import math
+from statistics import NormalDist
 
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from trafficsim.campaign.summary import per_encounter, summarise, wilson
+from trafficsim.campaign.summary import (
+    Z95,
+    completed,
+    diverged_encounters,
+    per_encounter,
+    summarise,
+    wilson,
+)
+from trafficsim.units import NM
 
 
 def test_wilson_interval_known_values():
@@ -57,3 +66,213 @@ def test_rates_are_per_encounter():
     assert s["by_type"]["multi"]["collision"]["rate"] == 1.0
     assert s["compliance"]["rule14"] == pytest.approx(0.5)
     assert s["cpa_nm"]["p50"] == pytest.approx(700.0 / 1852.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Wilson interval against independent forms
+# --------------------------------------------------------------------------------------------
+
+def _wilson_by_inversion(k, n, z):
+    """The Wilson interval as the set of p with |k/n - p| <= z sqrt(p (1 - p) / n): the roots
+    of (1 + z^2/n) p^2 - (2 k/n + z^2/n) p + (k/n)^2 = 0."""
+    ph = k / n
+    a = 1 + z * z / n
+    b = -(2 * ph + z * z / n)
+    c = ph * ph
+    disc = math.sqrt(b * b - 4 * a * c)
+    return (-b - disc) / (2 * a), (-b + disc) / (2 * a)
+
+
+def test_z95_is_the_two_sided_95_percent_normal_quantile():
+    assert math.isclose(Z95, NormalDist().inv_cdf(0.975), rel_tol=1e-12)
+
+
+@pytest.mark.parametrize("k, n", [(1, 1), (0, 1), (1, 2), (1, 10), (7, 10), (3, 1000),
+                                  (997, 1000), (50, 100), (12345, 1_000_000)])
+def test_wilson_is_the_inverted_score_test(k, n):
+    """Same interval as solving the score test's quadratic for p."""
+    low, high = wilson(k, n)
+    ref = _wilson_by_inversion(k, n, Z95)
+    assert (low, high) == pytest.approx(ref, abs=1e-12)
+
+
+def test_wilson_ends_satisfy_the_score_test_with_equality():
+    """At each end p of the interval the score statistic |k/n - p| / sqrt(p(1-p)/n) is z."""
+    for k, n in ((3, 17), (40, 41), (1, 300)):
+        for p in wilson(k, n):
+            stat = abs(k / n - p) / math.sqrt(p * (1 - p) / n)
+            assert stat == pytest.approx(Z95, rel=1e-9)
+
+
+def test_wilson_is_symmetric_and_narrows_with_n():
+    """wilson(n - k, n) mirrors wilson(k, n) about 1/2; the same proportion on 100 times the
+    encounters gives an interval about 10 times narrower; a larger z widens it."""
+    low, high = wilson(3, 20)
+    mlow, mhigh = wilson(17, 20)
+    assert (low, high) == pytest.approx((1 - mhigh, 1 - mlow), abs=1e-12)
+    w1 = np.subtract(*wilson(30, 100)[::-1])
+    w2 = np.subtract(*wilson(3000, 10000)[::-1])
+    assert w1 / w2 == pytest.approx(10.0, rel=0.02)
+    assert np.subtract(*wilson(30, 100, z=2.576)[::-1]) > w1
+
+
+def test_wilson_with_z_zero_is_the_point_estimate():
+    assert wilson(3, 8, z=0.0) == pytest.approx((3 / 8, 3 / 8))
+
+
+# --------------------------------------------------------------------------------------------
+# per-encounter collapse, quantiles, per-type statistics, diverged encounters
+# --------------------------------------------------------------------------------------------
+
+def _table(enc, kinds, min_range, collision=None, domain=None, blind=None, behaviour_j=None,
+           diverged=None, scores=None):
+    n = len(enc)
+    t = {
+        "encounter": np.asarray(enc),
+        "encounter_type": np.asarray(kinds, dtype=object),
+        "collision": np.zeros(n, bool) if collision is None else np.asarray(collision),
+        "domain_violation": np.zeros(n, bool) if domain is None else np.asarray(domain),
+        "blind_spot": np.zeros(n, bool) if blind is None else np.asarray(blind),
+        "min_range_m": np.asarray(min_range, dtype=float),
+        "behaviour_i": np.array(["colregs"] * n, dtype=object),
+        "behaviour_j": np.array(["colregs"] * n if behaviour_j is None else behaviour_j,
+                                dtype=object),
+    }
+    for r in (13, 14, 15, 16, 17):
+        t[f"score_rule{r}"] = (np.full(n, np.nan) if scores is None
+                               else np.asarray(scores.get(r, [np.nan] * n), dtype=float))
+    if diverged is not None:
+        t["diverged"] = np.asarray(diverged)
+    return t
+
+
+def test_per_encounter_does_not_need_sorted_rows():
+    """Rows of an encounter need not be adjacent: shuffling the rows changes nothing."""
+    t = _table([2, 0, 1, 2, 0], ["multi", "head_on", "overtaking", "multi", "head_on"],
+               [900.0, 100.0, 5000.0, 700.0, 2000.0], collision=[False, True, False, False,
+                                                              False])
+    rng = np.random.default_rng(0)
+    perm = rng.permutation(5)
+    a = per_encounter(t)
+    b = per_encounter({k: v[perm] for k, v in t.items()})
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+    np.testing.assert_array_equal(a["encounter"], [0, 1, 2])
+    np.testing.assert_array_equal(a["type"], ["head_on", "overtaking", "multi"])
+    np.testing.assert_array_equal(a["min_range_m"], [100.0, 5000.0, 700.0])
+
+
+def test_near_miss_is_strictly_below_800_m_and_not_a_collision():
+    """800 m exactly is not a near miss; 799.9 m is; a collision at 10 m is a collision, not a
+    near miss."""
+    t = _table([0, 1, 2, 3], ["head_on"] * 4, [800.0, 799.9, 10.0, 5000.0],
+               collision=[False, False, True, False])
+    enc = per_encounter(t)
+    np.testing.assert_array_equal(enc["near_miss"], [False, True, False, False])
+    s = summarise(t)
+    assert s["near_miss"]["count"] == 1 and s["collision"]["count"] == 1
+    assert s["near_miss"]["ci95"] == pytest.approx(list(wilson(1, 4)))
+
+
+def test_cpa_quantiles_are_linear_percentiles_of_the_per_encounter_minimum():
+    """Five encounters with minima 100, 200, 300, 400, 1852 m (the pair rows hold larger
+    ranges too): p50 = 300 m; p5 = 100 + 0.2 (200 - 100) = 120 m (position 0.05 * 4 = 0.2);
+    p1 = 100 + 0.04 * 100 = 104 m."""
+    t = _table([0, 0, 1, 2, 3, 4, 4], ["multi"] * 7,
+               [100.0, 900.0, 200.0, 300.0, 400.0, 1852.0, 5000.0])
+    s = summarise(t)
+    assert s["cpa_nm"]["p50"] == pytest.approx(300.0 / NM)
+    assert s["cpa_nm"]["p5"] == pytest.approx(120.0 / NM)
+    assert s["cpa_nm"]["p1"] == pytest.approx(104.0 / NM)
+
+
+def test_per_type_rates_and_intervals_by_hand():
+    """Three head-on encounters (one collision), two crossing give-way (none): rates 1/3 and
+    0/2 with their own Wilson intervals; types that did not occur are left out."""
+    t = _table([0, 1, 2, 3, 4], ["head_on", "crossing_give_way", "head_on", "head_on",
+                                 "crossing_give_way"],
+               [50.0, 3000.0, 2000.0, 1500.0, 900.0],
+               collision=[True, False, False, False, False],
+               domain=[True, True, False, False, False])
+    s = summarise(t)
+    assert set(s["by_type"]) == {"head_on", "crossing_give_way"}
+    ho, cg = s["by_type"]["head_on"], s["by_type"]["crossing_give_way"]
+    assert ho["n_encounters"] == 3 and cg["n_encounters"] == 2
+    assert ho["collision"]["rate"] == pytest.approx(1 / 3)
+    assert ho["collision"]["ci95"] == pytest.approx(list(wilson(1, 3)))
+    assert cg["collision"] == {"count": 0, "rate": 0.0, "ci95": [0.0, pytest.approx(
+        wilson(0, 2)[1])]}
+    assert cg["domain_violation"]["count"] == 1
+    assert s["collision"]["ci95"] == pytest.approx(list(wilson(1, 5)))
+    assert ho["cpa_nm"]["p50"] == pytest.approx(1500.0 / NM)
+
+
+def test_compliance_means_skip_nan_and_are_split_by_type():
+    """Rule means over pair rows ignore NaN (a rule that binds nobody in the pair); a rule with
+    no score at all is None (null in summary.json)."""
+    t = _table([0, 1, 1, 2], ["head_on", "multi", "multi", "head_on"], [900.0] * 4,
+               scores={14: [0.2, np.nan, 0.6, 0.4], 15: [np.nan, 0.9, np.nan, np.nan]})
+    s = summarise(t)
+    assert s["compliance"]["rule14"] == pytest.approx((0.2 + 0.6 + 0.4) / 3)
+    assert s["compliance"]["rule15"] == pytest.approx(0.9)
+    assert s["compliance"]["rule13"] is None
+    assert s["by_type"]["head_on"]["compliance"]["rule14"] == pytest.approx(0.3)
+    assert s["by_type"]["multi"]["compliance"]["rule14"] == pytest.approx(0.6)
+    assert s["by_type"]["head_on"]["compliance"]["rule15"] is None
+
+
+def test_compliant_counts_exclude_any_encounter_with_a_rogue():
+    """An encounter with one rogue (or keep-course) ship is not all-compliant; its collision is
+    not a collision of compliant ships."""
+    t = _table([0, 0, 1, 2], ["multi", "multi", "head_on", "head_on"], [10.0, 900.0, 20.0,
+                                                                         3000.0],
+               collision=[True, False, True, False],
+               behaviour_j=["colregs", "late_action", "colregs", "keep_course"])
+    s = summarise(t)
+    assert s["collisions"] == 2 and s["collisions_all_compliant"] == 1
+    assert s["encounters_all_compliant"] == 1
+
+
+def test_diverged_encounters_are_counted_apart():
+    """Encounter 1 diverged: it is named and counted, and every rate, quantile and score is
+    over encounters 0 and 2 only, exactly as if its rows were absent."""
+    kinds = ["head_on", "multi", "multi", "head_on"]
+    t = _table([0, 1, 1, 2], kinds, [10.0, 0.0, 0.0, 3000.0],
+               collision=[True, True, True, False], diverged=[False, True, True, False],
+               scores={14: [0.1, 0.9, 0.9, 0.5]})
+    s = summarise(t)
+    assert s["n_encounters"] == 3 and s["n_completed"] == 2
+    assert s["diverged"] == 1 and s["diverged_encounters"] == [1]
+    kept = [0, 3]
+    without = summarise({k: v[kept] for k, v in t.items() if k != "diverged"})
+    for key in ("collision", "near_miss", "cpa_nm", "compliance", "by_type", "collisions"):
+        assert s[key] == without[key], key
+    assert "multi" not in s["by_type"]
+    assert diverged_encounters(t) == [1]
+    assert completed(t)["encounter"].tolist() == [0, 2]
+
+
+def test_a_table_without_the_diverged_column_is_all_completed():
+    t = _table([0, 1], ["head_on", "head_on"], [500.0, 900.0])
+    assert diverged_encounters(t) == [] and len(completed(t)["encounter"]) == 2
+    assert summarise(t)["n_completed"] == 2
+
+
+def test_all_diverged_gives_no_rates_rather_than_an_error():
+    """Nothing ran to the end: counts 0, rates, intervals and quantiles NaN, scores None,
+    no per-type entries."""
+    t = _table([0, 1, 1], ["head_on", "multi", "multi"], [10.0, 20.0, 30.0],
+               diverged=[True, True, True], scores={14: [0.5, 0.5, 0.5]})
+    s = summarise(t)
+    assert s["n_encounters"] == 2 and s["n_completed"] == 0 and s["diverged"] == 2
+    assert s["collision"]["count"] == 0 and math.isnan(s["collision"]["rate"])
+    assert all(math.isnan(v) for v in s["collision"]["ci95"])
+    assert all(math.isnan(v) for v in s["cpa_nm"].values())
+    assert all(v is None for v in s["compliance"].values())
+    assert s["by_type"] == {}
+
+
+def test_an_empty_table_summarises():
+    t = _table([], [], [])
+    s = summarise(t)
+    assert s["n_encounters"] == 0 and s["n_completed"] == 0 and s["by_type"] == {}

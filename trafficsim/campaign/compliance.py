@@ -2,11 +2,12 @@
 
 :class:`PairObserver` samples the true state once per decision period for every directed pair
 (own ship ``o``, other ship ``t``; both directions of each pair): the range and, at the closest
-sample, the relative bearings ``alpha`` (of the other ship from the own bow) and ``beta`` (of the
-own ship from the other's bow); the own ship's largest course changes to starboard and port and
-its speed change so far; the range at its first manoeuvre (a course change over 5 degrees or a
-speed change over 0.2 m/s); whether it crossed the other ship's bow line ahead of her; and the
-manoeuvres and rule nodes its decision network produced towards her.
+sample, the relative bearings ``alpha`` (of the own ship from the other's bow) and ``beta`` (of
+the other ship from the own bow), as colregs.md defines them; the own ship's largest course
+changes to starboard and port and its speed change so far; the range at its first manoeuvre (a
+course change over 5 degrees or a speed change over 0.2 m/s) if that came before the closest
+sample; whether it crossed the other ship's bow line ahead of her; and the manoeuvres and rule
+nodes its decision network produced towards her.
 
 :func:`grade` turns these into the Woerner-style scores of ``../shared/reference/colregs.md``
 section 2.4 (Woerner 2016; Woerner et al. 2019, Auton. Robots 43:967-991, as implemented in
@@ -15,8 +16,10 @@ applies to the own ship's part in the encounter:
 
 * safety ``S = 0.5 s_r + 0.5 s_theta``: the range term ``s_r`` (1 above R_min = 1000 m, falling
   by gamma_nm = 0.4 to R_nm = 800 m and by gamma_col = 0.6 more to R_col = 200 m, 0 below) and
-  the pose term ``(1 - cos alpha)(1 - cos beta)`` with alpha clipped at 90 deg and beta to
-  [90, 270] deg, divided by its largest value 2 so that ``S`` lies in [0, 1] (our reading);
+  the pose term ``(1 - cos alpha)(1 - cos beta)`` with alpha (the own ship seen from the other)
+  clipped at 90 deg and beta (the other seen from the own ship) to [90, 270] deg: no credit for
+  passing ahead of the other's bow, full credit for passing abaft her beam; divided by its
+  largest value 2 so that ``S`` lies in [0, 1] (our reading);
 * give-way (Rule 16): ``S16 = S (1 - P_delay)(1 - P_na)``, ``P_delay`` the share of the range
   from the start to the CPA run before the first manoeuvre, ``P_na`` the non-apparent-manoeuvre
   penalty (course change under 30 deg and speed kept above half);
@@ -75,8 +78,8 @@ class PairObserver:
     x0: np.ndarray  # (N_STATE, n) true state at the start
     range0_m: np.ndarray
     closest_m: np.ndarray  # smallest sampled range
-    alpha_cpa: np.ndarray  # rad, clockwise, at the closest sample
-    beta_cpa: np.ndarray
+    alpha_cpa: np.ndarray  # rad, clockwise, at the closest sample: own ship from the other's bow
+    beta_cpa: np.ndarray  # the other ship from the own bow
     stbd_rad: np.ndarray  # own ship's largest course change to starboard so far
     port_rad: np.ndarray
     faster_mps: np.ndarray  # largest speed increase so far
@@ -86,7 +89,10 @@ class PairObserver:
     faster_cpa: np.ndarray
     slower_cpa: np.ndarray
     range_at_manoeuvre_m: np.ndarray  # NaN until the own ship manoeuvres
-    side: np.ndarray  # sign of the own ship's side of the other's bow line
+    manoeuvre_cpa_m: np.ndarray  # the same, at the closest sample (NaN: none before the CPA)
+    side: np.ndarray  # m, the own ship off the other's bow line (starboard +) at the last
+    #                   sample off it
+    ahead: np.ndarray  # m, the own ship ahead of the other along her heading at that sample
     crossed_ahead: np.ndarray
     asked: np.ndarray  # (2P, len(MANOEUVRES)) manoeuvres the network asked
     fired: np.ndarray  # (2P, max nodes) rule nodes visited
@@ -111,18 +117,15 @@ class PairObserver:
             net = d.ship_net[own]
         obs = cls(own, tgt, x.copy(), rng0, np.full(m, np.inf), z.copy(), z.copy(), z.copy(),
                   z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(),
-                  np.full(m, np.nan), np.zeros(m), np.zeros(m, dtype=bool),
+                  np.full(m, np.nan), np.full(m, np.nan), np.zeros(m), np.zeros(m),
+                  np.zeros(m, dtype=bool),
                   np.zeros((m, len(MANOEUVRES)), dtype=bool), np.zeros((m, width), dtype=bool),
                   names, net)
-        obs.side = obs._side(x)
+        dn = x[NORTH, own] - x[NORTH, tgt]
+        de = x[EAST, own] - x[EAST, tgt]
+        c, s = np.cos(x[PSI, tgt]), np.sin(x[PSI, tgt])
+        obs.side, obs.ahead = -dn * s + de * c, dn * c + de * s
         return obs
-
-    def _side(self, x: np.ndarray) -> np.ndarray:
-        """+1 where the own ship is on the other's starboard side of her bow line, -1 port."""
-        dn = x[NORTH, self.own] - x[NORTH, self.tgt]
-        de = x[EAST, self.own] - x[EAST, self.tgt]
-        psi = x[PSI, self.tgt]
-        return np.sign(-dn * np.sin(psi) + de * np.cos(psi))
 
     def observe(self, sim: Simulation) -> None:
         """One sample of the true state (and of the decisions just taken): one compiled loop
@@ -130,7 +133,8 @@ class PairObserver:
         _observe(sim.batch.x, self.x0, self.own, self.tgt, self.closest_m, self.alpha_cpa,
                  self.beta_cpa, self.stbd_rad, self.port_rad, self.faster_mps,
                  self.slower_mps, self.stbd_cpa, self.port_cpa, self.faster_cpa,
-                 self.slower_cpa, self.range_at_manoeuvre_m, self.side, self.crossed_ahead)
+                 self.slower_cpa, self.range_at_manoeuvre_m, self.manoeuvre_cpa_m, self.side,
+                 self.ahead, self.crossed_ahead)
         self._decisions(sim)
 
     def _decisions(self, sim: Simulation) -> None:
@@ -204,10 +208,15 @@ def _observe(x: np.ndarray, x0: np.ndarray, own: np.ndarray, tgt: np.ndarray,
              closest: np.ndarray, alpha: np.ndarray, beta: np.ndarray, stbd: np.ndarray,
              port: np.ndarray, faster: np.ndarray, slower: np.ndarray, stbd_cpa: np.ndarray,
              port_cpa: np.ndarray, faster_cpa: np.ndarray, slower_cpa: np.ndarray,
-             range_at_manoeuvre: np.ndarray, side: np.ndarray, crossed_ahead: np.ndarray
-             ) -> None:
+             range_at_manoeuvre: np.ndarray, manoeuvre_cpa: np.ndarray, side: np.ndarray,
+             ahead: np.ndarray, crossed_ahead: np.ndarray) -> None:
     """:meth:`PairObserver.observe` of every directed pair, in place (attributes of
-    :class:`PairObserver`; ``x`` the true state now, ``x0`` at the start)."""
+    :class:`PairObserver`; ``x`` the true state now, ``x0`` at the start).
+
+    The own ship crossed the other's bow line ahead of her when its side of the line changed
+    since the last sample and the point where it crossed, interpolated linearly between the two
+    samples in the other ship's frame, lies ahead of her: a crossing made between two samples
+    is seen even when the other ship has passed that point by the second."""
     for k in range(own.shape[0]):
         o, t = own[k], tgt[k]
         dn, de = x[NORTH, t] - x[NORTH, o], x[EAST, t] - x[EAST, o]
@@ -221,17 +230,20 @@ def _observe(x: np.ndarray, x0: np.ndarray, own: np.ndarray, tgt: np.ndarray,
             range_at_manoeuvre[k] = rng
         if rng < closest[k]:
             closest[k] = rng
-            alpha[k] = math.atan2(de, dn) - x[PSI, o]
-            beta[k] = math.atan2(-de, -dn) - x[PSI, t]
+            alpha[k] = math.atan2(-de, -dn) - x[PSI, t]
+            beta[k] = math.atan2(de, dn) - x[PSI, o]
             stbd_cpa[k], port_cpa[k] = stbd[k], port[k]
             faster_cpa[k], slower_cpa[k] = faster[k], slower[k]
+            manoeuvre_cpa[k] = range_at_manoeuvre[k]
         c, s = math.cos(x[PSI, t]), math.sin(x[PSI, t])
-        now = np.sign(dn * s - de * c)  # (the own ship relative to the other: -dn, -de)
-        ahead = (-dn * c - de * s) > 0.0  # own ahead of the other
-        if ahead and now * side[k] < 0:
-            crossed_ahead[k] = True
-        if now != 0:
-            side[k] = now
+        off = dn * s - de * c  # (the own ship relative to the other: -dn, -de)
+        along = -dn * c - de * s
+        if off * side[k] < 0.0:
+            w = side[k] / (side[k] - off)  # share of the interval before the crossing
+            if ahead[k] + w * (along - ahead[k]) > 0.0:
+                crossed_ahead[k] = True
+        if off != 0.0:
+            side[k], ahead[k] = off, along
 
 
 def grade(obs: PairObserver) -> dict[int, np.ndarray]:
@@ -248,7 +260,7 @@ def grade(obs: PairObserver) -> dict[int, np.ndarray]:
     s_theta = ((1.0 - np.cos(np.minimum(alpha, np.pi / 2)))
                * (1.0 - np.cos(np.clip(beta, np.pi / 2, 1.5 * np.pi))) / 2.0)
     safety = 0.5 * s_r + 0.5 * s_theta
-    r_man = np.where(np.isnan(obs.range_at_manoeuvre_m), r_cpa, obs.range_at_manoeuvre_m)
+    r_man = np.where(np.isnan(obs.manoeuvre_cpa_m), r_cpa, obs.manoeuvre_cpa_m)
     span = np.maximum(obs.range0_m - r_cpa, 1e-9)
     p_delay = np.clip((obs.range0_m - r_man) / span, 0.0, 1.0)
     course = np.maximum(obs.stbd_cpa, obs.port_cpa)

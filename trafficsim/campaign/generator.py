@@ -8,7 +8,9 @@ other ship starts at ``p = -w T + D n`` from the own ship, ``n`` a unit vector a
 type, and a draw is kept only when the start geometry is of that type by the sectors of
 COLREGS Rules 13-15 (``../shared/reference/colregs.md``): overtaking when coming up from more
 than 22.5 degrees abaft the other's beam (relative bearing 112.5-247.5 degrees), head-on when
-nearly reciprocal and ahead, crossing otherwise, give-way when the other ship is on the own
+nearly reciprocal (within 6 degrees) and each ship sees the other ahead or nearly ahead (Rule
+14(b); within 10 degrees of the bow, the ``head_on_bearing_deg`` of ``rules/colregs.yaml``),
+crossing otherwise, give-way when the other ship is on the own
 ship's starboard side.
 
 Every ship sails a straight route along its initial course, long enough for the whole run.
@@ -36,6 +38,7 @@ from trafficsim.units import NM, from_kn
 
 PAIR_TYPES = ENCOUNTER_TYPES[:-1]  # the types of one other ship
 HEAD_ON_DEG = 6.0  # course difference from reciprocal of a head-on draw (Rule 14: "nearly")
+HEAD_ON_BEARING_DEG = 10.0  # Rule 14(b): the other ship "ahead or nearly ahead" of each
 ABAFT_LOW, ABAFT_HIGH = math.radians(112.5), math.radians(247.5)  # Rule 13(b) sector
 ROGUES = ("turn_port", "late_action")
 MAX_TRIES = 1000
@@ -76,7 +79,9 @@ def classify(own_psi: float, other_psi: float, rel_n: float, rel_e: float) -> st
     if _abaft(bearing):
         return "overtaken"
     reciprocal = abs(_wrap(other_psi - own_psi) - math.pi) <= math.radians(HEAD_ON_DEG)
-    if reciprocal:
+    sector = math.radians(HEAD_ON_BEARING_DEG)
+    if (reciprocal and abs(_wrap(bearing + math.pi) - math.pi) <= sector
+            and abs(_wrap(aspect + math.pi) - math.pi) <= sector):
         return "head_on"
     return "crossing_give_way" if _wrap(bearing) < math.pi else "crossing_stand_on"
 
