@@ -2,8 +2,10 @@
 ship-domain violation.
 
 A collision is an overlap of the two hull outlines (:func:`trafficsim.geometry.hull_outlines`);
-the exact polygon test runs only for pairs whose centres are closer than half the sum of their
-lengths, so the per-step cost is one range computation per pair. A domain violation is either
+the exact polygon test runs only for pairs whose centres are closer than ``0.5 (L + B)`` of the
+one plus that of the other (a bound on the hull radius ``0.5 hypot(L, B)``, the distance of the
+outline's stern corners from its centre), so the per-step cost is one range computation per
+pair. A domain violation is either
 ship's reference point inside the other's domain (:mod:`trafficsim.colregs.domains`, the
 scenario's domain model, sized by the ship's length and speed through the water; Coldwell's
 head-on and crossing shape).
@@ -55,7 +57,8 @@ class PairMetrics:
         domains in one compiled loop over pairs, hull outlines only for pairs close enough to
         touch."""
         near = np.empty(pi.shape[0], dtype=np.int64)
-        count = _accumulate(x, length_m, pi, pj, float(t_s), domains.domain_code(self.domain),
+        count = _accumulate(x, length_m, beam_m, pi, pj, float(t_s),
+                            domains.domain_code(self.domain),
                             self.min_range_m, self.t_min_range_s, self.domain_violation,
                             self.t_domain_violation_s, self.collision, near)
         if count:
@@ -84,13 +87,13 @@ def _inside_domain(kind: int, x: np.ndarray, own: int, sign: float, dn: float, d
 
 
 @kernel
-def _accumulate(x: np.ndarray, length_m: np.ndarray, pi: np.ndarray, pj: np.ndarray,
-                t_s: float, kind: int, min_range: np.ndarray, t_min: np.ndarray,
+def _accumulate(x: np.ndarray, length_m: np.ndarray, beam_m: np.ndarray, pi: np.ndarray,
+                pj: np.ndarray, t_s: float, kind: int, min_range: np.ndarray, t_min: np.ndarray,
                 violation: np.ndarray, t_violation: np.ndarray, collision: np.ndarray,
                 near: np.ndarray) -> int:
     """Minimum range and first domain violation of every pair, in place; the pairs not yet
-    collided whose centres are closer than half the sum of their lengths go to ``near``
-    (their count is returned)."""
+    collided whose centres are close enough for their outlines to touch go to ``near`` (their
+    count is returned)."""
     count = 0
     for p in range(pi.shape[0]):
         a, b = pi[p], pj[p]
@@ -101,7 +104,8 @@ def _accumulate(x: np.ndarray, length_m: np.ndarray, pi: np.ndarray, pj: np.ndar
         if not violation[p] and (_inside_domain(kind, x, a, 1.0, dn, de, rng, length_m)
                                  or _inside_domain(kind, x, b, -1.0, dn, de, rng, length_m)):
             violation[p], t_violation[p] = True, t_s
-        if rng < 0.5 * (length_m[a] + length_m[b]) and not collision[p]:
+        reach = 0.5 * (length_m[a] + beam_m[a] + length_m[b] + beam_m[b])
+        if rng < reach and not collision[p]:
             near[count] = p
             count += 1
     return count

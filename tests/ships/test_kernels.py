@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from tests.conftest import SHARED
 from trafficsim.ships import base, kernels
 from trafficsim.ships.base import PSI, RPS, RUDDER, Actuators, Env, R, U
 from trafficsim.ships.library import load_ship
@@ -148,3 +149,172 @@ def test_accelerations_equal_the_family_kernels() -> None:
         np.testing.assert_array_equal(out[:, i], one)
     assert np.all(np.isfinite(out)) and np.any(out[2] != 0.0)
     assert np.all(np.abs(x[R]) > 0.0)
+
+
+def _scipy_track(code: int, p: np.ndarray, a: np.ndarray, x0: np.ndarray, rudder: float,
+                 rps: float, env: np.ndarray, t_end: float) -> np.ndarray:
+    """The same ship integrated by scipy (DOP853, tolerance 1e-11) with the rates written out
+    from their definitions: the family's accelerations (``kernels.accel``), kinematics with
+    the current, steering gear ``clip((clip(order, +-max) - delta) / T_R, +-rate)`` and engine
+    ``(clip(order, min, max) - n) / T_N``."""
+    from scipy.integrate import solve_ivp
+
+    def rhs(t, y):
+        du, dv, dr = kernels.accel(code, p, np.ascontiguousarray(y), env)
+        c, s = math.cos(y[PSI]), math.sin(y[PSI])
+        order = min(max(rudder, -a[kernels.RUDDER_MAX]), a[kernels.RUDDER_MAX])
+        rate = min(max((order - y[RUDDER]) / a[kernels.RUDDER_TAU], -a[kernels.RUDDER_RATE]),
+                   a[kernels.RUDDER_RATE])
+        n = min(max(rps, a[kernels.RPS_MIN]), a[kernels.RPS_MAX])
+        return [y[U] * c - y[4] * s + env[0], y[U] * s + y[4] * c + env[1], y[R], du, dv, dr,
+                rate, (n - y[RPS]) / a[kernels.ENGINE_TAU]]
+
+    sol = solve_ivp(rhs, (0.0, t_end), x0, method="DOP853", rtol=1e-11, atol=1e-11)
+    return sol.y[:, -1]
+
+
+@pytest.mark.parametrize("ship, rudder_deg, rps_factor", [
+    ("cargo", 25.0, 1.1), ("kvlcc2", 25.0, 1.1), ("catfish", -20.0, 0.9),
+    ("bulk_carrier", 50.0, 3.0), ("container", -35.0, -1.0), ("kvlcc2", -10.0, 0.5)])
+def test_rk4_step_agrees_with_scipy_on_the_same_model(ship, rudder_deg, rps_factor) -> None:
+    """After two ship lengths' time of a turn in current and wind, with orders beyond the
+    limits in some cases (50 deg rudder, three times or reversed propeller speed), 100 RK4
+    steps match scipy: positions to 2e-5 L, heading to 3e-5 rad, velocities to 1e-5 of the
+    speed, yaw rate, rudder and propeller speed to 1e-6; with 400 steps the position error
+    falls at least fourfold (integration error, not a different model)."""
+    codes, P, A = _table((ship,))
+    x0 = _start((ship,))
+    x0[PSI] = 0.3
+    length = load_ship(ship)["particulars"]["length_m"]
+    t_end = 2.0 * length / x0[U, 0]
+    env = base.env_table(Env(current_north_mps=0.3, current_east_mps=-0.2, wind_speed_mps=8.0,
+                             wind_from_rad=1.0), 1)
+    rudder, rps = math.radians(rudder_deg), rps_factor * x0[RPS, 0]
+    ref = _scipy_track(codes[0], P[0], A[0], x0[:, 0].copy(), rudder, rps,
+                       np.ascontiguousarray(env[:, 0]), t_end)
+    errors = []
+    for steps in (100, 400):
+        x = np.array(x0, order="C")
+        for _ in range(steps):
+            kernels.step_ships(codes, P, A, x, np.array([rudder]), np.array([rps]), env,
+                               t_end / steps, np.ones(1, dtype=np.int64))
+        errors.append(math.hypot(x[0, 0] - ref[0], x[1, 0] - ref[1]))
+        if steps == 100:
+            got = x[:, 0].copy()
+    assert errors[0] < 2e-5 * length and errors[1] < errors[0] / 4.0
+    assert _angle_diff(got[PSI], ref[PSI]) < 3e-5
+    np.testing.assert_allclose(got[[U, 4]], ref[[U, 4]], rtol=0, atol=1e-5 * x0[U, 0])
+    np.testing.assert_allclose(got[[R, RUDDER, RPS]], ref[[R, RUDDER, RPS]], rtol=0, atol=1e-6)
+    # orders beyond the limits: the rudder stays within its maximum, the engine its range
+    assert abs(got[RUDDER]) <= A[0, kernels.RUDDER_MAX] + 1e-12
+    assert A[0, kernels.RPS_MIN] - 1e-12 <= got[RPS] <= A[0, kernels.RPS_MAX] + 1e-12
+
+
+def test_mmg_berthing_step_agrees_with_scipy() -> None:
+    """The Esso Osaka ``mmg_berthing`` model (read from its parameter folder) at slow speed,
+    also against scipy."""
+    folder = SHARED / "data" / "esso-osaka-mmg" / "python_module" / "input_csv"
+    if not folder.is_dir():
+        pytest.skip("MMG parameter folder not present")
+    spec = load_ship(str(folder))
+    fam = base.families()["mmg_berthing"]
+    codes = np.array([kernels.FAMILY_CODE["mmg_berthing"]])
+    P = base.pack(fam.build([spec]))
+    A = base.actuator_table(Actuators.from_specs([spec]))
+    x0 = np.zeros((base.N_STATE, 1))
+    x0[U], x0[RPS], x0[PSI] = 0.4, 10.0, 1.0
+    env = base.env_table(Env(current_north_mps=0.02, wind_speed_mps=2.0, wind_from_rad=2.0), 1)
+    t_end = 30.0
+    ref = _scipy_track(codes[0], P[0], A[0], x0[:, 0].copy(), math.radians(20.0), 12.0,
+                       np.ascontiguousarray(env[:, 0]), t_end)
+    x = np.array(x0, order="C")
+    for _ in range(300):
+        kernels.step_ships(codes, P, A, x, np.array([math.radians(20.0)]), np.array([12.0]),
+                           env, t_end / 300, np.ones(1, dtype=np.int64))
+    assert math.hypot(x[0, 0] - ref[0], x[1, 0] - ref[1]) < 1e-4
+    assert _angle_diff(x[PSI, 0], ref[PSI]) < 1e-5
+    np.testing.assert_allclose(x[[U, 4, R, RUDDER, RPS], 0], ref[[U, 4, R, RUDDER, RPS]],
+                               atol=1e-6)
+
+
+def test_substeps_converge_to_scipy_and_one_substep_is_one_step() -> None:
+    """Sub-stepping refines the same RK4: the error against scipy of one step of 20 s falls
+    with 1, 2, 4, 8 sub-steps, by about 16 per halving once resolved; ``substeps = 1`` is a
+    single plain step."""
+    codes, P, A = _table(("bulk_carrier",))
+    x0 = _start(("bulk_carrier",))
+    x0[RUDDER] = math.radians(20.0)
+    env = base.env_table(Env(), 1)
+    ref = _scipy_track(codes[0], P[0], A[0], x0[:, 0].copy(), math.radians(20.0),
+                       x0[RPS, 0], np.ascontiguousarray(env[:, 0]), 20.0)
+    errors = []
+    for m in (1, 2, 4, 8):
+        x = np.array(x0, order="C")
+        kernels.step_ships(codes, P, A, x, np.array([math.radians(20.0)]), np.array(x0[RPS]),
+                           env, 20.0, np.array([m]))
+        errors.append(math.hypot(x[0, 0] - ref[0], x[1, 0] - ref[1]))
+    assert errors[0] > errors[1] > errors[2] > errors[3] > 0.0
+    assert 8.0 < errors[2] / errors[3] < 32.0
+
+
+def test_an_empty_batch_steps_and_a_port_turn_wraps_through_north() -> None:
+    """No ships: nothing to do and no error. A port turn from heading 0.05 rad crosses north:
+    the heading wraps to just below 2 pi, continuous with the unwrapped heading of a
+    run from 0.05 + 2 pi."""
+    codes, P, A = _table(("cargo",))
+    empty = np.zeros((base.N_STATE, 0))
+    kernels.step_ships(codes[:0], P[:0], A[:0], empty, np.zeros(0), np.zeros(0),
+                       np.zeros((4, 0)), 1.0, np.zeros(0, dtype=np.int64))
+    assert kernels.accelerations(codes[:0], P[:0], empty, np.zeros((4, 0))).shape == (3, 0)
+    x0 = _start(("cargo",))
+    x0[PSI], x0[RUDDER], x0[R] = 0.05, math.radians(-35.0), -0.01
+    env = base.env_table(Env(), 1)
+    a = np.array(x0, order="C")
+    b = np.array(x0, order="C")
+    b[PSI] += 2 * math.pi
+    for _ in range(10):
+        for x in (a, b):
+            kernels.step_ships(codes, P, A, x, np.array([math.radians(-35.0)]),
+                               np.array(x0[RPS]), env, 1.0, np.ones(1, dtype=np.int64))
+    assert math.pi < a[PSI, 0] < 2 * math.pi
+    assert _angle_diff(a[PSI], b[PSI])[0] < 1e-12
+    np.testing.assert_allclose(a[[0, 1, U, R]], b[[0, 1, U, R]], rtol=0, atol=1e-9)
+
+
+def test_steady_rps_is_the_nomoto_closed_form_and_saturates() -> None:
+    """Nomoto surge is at rest when ``u = U_s n / n_s``, so the steady propeller speed is
+    ``n_s u / U_s``; a speed beyond the engine gives ``rps_max``; the found rps holds the
+    speed (zero surge acceleration) for the other families."""
+    spec = load_ship("cargo")
+    fam = base.families()["nomoto"]
+    params, act = fam.build([spec] * 4), Actuators.from_specs([spec] * 4)
+    us = spec["service_speed_kn"] * 1852.0 / 3600.0
+    speeds = np.array([0.2, 0.5, 1.0, 1.3]) * us
+    got = base.steady_rps_for_speed(fam, params, act, speeds)
+    np.testing.assert_allclose(got, spec["coefficients"]["rps_service"] * speeds / us,
+                               rtol=1e-12)
+    fast = base.steady_rps_for_speed(fam, fam.build([spec]), Actuators.from_specs([spec]),
+                                     np.array([2.0 * us]))
+    assert fast[0] == pytest.approx(spec["actuators"]["rps_max"], rel=1e-12)
+    for name in ("kvlcc2", "bulk_carrier", "catfish"):
+        s = load_ship(name)
+        f = base.families()[s["model"]]
+        speed = 0.7 * s["service_speed_kn"] * 1852.0 / 3600.0
+        n = base.steady_rps_for_speed(f, f.build([s]), Actuators.from_specs([s]),
+                                      np.array([speed]))
+        x = np.zeros((base.N_STATE, 1))
+        x[U], x[RPS] = speed, n[0]
+        du, _, _ = base.accelerations(f, f.build([s]), x, Env())
+        assert abs(du[0]) < 1e-9
+
+
+def test_heading_a_hair_west_of_north_wraps_below_two_pi() -> None:
+    """From north with a yaw rate of -1e-19 rad/s the heading after a step is -1e-19 rad,
+    whose remainder modulo 2 pi rounds to 2 pi itself: the wrapped heading must still lie in
+    [0, 2 pi) (as :func:`trafficsim.sensors.wrap_2pi` guarantees)."""
+    codes, P, A = _table(("cargo",))
+    x = np.array(_start(("cargo",)), order="C")
+    x[PSI], x[R] = 0.0, -1e-19
+    kernels.step_ships(codes, P, A, x, np.zeros(1), np.array(x[RPS]), base.env_table(Env(), 1),
+                       1.0, np.ones(1, dtype=np.int64))
+    assert 0.0 <= x[PSI, 0] < 2.0 * math.pi

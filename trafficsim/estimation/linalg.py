@@ -166,6 +166,9 @@ def _expm_one(Ain: np.ndarray, out: np.ndarray, W: np.ndarray, pade: np.ndarray,
         for i in range(k):
             col += abs(Ain[i, j])
         norm = max(norm, col)
+    if not math.isfinite(norm):  # an infinite entry: no scaling makes the series converge
+        out[:, :] = math.nan
+        return
     s = 0
     m = 13
     for idx, deg in enumerate((3, 5, 7, 9)):
@@ -281,8 +284,8 @@ def _balance(G: np.ndarray, d: np.ndarray) -> None:
                 if j != i:
                     c += abs(G[j, i])
                     r += abs(G[i, j])
-            if c == 0.0 or r == 0.0:
-                continue
+            if c == 0.0 or r == 0.0 or not math.isfinite(c + r):
+                continue  # (an infinite entry: no power of two equalises the norms)
             # the power of two f that best equalises c f and r / f (LAPACK dgebal's loops)
             f = 1.0
             total = c + r
@@ -351,6 +354,10 @@ def _van_loan_one(F: np.ndarray, Qc: np.ndarray, dt: float, W: np.ndarray, d: np
         n1 = max(n1, c1)
         ninf = max(ninf, ci)
     norm = max(n1, ninf)
+    if not math.isfinite(norm):  # an infinite entry: no scaling makes the series converge
+        A_out[:, :] = math.nan
+        Qd_out[:, :] = math.nan
+        return
     m = 13
     for idx, deg in enumerate((3, 5, 7, 9)):
         if norm <= theta[idx]:

@@ -20,7 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 from trafficsim.jit import inline_kernel, kernel
-from trafficsim.sensors import mod_2pi_scalar
+from trafficsim.sensors import wrap_2pi_scalar
 from trafficsim.ships import mmg, mmg_berthing, modular, nomoto, response
 from trafficsim.ships.base import RPS, U, gather_ship
 
@@ -135,7 +135,7 @@ def step_ships(codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
             x = _rk4(mmg_berthing.accel, p, a, x, rc, nc, env, h, m)
         else:
             x = _rk4(modular.accel, p, a, x, rc, nc, env, h, m)
-        X[0, i], X[1, i], X[2, i], X[3, i] = x[0], x[1], mod_2pi_scalar(x[2]), x[3]
+        X[0, i], X[1, i], X[2, i], X[3, i] = x[0], x[1], wrap_2pi_scalar(x[2]), x[3]
         X[4, i], X[5, i], X[6, i], X[7, i] = x[4], x[5], x[6], x[7]
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import hashlib
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
@@ -123,8 +124,8 @@ def find_ship(type_or_path: str, base_dir: Path | None = None) -> Path:
 def load_ship(type_or_path: str, base_dir: Path | None = None,
               flag: str | None = None) -> dict[str, Any]:
     """Load and validate a ship file; returns it as a plain dict (plus ``path``), the caller's
-    own: files are parsed once and cached, and each call gets a deep copy, so changing what it
-    returns changes nothing for the next caller.
+    own: files are parsed once and cached (read again once changed on disk), and each call gets
+    a deep copy, so changing what it returns changes nothing for the next caller.
 
     ``flag``: the command-line flag that named the ship, for the message of an unknown one."""
     try:
@@ -133,11 +134,22 @@ def load_ship(type_or_path: str, base_dir: Path | None = None,
         if flag is None:
             raise
         raise ShipLibraryError(err.message, key=flag) from None
-    return copy.deepcopy(_load_cached(str(found)))
+    return copy.deepcopy(_load_cached(str(found), _stamp(found)))
+
+
+def _stamp(path: Path) -> str:
+    """Digest of a ship file's bytes (of every file of a parameter folder, with their names): a
+    file rewritten since it was cached is a new cache key, however soon and whatever its size."""
+    digest = hashlib.blake2b(digest_size=16)
+    for f in sorted(path.iterdir()) if path.is_dir() else [path]:
+        if f.is_file():
+            digest.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    return digest.hexdigest()
 
 
 @lru_cache(maxsize=256)
-def _load_cached(path: str) -> dict[str, Any]:
+def _load_cached(path: str, stamp: str) -> dict[str, Any]:
+    """The validated ship file at ``path`` (``stamp``: :func:`_stamp`, part of the key only)."""
     from trafficsim.ships.base import families
 
     if Path(path).is_dir():
