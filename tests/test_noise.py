@@ -1,9 +1,10 @@
 import math
 
+import numba
 import numpy as np
 import pytest
 
-from trafficsim.noise import NoiseBank, generator
+from trafficsim.noise import NoiseBank, generator, normal_from, uniform_from
 
 
 def _draws(bank: NoiseBank, steps: int) -> np.ndarray:
@@ -118,3 +119,140 @@ def test_streams_seeded_in_one_loop_are_numpys():
         seeded_states(-1, [(0,)])
     with pytest.raises(ValueError, match=">= 0"):
         seeded_states(0, np.array([[1, -2, 3]]))
+
+
+# ---------------------------------------------------------------------------------------------
+# keyed streams: batch composition and order, independence, at-need draws
+
+
+def test_permuted_and_duplicated_rows_draw_each_keys_own_numbers():
+    """Rows of a bank in any order, with a key repeated, each draw their key's stream: the
+    batch's composition changes nothing (normal and uniform banks, with an ``other``)."""
+    keys = [(0, 0, 1), (0, 1, 0), (3, 2, 0), (5, 0, 4)]
+    for kind in ("normal", "uniform"):
+        def bank(rows, kind=kind):
+            enc, ship, other = zip(*rows, strict=True)
+            return _draws(NoiseBank(9, enc, ship, "ais_rx", 2, kind=kind, block_steps=5,
+                                    other=other), 12)
+        base = bank(keys)
+        order = [2, 0, 3, 1, 2]
+        mixed = bank([keys[i] for i in order])
+        for j, i in enumerate(order):
+            np.testing.assert_array_equal(mixed[:, j], base[:, i])
+
+
+def test_rows_with_another_ship_are_numpys_keyed_generator():
+    """A directed-pair row ``(encounter, observer, purpose, other)`` draws the uniforms of
+    ``generator(seed, encounter, observer, purpose, other)``; the pair reversed is another
+    stream."""
+    bank = NoiseBank(21, [4, 4], [1, 2], "radar", 1, kind="uniform", other=[2, 1])
+    got = _draws(bank, 20)
+    np.testing.assert_array_equal(got[:, 0, 0], generator(21, 4, 1, "radar", 2).random(20))
+    np.testing.assert_array_equal(got[:, 1, 0], generator(21, 4, 2, "radar", 1).random(20))
+    assert not np.array_equal(got[:, 0, 0], got[:, 1, 0])
+
+
+def test_empty_banks_and_bad_arguments():
+    """A bank of no ships draws ``(0, dims)`` arrays; unequal key columns or an unknown kind
+    are refused; seeds and keys must be >= 0; an unknown purpose is not a stream."""
+    from trafficsim.noise import seeded_states
+
+    bank = NoiseBank(1, [], [], "gnss", 3)
+    assert bank.next().shape == (0, 3) and bank.state.shape == (0, 4)
+    assert seeded_states(1, []).shape == (0, 4)
+    with pytest.raises(ValueError, match="differ in length"):
+        NoiseBank(1, [0, 1], [0], "gnss", 1)
+    with pytest.raises(ValueError, match="differ in length"):
+        NoiseBank(1, [0, 1], [0, 1], "gnss", 1, other=[0])
+    with pytest.raises(ValueError, match="kind"):
+        NoiseBank(1, [0], [0], "gnss", 1, kind="gauss")
+    with pytest.raises(ValueError, match=">= 0"):
+        NoiseBank(1, [0], [-1], "gnss", 1).next()
+    with pytest.raises(ValueError):
+        generator(1, 0, 0, "sonar")
+
+
+def test_neighbouring_keys_give_uncorrelated_streams():
+    """Streams whose keys differ in one entry by one (encounter, ship, purpose, seed): sample
+    correlations below 5 / sqrt(n) (n = 20,000: 0.035; the standard error is 0.007), and no
+    lag-1 autocorrelation within a stream."""
+    n = 20_000
+    ref = _column(NoiseBank(3, [7], [2], "gnss", 1, block_steps=n))
+    others = [_column(NoiseBank(3, [8], [2], "gnss", 1, block_steps=n)),
+              _column(NoiseBank(3, [7], [3], "gnss", 1, block_steps=n)),
+              _column(NoiseBank(3, [7], [2], "gnss_gross", 1, block_steps=n)),
+              _column(NoiseBank(4, [7], [2], "gnss", 1, block_steps=n)),
+              _column(NoiseBank(3, [2], [7], "gnss", 1, block_steps=n))]
+    bound = 5.0 / math.sqrt(n)
+    for other in others:
+        assert abs(np.corrcoef(ref, other)[0, 1]) < bound
+    assert abs(np.corrcoef(ref[:-1], ref[1:])[0, 1]) < bound
+
+
+@numba.njit
+def _at_need(streams, rows, count, normal):
+    """``count`` draws at need from each stream of ``rows`` in turn, ``(len(rows), count)``."""
+    out = np.empty((rows.shape[0], count))
+    for j in range(rows.shape[0]):
+        for i in range(count):
+            out[j, i] = (normal_from(streams, rows[j]) if normal
+                         else uniform_from(streams, rows[j]))
+    return out
+
+
+def _moments(x: np.ndarray) -> tuple[float, float, float, float]:
+    m, s = x.mean(), x.std()
+    z = (x - m) / s
+    return float(m), float(s * s), float(np.mean(z**3)), float(np.mean(z**4))
+
+
+def test_at_need_draws_have_the_moments_of_their_distributions():
+    """``normal_from``: mean 0, variance 1, skewness 0, kurtosis 3; ``uniform_from``: mean 1/2,
+    variance 1/12, in [0, 1), kurtosis 9/5. 100,000 draws over 4 streams; bounds of about five
+    standard errors (mean 0.016 and 0.0046, variance 0.022 and 0.0014, skewness 0.04 and
+    0.04, kurtosis 0.08 and 0.04)."""
+    from trafficsim.noise import independent_streams
+
+    rows = np.arange(4)
+    normals = _at_need(independent_streams(4, 17), rows, 25_000, True).ravel()
+    uniforms = _at_need(independent_streams(4, 18), rows, 25_000, False).ravel()
+    m, v, skew, kurt = _moments(normals)
+    assert abs(m) < 0.016 and abs(v - 1.0) < 0.022
+    assert abs(skew) < 0.04 and abs(kurt - 3.0) < 0.08
+    m, v, skew, kurt = _moments(uniforms)
+    assert abs(m - 0.5) < 0.0046 and abs(v - 1.0 / 12.0) < 0.0014
+    assert abs(skew) < 0.04 and abs(kurt - 1.8) < 0.04
+    assert uniforms.min() >= 0.0 and uniforms.max() < 1.0
+
+
+def test_uniform_at_need_continues_numpys_stream_and_rows_advance_alone():
+    """``uniform_from`` on row ``i`` gives numpy's ``Generator.random`` of that row's key and
+    advances that row only; ``independent_streams`` row ``i`` is keyed ``(seed, 0, i,
+    purpose)``."""
+    from trafficsim.noise import independent_streams
+
+    streams = independent_streams(3, 5, "ais")
+    before = streams.copy()
+    got = _at_need(streams, np.array([1]), 50, False)[0]
+    np.testing.assert_array_equal(got, generator(5, 0, 1, "ais").random(50))
+    np.testing.assert_array_equal(streams[[0, 2]], before[[0, 2]])
+    assert not np.array_equal(streams[1], before[1])
+
+
+def test_normal_at_need_continues_the_banks_normals():
+    """``normal_from`` on a bank's state continues the very sequence the bank's blocks give:
+    block draws then at-need draws are the first ``a + b`` normals of the stream."""
+    whole = _draws(NoiseBank(6, [1, 2], [0, 0], "compass", 1, block_steps=40), 40)[:, :, 0].T
+    bank = NoiseBank(6, [1, 2], [0, 0], "compass", 1, block_steps=25)
+    first = _draws(bank, 25)[:, :, 0].T
+    rest = _at_need(bank.state, np.arange(2), 15, True)
+    np.testing.assert_array_equal(np.hstack([first, rest]), whole)
+
+
+def test_peek_of_nothing_and_of_many():
+    """Peeking zero numbers gives ``(n, 0)``; peeking is repeatable."""
+    from trafficsim.noise import independent_streams, peek_normals
+
+    streams = independent_streams(3, 2)
+    assert peek_normals(streams, 0).shape == (3, 0)
+    np.testing.assert_array_equal(peek_normals(streams, 10), peek_normals(streams, 10))

@@ -1,10 +1,12 @@
 """Radar and AIS of other ships feed one tracker per directed pair, inside the engine."""
 
 import numpy as np
+import pytest
 
 from trafficsim.batch import EncounterEnv, ShipSetup, build_batch
 from trafficsim.engine import Simulation
-from trafficsim.ships.base import EAST, NORTH
+from trafficsim.observation import Observation, observes
+from trafficsim.ships.base import EAST, NORTH, PSI, U
 from trafficsim.ships.library import load_ship
 from trafficsim.units import from_kn
 
@@ -68,3 +70,129 @@ def test_predicted_tracks_move_each_track_along_its_velocity():
     np.testing.assert_allclose(xp[:, :2], tracks.x[:, :2]
                                + (t - tracks.t_s)[:, None] * tracks.x[:, 2:], rtol=1e-15)
     np.testing.assert_array_equal(xp[:, 2:], tracks.x[:, 2:])
+
+
+# --- Observation driven directly on straight-line truth -------------------------------------
+
+FULL = {"radar": {"sigma_range_m": 25.0, "sigma_bearing_deg": 0.8, "p_detect": 0.7},
+        "ais": {"p_receive": 0.6, "latency_s": 3.0}}
+#: (north, east, heading deg, speed m/s) of ships a, b, c
+MOVES = {"a": (0.0, 0.0, 0.0, 7.0), "b": (5000.0, 2500.0, 200.0, 6.0),
+         "c": (-3000.0, 4000.0, 300.0, 5.0)}
+
+
+def _observe(names, enc, slot, seed=4, steps=90, configs=None, est_offset=(0.0, 0.0)):
+    """Ships ``names`` on straight lines observed for ``steps`` 1 s steps; each observer puts
+    its plots on the chart with its position estimate moved by ``est_offset`` (m)."""
+    n = len(names)
+    configs = configs or [FULL] * n
+    enc = np.asarray(enc)
+    pi, pj = (np.array(a, dtype=np.int64) for a in
+              zip(*[(i, j) for i in range(n) for j in range(i + 1, n) if enc[i] == enc[j]],
+                  strict=True))
+    obs = Observation.build(configs, pi, pj, seed, enc, np.asarray(slot))
+    x = np.zeros((8, n))
+    for k, name in enumerate(names):
+        north, east, hdg, speed = MOVES[name]
+        x[NORTH, k], x[EAST, k], x[PSI, k], x[U, k] = north, east, np.radians(hdg), speed
+    for t in range(steps):
+        est = x[:6].copy()
+        est[NORTH] += est_offset[0]
+        est[EAST] += est_offset[1]
+        obs.update(x, est, np.zeros((2, n)), float(t))
+        x[NORTH] += x[U] * np.cos(x[PSI])
+        x[EAST] += x[U] * np.sin(x[PSI])
+    return obs
+
+
+def _track_of(obs, observer, target):
+    """Row of the directed pair (observer -> target) in the observation's arrays."""
+    k = np.flatnonzero((obs.obs == observer) & (obs.tgt == target))
+    assert k.size == 1
+    return int(k[0])
+
+
+def _same_tracks(o1, pairs1, o2, pairs2):
+    for (a1, b1), (a2, b2) in zip(pairs1, pairs2, strict=True):
+        k1, k2 = _track_of(o1, a1, b1), _track_of(o2, a2, b2)
+        for f in ("x", "P", "t_s", "active", "n_updates", "gate_failures"):
+            np.testing.assert_array_equal(getattr(o1.tracks, f)[k1], getattr(o2.tracks, f)[k2])
+
+
+def test_pair_tracks_do_not_depend_on_a_third_ship_or_batch_order():
+    """Radar (missed detections) and AIS (lost reports) draw per pair and per transmitter:
+    the tracks between a and b are bit-identical with a third ship c in the same encounter,
+    with the ships listed in another order, and with another encounter placed first in the
+    batch (its key unchanged)."""
+    alone = _observe(["a", "b"], [0, 0], [0, 1])
+    assert alone.tracks.active.all() and (alone.tracks.n_updates > 10).all()
+    ab = [(0, 1), (1, 0)]
+    third = _observe(["a", "b", "c"], [0, 0, 0], [0, 1, 2])
+    _same_tracks(alone, ab, third, ab)
+    swapped = _observe(["b", "c", "a"], [0, 0, 0], [1, 2, 0])
+    _same_tracks(alone, ab, swapped, [(2, 0), (0, 2)])
+    behind = _observe(["c", "a", "b"], [5, 0, 0], [0, 0, 1])
+    _same_tracks(alone, ab, behind, [(1, 2), (2, 1)])
+
+
+def test_the_stream_key_and_seed_change_the_noise():
+    """The same pair under another encounter key or another seed gets other numbers (so the
+    test above compares streams that matter)."""
+    alone = _observe(["a", "b"], [0, 0], [0, 1])
+    for other in (_observe(["a", "b"], [1, 1], [0, 1]), _observe(["a", "b"], [0, 0], [0, 1],
+                                                                 seed=5)):
+        assert not np.array_equal(alone.tracks.x, other.tracks.x)
+
+
+def test_own_position_error_shifts_radar_tracks_rigidly():
+    """Radar plots are placed from the observer's own estimate: an estimate off by (120, -80) m
+    (heading exact) moves every plot, and so every radar-only track, by exactly that offset,
+    with the same velocity and covariance (the same draws, a translated linear filter)."""
+    radar_only = [{"radar": FULL["radar"]}] * 2
+    exact = _observe(["a", "b"], [0, 0], [0, 1], configs=radar_only)
+    moved = _observe(["a", "b"], [0, 0], [0, 1], configs=radar_only, est_offset=(120.0, -80.0))
+    assert exact.tracks.active.all()
+    np.testing.assert_allclose(moved.tracks.x[:, :2] - exact.tracks.x[:, :2],
+                               np.broadcast_to([120.0, -80.0], (2, 2)), atol=1e-6)
+    np.testing.assert_allclose(moved.tracks.x[:, 2:], exact.tracks.x[:, 2:], atol=1e-9)
+    np.testing.assert_allclose(moved.tracks.P, exact.tracks.P, rtol=1e-9)
+
+
+def test_ais_only_tracks_follow_the_transmitter_not_the_observer_estimate():
+    """Without radar the tracks come from AIS reports of the target's own GNSS: the
+    observer's position error does not move them."""
+    ais_only = [{"ais": FULL["ais"]}] * 2
+    exact = _observe(["a", "b"], [0, 0], [0, 1], configs=ais_only)
+    moved = _observe(["a", "b"], [0, 0], [0, 1], configs=ais_only, est_offset=(120.0, -80.0))
+    assert exact.tracks.active.all() and not exact.has_radar and exact.has_ais
+    np.testing.assert_array_equal(moved.tracks.x, exact.tracks.x)
+
+
+@pytest.mark.parametrize("configs, expected", [
+    ([{}, {}], False),
+    ([{"radar": None, "ais": None}], False),
+    ([{}, {"ais": {}}], True),
+    ([{"radar": {"p_detect": 0.5}}], True),
+    ([], False),
+])
+def test_observes_needs_a_radar_or_ais_section(configs, expected):
+    """An instrument section set to None is absent; an empty section is an instrument with
+    its defaults."""
+    assert observes(configs) is expected
+
+
+def test_build_pairs_flags_and_per_ship_instruments():
+    """Both directions of every pair (i -> j first); a ship without a radar section has its
+    radar disabled, one with an empty section has it enabled; the tracker settings of a
+    directed pair are its observer's."""
+    configs = [{"radar": {}}, {"ais": {}, "tracker": {"coast_s": 12.0}}, {"radar": None}]
+    obs = Observation.build(configs, np.array([0, 0, 1]), np.array([1, 2, 2]), 0,
+                            [0, 0, 0], np.array([0, 1, 2]))
+    np.testing.assert_array_equal(obs.obs, [0, 0, 1, 1, 2, 2])
+    np.testing.assert_array_equal(obs.tgt, [1, 2, 2, 0, 0, 1])
+    np.testing.assert_array_equal(obs.radar_p.enabled, [True, False, False])
+    np.testing.assert_array_equal(obs.ais_p.enabled, [False, True, False])
+    assert obs.has_radar and obs.has_ais
+    coast = obs.settings[:, 1]
+    np.testing.assert_array_equal(coast == 12.0, obs.obs == 1)
+    assert obs.tracks.x.shape == (6, 4) and not obs.tracks.active.any()

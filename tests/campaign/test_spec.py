@@ -255,8 +255,6 @@ def test_whole_multiples_in_floating_point_are_accepted(tmp_path, extra):
     load_spec(path)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: dt_s left at its default is never checked "
-                   "against duration_s (validator skipped on defaults)")
 @pytest.mark.parametrize("duration", ["900.5", "0.5"])
 def test_duration_not_a_whole_number_of_default_steps_is_refused(tmp_path, duration):
     """``dt_s: 1`` written out makes 900.5 s an error ("whole multiple"); leaving dt_s at its
@@ -271,23 +269,35 @@ def test_duration_not_a_whole_number_of_default_steps_is_refused(tmp_path, durat
     assert "whole multiple" in str(_error(implicit))
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: decision_period_s left at its default (10 s) is "
-                   "never checked against dt_s; dt_s 3 silently gives 9 s decisions")
-def test_default_decision_period_not_a_multiple_of_dt_is_refused(tmp_path):
-    """``decision_period_s: 10`` with ``dt_s: 3`` is refused; the same 10 s taken from the
-    default must be refused as well (the engine would decide every round(10 / 3) = 3 steps,
-    9 s)."""
+def test_default_decision_period_is_ten_seconds_in_whole_steps(tmp_path):
+    """``decision_period_s: 10`` written with ``dt_s: 3`` is refused (not whole steps); left
+    out, the default 10 s is rounded to whole steps: 3 steps of 3 s = 9 s, said as such,
+    rather than claimed as 10 s while the engine decides every round(10 / 3) = 3 steps."""
     explicit = _minimal(tmp_path, extra="dt_s: 3\ndecision_period_s: 10", name="e.yaml")
     assert "decision_period_s" in str(_error(explicit))
-    implicit = _minimal(tmp_path, extra="dt_s: 3", name="i.yaml")
-    assert "decision_period_s" in str(_error(implicit))
+    implicit = load_spec(_minimal(tmp_path, extra="dt_s: 3", name="i.yaml"))
+    assert implicit.decision_period_s == 9.0
+    assert load_spec(_minimal(tmp_path, extra="dt_s: 0.3", name="d.yaml")).decision_period_s \
+        == pytest.approx(33 * 0.3, rel=1e-15)
+    assert load_spec(_minimal(tmp_path, extra="dt_s: 60", name="m.yaml")).decision_period_s \
+        == 60.0  # at least one step
 
 
-@pytest.mark.xfail(strict=True, reason="BUG (io/yamlio): a one-item [low, high] range is "
-                   "reported as \"missing required key '1'\"")
 def test_a_one_item_range_is_reported_as_a_short_list(tmp_path):
     """``dcpa_nm: [0.5]`` lacks the high end of a range, a list item: calling list position 1
     a missing *key* points the user at a mapping that is not there."""
     err = _error(_minimal(tmp_path, extra="dcpa_nm: [0.5]"))
     assert err.line == 5 and "dcpa_nm" in str(err)
     assert "key" not in err.message and "2" in err.message
+
+
+def test_a_rules_file_that_does_not_exist_is_reported_at_its_line(tmp_path):
+    """A misspelt ``rules:`` file is found when the spec is loaded (and so by ``trafficsim
+    validate``), at the key's line, not when the first chunk runs."""
+    err = _error(_minimal(tmp_path, extra="rules: no_such_rules.yaml"))
+    assert err.line == 5 and "rules file not found" in str(err)
+    assert str(tmp_path / "no_such_rules.yaml") in str(err)
+    rules = tmp_path / "mine.yaml"
+    rules.write_text("x: 1\n")
+    spec = load_spec(_minimal(tmp_path, extra="rules: mine.yaml", name="ok.yaml"))
+    assert spec.rules == "mine.yaml"

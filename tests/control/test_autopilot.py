@@ -1,6 +1,9 @@
-import numpy as np
+import math
 
-from trafficsim.control.autopilot import rudder_command
+import numpy as np
+import pytest
+
+from trafficsim.control.autopilot import INTEGRAL_BAND_RAD, rudder_command
 
 
 def test_rudder_turns_towards_the_desired_heading_and_wraps():
@@ -26,3 +29,123 @@ def test_integral_accumulates_only_near_the_target():
     rudder_command(np.radians([5.0, 40.0]), np.zeros(2), np.zeros(2), integ, np.ones(2),
                    np.zeros(2), np.full(2, 0.01), np.radians(np.full(2, 35.0)), 2.0)
     assert integ[0] > 0 and integ[1] == 0
+
+
+# --- against a scalar reference loop, wrap boundaries, anti-windup band, closed loop --------
+
+def _reference(psi_d, psi, r, integ, kp, kd, ki, rmax, dt):
+    """The docstring's law for one ship: e = wrap(psi_d - psi) to [-pi, pi] by IEEE remainder,
+    integral only while |e| < 10 deg, command clipped to +-rmax."""
+    e = math.remainder(psi_d - psi, 2.0 * math.pi)
+    if abs(e) < math.radians(10.0):
+        integ += e * dt
+    cmd = kp * e + ki * integ - kd * r
+    return min(max(cmd, -rmax), rmax), integ
+
+
+def test_rudder_command_matches_a_scalar_loop_over_many_steps():
+    """300 ships with random gains, limits and headings anywhere on the real line (negative,
+    several turns), errors spread across the integral band, 25 steps: commands and integrals
+    equal the scalar reference ship by ship."""
+    rng = np.random.default_rng(40)
+    n = 300
+    kp, kd, ki = rng.uniform(0.2, 3.0, n), rng.uniform(0.0, 40.0, n), rng.uniform(0.0, 0.05, n)
+    rmax = np.radians(rng.uniform(10.0, 45.0, n))
+    integ = rng.normal(0.0, 0.5, n)
+    ref_int = integ.copy()
+    for _ in range(25):
+        psi = rng.uniform(-20.0, 20.0, n)
+        psi_d = psi + rng.normal(0.0, 0.3, n) + 2 * np.pi * rng.integers(-3, 4, n)
+        r = rng.normal(0.0, 0.02, n)
+        cmd = rudder_command(psi_d, psi, r, integ, kp, kd, ki, rmax, 0.5)
+        for i in range(n):
+            c, ref_int[i] = _reference(psi_d[i], psi[i], r[i], ref_int[i], kp[i], kd[i], ki[i],
+                                       rmax[i], 0.5)
+            assert cmd[i] == pytest.approx(c, abs=1e-12)
+        np.testing.assert_allclose(integ, ref_int, rtol=0, atol=1e-12)
+    assert np.any(np.abs(cmd) == rmax) and np.any(np.abs(cmd) < rmax)
+
+
+@pytest.mark.parametrize("psi_d_deg, psi_deg, err_deg", [
+    (5.0, 355.0, 10.0),         # across north to starboard
+    (355.0, 5.0, -10.0),        # across north to port
+    (0.0, 360.0, 0.0),          # the same heading written two ways
+    (360.0, 0.0, 0.0),
+    (-3.0, 723.0, -6.0),        # several turns apart
+    (179.0, -179.0, -2.0),      # across south
+    (90.0, 269.0, -179.0),      # nearly reversed: the shorter way
+    (90.0, 271.0, 179.0),
+])
+def test_heading_error_wraps_to_the_shorter_turn(psi_d_deg, psi_deg, err_deg):
+    """With kp = 1 and no other term the command is the wrapped error itself (limit 180 deg)."""
+    integ = np.zeros(1)
+    cmd = rudder_command(np.radians([psi_d_deg]), np.radians([psi_deg]), np.zeros(1), integ,
+                         1.0, 0.0, 0.0, math.pi, 1.0)
+    assert cmd[0] == pytest.approx(math.radians(err_deg), abs=1e-12)
+
+
+def test_integral_band_edges_and_saturation_symmetry():
+    """Errors just inside +-10 deg accumulate e dt, just outside nothing; the clip is
+    symmetric and per ship; scalar gains broadcast like per-ship arrays."""
+    eps = 1e-9
+    e = np.array([INTEGRAL_BAND_RAD - eps, -(INTEGRAL_BAND_RAD - eps),
+                  INTEGRAL_BAND_RAD + eps, -(INTEGRAL_BAND_RAD + eps)])
+    integ = np.zeros(4)
+    rudder_command(e, np.zeros(4), np.zeros(4), integ, 1.0, 0.0, 0.0, 1.0, 2.0)
+    np.testing.assert_allclose(integ, [2 * e[0], 2 * e[1], 0.0, 0.0], rtol=1e-12)
+    integ = np.zeros(2)
+    cmd = rudder_command(np.radians([60.0, -60.0]), np.zeros(2), np.zeros(2), integ, 2.0, 0.0,
+                         0.0, np.radians([20.0, 30.0]), 1.0)
+    np.testing.assert_allclose(cmd, np.radians([20.0, -30.0]), rtol=1e-15)
+    integ_a, integ_b = np.full(3, 0.1), np.full(3, 0.1)
+    args = (np.array([0.1, -0.05, 2.0]), np.zeros(3), np.array([0.01, 0.0, -0.02]))
+    a = rudder_command(*args, integ_a, 1.5, 10.0, 0.01, 0.6, 1.0)
+    b = rudder_command(*args, integ_b, np.full(3, 1.5), np.full(3, 10.0), np.full(3, 0.01),
+                       np.full(3, 0.6), 1.0)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(integ_a, integ_b)
+
+
+def test_empty_batch_and_nan_heading_leave_the_integral_alone():
+    """No ships: an empty command. A NaN heading estimate is outside the band: the integral
+    of that ship is not poisoned, and the other ship's command is unaffected."""
+    assert rudder_command(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), 1.0, 0.0, 0.0,
+                          0.5, 1.0).shape == (0,)
+    integ = np.array([0.3, 0.3])
+    cmd = rudder_command(np.array([0.1, 0.1]), np.array([np.nan, 0.0]), np.zeros(2), integ,
+                         1.0, 0.0, 0.1, 0.6, 1.0)
+    assert integ[0] == 0.3 and integ[1] == pytest.approx(0.3 + 0.1, rel=1e-12)
+    assert cmd[1] == pytest.approx(0.1 + 0.1 * 0.4, rel=1e-12)
+
+
+def _nomoto_closed_loop(psi0_deg, psi_d_deg, ki, bias_rad, seconds=600.0, dt=0.5):
+    """First-order Nomoto ship T r' + r = K (delta + bias) under the autopilot (Euler)."""
+    K, T = 0.1, 20.0
+    psi, r, integ = np.radians([psi0_deg]), np.zeros(1), np.zeros(1)
+    track = []
+    for _ in range(int(seconds / dt)):
+        d = rudder_command(np.radians([psi_d_deg]), psi, r, integ, 2.0, 30.0, ki,
+                           math.radians(35.0), dt)
+        r = r + dt * (K * (d + bias_rad) - r) / T
+        psi = np.mod(psi + dt * r, 2 * np.pi)
+        track.append(psi[0])
+    return np.array(track)
+
+
+def test_closed_loop_turns_the_short_way_across_north_and_settles():
+    """From 10 deg to 350 deg the ship turns to port through north (never past 20 deg or below
+    330 deg) and settles on 350 deg."""
+    track = np.degrees(_nomoto_closed_loop(10.0, 350.0, 0.0, 0.0))
+    signed = (track + 180.0) % 360.0 - 180.0
+    assert signed.max() <= 10.0 + 1e-9 and signed.min() > -30.0
+    assert abs(signed[-1] - (-10.0)) < 0.05
+
+
+def test_integral_removes_the_steady_error_of_a_constant_moment():
+    """A constant rudder-equivalent disturbance b: without integral the heading settles
+    -b / kp off (kp e = -b at r = 0); with it the error goes to zero."""
+    b = math.radians(2.0)
+    p_only = _nomoto_closed_loop(40.0, 40.0, 0.0, b, seconds=900.0)
+    pid = _nomoto_closed_loop(40.0, 40.0, 0.02, b, seconds=900.0)
+    assert math.degrees(p_only[-1]) - 40.0 == pytest.approx(math.degrees(b / 2.0), rel=1e-3)
+    assert abs(math.degrees(pid[-1]) - 40.0) < 0.01

@@ -188,3 +188,188 @@ def test_nis_returns_inside_its_bounds(runs: dict) -> None:
     # slightly above 2 (2.10 here): R_hat from 60 samples scatters by ~18 % per ship, and a
     # scattered denominator raises the mean of nu^2 / R_hat (Jensen)
     assert nis_g[360:].mean() == pytest.approx(2.0, rel=0.08)
+
+
+# --- the running-sum window against a brute-force window, and the helpers -------------------
+
+def _clamp_ref(R: np.ndarray, floor: float) -> np.ndarray:
+    """Eigenvalues of the symmetric part raised to ``floor`` (general eigensolver)."""
+    S = 0.5 * (R + R.T)
+    w, V = np.linalg.eig(S)
+    w, V = w.real, V.real
+    V = V / np.linalg.norm(V, axis=0)
+    return (V * np.maximum(w, floor)) @ V.T
+
+
+def test_running_sums_equal_a_brute_force_window_every_step() -> None:
+    """Two-dimensional group, per-ship windows and min_samples, biased innovations, one in three
+    steps invalid (NaN innovations there), floors that clamp some ships: at every step each
+    ship's R is the Myers-Tapley estimate over its last ``window_steps`` steps' valid
+    innovations, clamped; the previous R while fewer than ``min_samples`` are in the window."""
+    rng = np.random.default_rng(30)
+    n, m, steps = 5, 2, 70
+    windows = [3, 4, 7, 10, 10]
+    mins = [2, 3, 4, 5, 10]
+    floors = [1e-3, 1.0, 1e-3, 2.0, 1e-3]
+    params = adaptive.build([{"window_steps": w, "min_samples": k, "floor_sigma_m": f}
+                             for w, k, f in zip(windows, mins, floors, strict=True)], "gnss")
+    R0 = _spd(rng, n, m, 3.0)
+    state = adaptive.start(params, R0)
+    expected = R0.copy()
+    history: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    for _ in range(steps):
+        nu = rng.normal(0.0, 2.0, (n, m)) + np.array([[10.0, -4.0]])
+        hph = _spd(rng, n, m, 0.5)
+        valid = rng.random(n) < 0.67
+        nu[~valid] = np.nan
+        hph[~valid] = np.nan
+        state = adaptive.step(params, state, nu, hph, valid)
+        history.append((nu, hph, valid))
+        for i, w in enumerate(windows):
+            sel = [h for h in history[-w:] if h[2][i]]
+            assert state.count[i] == len(sel)
+            if len(sel) >= mins[i]:
+                v = np.array([h[0][i] for h in sel])
+                C = np.cov(v.T, ddof=1) - np.mean([h[1][i] for h in sel], axis=0)
+                expected[i] = _clamp_ref(C, floors[i] ** 2)
+            np.testing.assert_allclose(state.R[i], expected[i], rtol=1e-9, atol=1e-12)
+            assert state.head[i] == len(history) % w
+    assert np.isfinite(state.sum_nunu).all()
+
+
+def test_step_leaves_the_previous_state_untouched() -> None:
+    """step returns a new state: the one passed in (buffers, sums, R) is not changed, so a
+    caller may keep it (e.g. to retry a step)."""
+    rng = np.random.default_rng(31)
+    params = adaptive.build([{"window_steps": 4, "min_samples": 2}] * 3, "compass")
+    state = adaptive.start(params, np.full((3, 1, 1), 0.01))
+    for _ in range(6):
+        state = adaptive.step(params, state, rng.normal(0, 0.1, (3, 1)),
+                              np.full((3, 1, 1), 1e-4), np.ones(3, bool))
+    copies = [np.copy(a) for a in state]
+    adaptive.step(params, state, rng.normal(0, 5.0, (3, 1)), np.full((3, 1, 1), 1e-4),
+                  np.ones(3, bool))
+    for a, b in zip(state, copies, strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_estimate_is_invariant_to_a_bias_and_scales_with_the_innovations() -> None:
+    """The mean is removed: a constant bias per ship leaves R unchanged; innovations times c
+    with H P H^T times c^2 give R times c^2 (floors far below)."""
+    rng = np.random.default_rng(32)
+    n, m, w = 4, 2, 12
+    params = adaptive.build([{"window_steps": w, "floor_sigma_m": 1e-6}] * n, "gnss")
+    nus = rng.normal(0.0, 3.0, (w, n, m))
+    hphs = _spd(rng, w * n, m, 0.2).reshape(w, n, m, m)
+    bias = rng.uniform(-50, 50, (n, m))
+
+    def run(scale: float, offset: np.ndarray) -> np.ndarray:
+        s = adaptive.start(params, np.broadcast_to(np.eye(m), (n, m, m)))
+        for k in range(w):
+            s = adaptive.step(params, s, scale * nus[k] + offset, scale**2 * hphs[k],
+                              np.ones(n, bool))
+        return s.R
+
+    R = run(1.0, np.zeros((n, m)))
+    np.testing.assert_allclose(run(1.0, bias), R, rtol=1e-9)
+    np.testing.assert_allclose(run(3.0, np.zeros((n, m))), 9.0 * R, rtol=1e-12)
+
+
+def test_a_window_without_valid_steps_keeps_the_last_estimate() -> None:
+    """While invalid steps push the valid ones out, R follows the shrinking window down to
+    min_samples (3: the variance of the last three), then stays there; the empty window has
+    count 0 and zero sums; new valid innovations rebuild R from scratch."""
+    rng = np.random.default_rng(33)
+    params = adaptive.build([{"window_steps": 5, "min_samples": 3}], "log")
+    state = adaptive.start(params, np.full((1, 1, 1), 0.5))
+    old = rng.normal(0, 0.3, 5)
+    for v in old:
+        state = adaptive.step(params, state, np.full((1, 1), v), np.zeros((1, 1, 1)),
+                              np.ones(1, bool))
+    for _ in range(5):
+        state = adaptive.step(params, state, np.full((1, 1), np.nan), np.full((1, 1, 1), np.nan),
+                              np.zeros(1, bool))
+    assert state.count[0] == 0
+    assert state.R[0, 0, 0] == pytest.approx(np.var(old[-3:], ddof=1), rel=1e-9)
+    np.testing.assert_allclose(state.sum_nu, 0.0, atol=1e-15)
+    np.testing.assert_allclose(state.sum_nunu, 0.0, atol=1e-15)
+    new = [0.1, -0.2, 0.4]
+    for v in new:
+        state = adaptive.step(params, state, np.full((1, 1), v), np.zeros((1, 1, 1)),
+                              np.ones(1, bool))
+    assert state.R[0, 0, 0] == pytest.approx(np.var(new, ddof=1), rel=1e-12)
+
+
+@pytest.mark.parametrize("m", [1, 2, 3])
+def test_clamp_spd_raises_only_the_small_eigenvalues(m: int) -> None:
+    """Eigenvalues become max(lambda, floor) with the eigenvectors kept: a matrix already above
+    its floor is returned (symmetrised) unchanged; the result is symmetric; for m = 1 the
+    floor is a plain maximum."""
+    rng = np.random.default_rng(34 + m)
+    n = 50
+    A = rng.standard_normal((n, m, m))
+    S = 0.5 * (A + A.transpose(0, 2, 1))
+    floor = rng.uniform(0.0, 1.0, n)
+    out = adaptive.clamp_spd(A, floor)
+    for i in range(n):
+        np.testing.assert_allclose(out[i], _clamp_ref(A[i], floor[i]), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(out, out.transpose(0, 2, 1), rtol=0, atol=1e-14)
+    w = np.linalg.eigvalsh(out)
+    assert np.all(w >= floor[:, None] * (1 - 1e-10) - 1e-14)
+    big = S + (np.abs(np.linalg.eigvalsh(S)).max(axis=1) + 2.0)[:, None, None] * np.eye(m)
+    np.testing.assert_allclose(adaptive.clamp_spd(big, floor), big, rtol=1e-12)
+
+
+def test_innovation_group_slices_the_group_and_needs_all_its_components() -> None:
+    """nu, the H P H^T block and validity of components (0, 1) and (2,) of a 4-measurement
+    record, by explicit indexing; a ship missing one GNSS axis has no valid GNSS group."""
+    rng = np.random.default_rng(35)
+    n = 6
+    nu = rng.standard_normal((n, 4))
+    hph = rng.standard_normal((n, 4, 4))
+    mask = np.ones((n, 4), dtype=bool)
+    mask[1, 0] = False
+    mask[2, 1] = False
+    mask[3, 2] = False
+    g_nu, g_hph, g_ok = adaptive.innovation_group(nu, hph, mask, (0, 1))
+    np.testing.assert_array_equal(g_nu, nu[:, :2])
+    np.testing.assert_array_equal(g_hph, hph[:, :2, :2])
+    np.testing.assert_array_equal(g_ok, [True, False, False, True, True, True])
+    c_nu, c_hph, c_ok = adaptive.innovation_group(nu, hph, mask, (2,))
+    np.testing.assert_array_equal(c_nu, nu[:, 2:3])
+    np.testing.assert_array_equal(c_hph, hph[:, 2:3, 2:3])
+    np.testing.assert_array_equal(c_ok, [True, True, True, False, True, True])
+    r_nu, r_hph, _ = adaptive.innovation_group(nu, hph, mask, (3, 0))
+    np.testing.assert_array_equal(r_hph[:, 0, 1], hph[:, 3, 0])
+    np.testing.assert_array_equal(r_nu[:, 0], nu[:, 3])
+
+
+def test_build_defaults_units_and_per_ship_values() -> None:
+    """Defaults: window 60, min_samples max(3, window // 2), floors 0.1 m, 0.05 deg (in rad),
+    0.01 m/s, squared; per-ship values kept in order."""
+    p = adaptive.build([{}, {"window_steps": 3}, {"window_steps": 7},
+                        {"window_steps": 10, "min_samples": 10, "floor_sigma_deg": 2.0}],
+                       "compass")
+    np.testing.assert_array_equal(p.window_steps, [60, 3, 7, 10])
+    np.testing.assert_array_equal(p.min_samples, [30, 3, 3, 10])
+    np.testing.assert_allclose(p.floor_var[:3], math.radians(0.05) ** 2, rtol=1e-15)
+    assert p.floor_var[3] == pytest.approx(math.radians(2.0) ** 2, rel=1e-15)
+    assert adaptive.build([{}], "gnss").floor_var[0] == pytest.approx(0.01, rel=1e-15)
+    assert adaptive.build([{}], "log").floor_var[0] == pytest.approx(1e-4, rel=1e-15)
+    assert adaptive.build([], "gnss").window_steps.shape == (0,)
+
+
+@pytest.mark.parametrize("cfg, match", [
+    ({"window_steps": 2}, "window_steps"),
+    ({"window_steps": 5, "min_samples": 1}, "min_samples"),
+    ({"window_steps": 5, "min_samples": 6}, "min_samples"),
+    ({"floor_sigma_m": 0.0}, "floor_sigma_m"),
+    ({"floor_sigma_m": -1.0}, "floor_sigma_m"),
+    ({"floor_sigma_deg": 1.0}, "unknown"),
+    ({"window": 10}, "unknown"),
+])
+def test_build_rejects_bad_settings_naming_the_key(cfg: dict, match: str) -> None:
+    """Bad values and keys of another group are refused with the key in the message, even
+    when only one ship of several is wrong."""
+    with pytest.raises(ValueError, match=match):
+        adaptive.build([{}, cfg], "gnss")

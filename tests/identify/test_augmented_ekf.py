@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from trafficsim.identify import augmented_ekf
+from trafficsim.identify import augmented_ekf, replay
 from trafficsim.identify.preprocess import Kinematics
 from trafficsim.io.trialdata import from_arrays
 from trafficsim.ships.library import load_ship
@@ -60,3 +61,181 @@ def test_recovers_the_coefficients_of_its_own_model() -> None:
     assert np.all(np.abs(late - res.x).max(axis=0) <= 0.01 * np.abs(res.x))
     assert res.run_starts == [0, 1499] and res.trace.shape == (2998, 16)
     assert np.all(res.std > 0)
+
+
+def test_transition_by_hand() -> None:
+    """One Euler step of [seed 001, eq 4] written out with small round numbers; the
+    coefficients are carried unchanged (da/dt = 0)."""
+    theta = np.arange(1.0, 17.0) * 0.01  # a1..a9 = .01...09, b1..b4 = .10...13, c = .14...16
+    x = np.concatenate([[2.0, 0.5, -1.0], theta])
+    d, n, T = 3.0, 4.0, 0.5
+    xn, phi = augmented_ekf.transition(x, d, n, T)
+    # regressors u^2, v^2, r^2, d^2, v r, v d, r d, u n, n^2 = 4, .25, 1, 9, -.5, 1.5, -3, 8, 16
+    du = (0.01 * 4 + 0.02 * 0.25 + 0.03 * 1 + 0.04 * 9 + 0.05 * -0.5 + 0.06 * 1.5
+          + 0.07 * -3 + 0.08 * 8 + 0.09 * 16)
+    dv = 0.10 * 0.5 + 0.11 * -1.0 + 0.12 * 3.0 + 0.13 * (2.0 * -1.0)
+    dr = 0.14 * 0.5 + 0.15 * -1.0 + 0.16 * 3.0
+    np.testing.assert_allclose(xn[:3], [2.0 + T * du, 0.5 + T * dv, -1.0 + T * dr], rtol=1e-14)
+    np.testing.assert_array_equal(xn[3:], theta)
+    # the coefficients' rows of Phi are the identity: they have no dynamics
+    np.testing.assert_array_equal(phi[3:], np.eye(augmented_ekf.N_AUG)[3:])
+    # d(u_next)/d(a8) = T u n ; d(v_next)/d(b4) = T u r ; d(r_next)/d(c3) = T d
+    assert phi[0, 3 + 7] == pytest.approx(T * 2.0 * 4.0)
+    assert phi[1, 3 + 9 + 3] == pytest.approx(T * 2.0 * -1.0)
+    assert phi[2, 3 + 13 + 2] == pytest.approx(T * 3.0)
+    assert not np.shares_memory(xn, x) and x[0] == 2.0  # the input is not modified
+
+
+def _hand_euler_run(name: str, rng: np.random.Generator, n: int, T: float) -> Kinematics:
+    """Like ``_euler_run`` but the recursion of [seed 001, eq 4] is written out here, with the
+    mean input of samples k and k+1 (``s_m(k)``), not through ``transition``."""
+    a, b, c = TRUE[:9], TRUE[9:13], TRUE[13:]
+    d = np.repeat(rng.uniform(-25, 25, n // 40 + 1), 40)[:n]
+    rpm = np.repeat(rng.uniform(60, 90, n // 100 + 1), 100)[:n]
+    u, v, r = np.zeros(n), np.zeros(n), np.zeros(n)
+    u[0] = 6.0
+    for k in range(n - 1):
+        dm, nm = 0.5 * (d[k] + d[k + 1]), 0.5 * (rpm[k] + rpm[k + 1])
+        reg = np.array([u[k] ** 2, v[k] ** 2, r[k] ** 2, dm ** 2, v[k] * r[k], v[k] * dm,
+                        r[k] * dm, u[k] * nm, nm ** 2])
+        u[k + 1] = u[k] + T * (a @ reg)
+        v[k + 1] = v[k] + T * (b @ [v[k], r[k], dm, u[k] * r[k]])
+        r[k + 1] = r[k] + T * (c @ [v[k], r[k], dm])
+    t = np.arange(n) * T
+    trial = from_arrays(name, {"t_s": t, "north_m": t * 0, "east_m": t * 0,
+                               "heading_deg": t * 0, "rudder_deg": d, "rpm": rpm})
+    sigma = np.full(n, 1e-3)
+    smooth = {"u_mps": u, "v_mps": v, "r_radps": np.radians(r), "sigma_u_mps": sigma,
+              "sigma_v_mps": sigma, "sigma_r_radps": np.radians(sigma)}
+    return Kinematics(trial, smooth, {}, {})
+
+
+def test_true_coefficients_are_a_fixed_point() -> None:
+    """Started at the true coefficients on noise-free data of its own model, every prediction
+    is the next measurement (rudder deg, rpm and r deg/s converted back from the SI trial,
+    inputs averaged over the interval), so the innovations vanish and the estimate stays put."""
+    rng = np.random.default_rng(8)
+    runs = [_hand_euler_run("a", rng, 300, 2.0), _hand_euler_run("b", rng, 200, 2.0)]
+    res = augmented_ekf.identify_response(runs, theta0=TRUE)
+    np.testing.assert_allclose(res.x, TRUE, rtol=1e-9)
+    np.testing.assert_allclose(res.trace, np.broadcast_to(TRUE, res.trace.shape), rtol=1e-9)
+    assert np.all(res.innovation_rms < 1e-6)
+    assert res.run_starts == [0, 299] and res.steps == 498
+
+
+def test_recovers_the_continuous_ship_and_the_bias_is_first_order_in_T() -> None:
+    """Data replayed (RK4, continuous time) from the project's own ``response`` ship
+    (bulk_carrier, above the rudder-fade speed so the ship is the paper's eq 2): the Euler
+    model of [seed 001, eq 4] identifies the well-excited coefficients (resistance, rudder,
+    propeller, sway and yaw) within 5 % at T = 1 s, and the bias of the Euler discretisation
+    shrinks about in proportion to T (T = 2 s -> 1 s: total error at least 1.5 times smaller)."""
+    spec = load_ship("bulk_carrier")
+    good = [augmented_ekf.NAMES.index(k) for k in
+            ("a1", "a4", "a8", "a9", "b1", "b2", "b3", "b4", "c1", "c2", "c3")]
+
+    def run(name: str, seed: int, dt: float) -> Kinematics:
+        n = int(1500 / dt)
+        rng = np.random.default_rng(seed)
+        hold = int(80 / dt)
+        d = np.radians(np.repeat(rng.uniform(-25, 25, n // hold + 1), hold)[:n])
+        rps = np.repeat(rng.uniform(60, 90, n // (3 * hold) + 1), 3 * hold)[:n] / 60.0
+        x0 = np.zeros((8, 1))
+        x0[3] = 6.0
+        win = replay.Windows(x0, np.stack([d, rps], 1)[None], np.zeros((1, n, 4)),
+                             np.array([dt]), np.array([n]), np.full((1, n, 6), np.nan),
+                             np.zeros(1, int), np.zeros(1), (name,))
+        out = replay.simulate(replay.model_rows([spec]), win)[0][0, 0]
+        assert out[:, 3].min() > 1.0  # above rudder_fade_speed_mps
+        t = np.arange(n) * dt
+        trial = from_arrays(name, {"t_s": t, "north_m": out[:, 0], "east_m": out[:, 1],
+                                   "heading_deg": np.degrees(out[:, 2]),
+                                   "rudder_deg": np.degrees(d), "rpm": rps * 60.0})
+        sig = np.full(n, 1e-3)
+        smooth = {"u_mps": out[:, 3], "v_mps": out[:, 4], "r_radps": out[:, 5],
+                  "sigma_u_mps": sig, "sigma_v_mps": sig, "sigma_r_radps": np.radians(sig)}
+        return Kinematics(trial, smooth, {}, {})
+
+    err = {}
+    for dt in (2.0, 1.0):
+        res = augmented_ekf.identify_response([run("a", 1, dt), run("b", 2, dt)])
+        err[dt] = np.abs(res.x[good] - TRUE[good]) / np.abs(TRUE[good])
+    assert err[1.0].max() < 0.05, err[1.0]
+    assert err[2.0].sum() > 1.5 * err[1.0].sum()
+
+
+def test_more_data_never_widens_the_intervals() -> None:
+    """The coefficients have no process noise and carry over between runs, so the covariance
+    only shrinks: after runs a and b every std is at most its value after run a alone; a
+    run of one sample adds no recursion and changes nothing."""
+    rng = np.random.default_rng(2)
+    a, b = _hand_euler_run("a", rng, 200, 2.0), _hand_euler_run("b", rng, 200, 2.0)
+    one = _single(_hand_euler_run("one", rng, 2, 2.0))
+    only_a = augmented_ekf.identify_response([a])
+    both = augmented_ekf.identify_response([a, b])
+    assert np.all(both.std <= only_a.std * (1 + 1e-9))
+    assert np.all(only_a.std < np.sqrt(1e5))
+    with_one = augmented_ekf.identify_response([a, one])
+    np.testing.assert_allclose(with_one.x, only_a.x, rtol=1e-12)
+    np.testing.assert_allclose(with_one.std, only_a.std, rtol=1e-9)
+    assert with_one.run_starts == [0, 199] and with_one.steps == only_a.steps
+
+
+def test_no_recursion_is_refused() -> None:
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="at least two samples"):
+        augmented_ekf.identify_response([_single(_hand_euler_run("one", rng, 2, 2.0))])
+    with pytest.raises(ValueError, match="at least two samples"):
+        augmented_ekf.identify_response([])
+
+
+def test_missing_inputs_and_sigmas_are_bridged() -> None:
+    """A NaN rudder sample is interpolated from its neighbours (linear, as ``_fill`` promises)
+    and a NaN sigma falls back to a finite weight: the result stays finite and, on a run whose
+    rudder is linear across the gap, equals the run without the gap."""
+    rng = np.random.default_rng(4)
+    run = _hand_euler_run("a", rng, 120, 2.0)
+    # make the rudder linear around sample 50 so the interpolated value is the true one
+    rud = run.trial.rudder_rad.copy()
+    rud[48:53] = np.radians([4.0, 5.0, 6.0, 7.0, 8.0])
+    clean = _rerun_with_rudder(run, rud)
+    gappy_rud = rud.copy()
+    gappy_rud[50] = np.nan
+    gappy = _rerun_with_rudder(run, gappy_rud)
+    gappy.smooth["sigma_v_mps"][10] = np.nan
+    clean.smooth["sigma_v_mps"][10] = 1.0
+    r1 = augmented_ekf.identify_response([clean])
+    r2 = augmented_ekf.identify_response([gappy])
+    assert np.all(np.isfinite(r2.x)) and np.all(np.isfinite(r2.std))
+    np.testing.assert_allclose(r2.x, r1.x, rtol=1e-9, atol=1e-15)
+
+
+def _single(run: Kinematics) -> Kinematics:
+    """The run's first sample only."""
+    return Kinematics(run.trial.take(slice(0, 1)), {k: v[:1] for k, v in run.smooth.items()},
+                      {}, {})
+
+
+def _rerun_with_rudder(run: Kinematics, rudder_rad: np.ndarray) -> Kinematics:
+    trial = run.trial.with_series(rudder_rad=rudder_rad)
+    return Kinematics(trial, {k: v.copy() for k, v in run.smooth.items()}, {}, {})
+
+
+@pytest.mark.parametrize("values, expect", [
+    ([1.0, np.nan, 3.0, np.nan, np.nan, 6.0], [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]),
+    ([np.nan, 2.0, 4.0, np.nan], [2.0, 2.0, 4.0, 4.0]),  # ends held at the nearest value
+    ([np.nan, np.nan], [0.0, 0.0]),  # nothing known: zero
+    ([1.0, 2.0], [1.0, 2.0]),
+])
+def test_fill(values, expect) -> None:
+    np.testing.assert_array_equal(augmented_ekf._fill(np.array(values)), expect)
+
+
+def test_summary_matches_the_result() -> None:
+    rng = np.random.default_rng(1)
+    res = augmented_ekf.identify_response([_hand_euler_run("a", rng, 50, 2.0)])
+    s = res.summary()
+    assert list(s["coefficients"]) == list(augmented_ekf.NAMES)
+    for i, name in enumerate(augmented_ekf.NAMES):
+        assert s["coefficients"][name] == {"value": res.x[i], "std": res.std[i]}
+    assert s["recursions"] == 49 == res.trace.shape[0]
+    assert set(s["normalised_innovation_rms"]) == {"u", "v", "r"}

@@ -92,3 +92,182 @@ def test_parametrisation_checks_names_and_bounds() -> None:
     assert specs[1]["coefficients"]["Y_v"] == 2 * spec["coefficients"]["Y_v"]
     assert specs[1]["coefficients"]["k_0"] == spec["coefficients"]["k_0"]
     assert spec["coefficients"]["Y_v"] == -0.315  # the base ship is not touched
+
+
+def _windows_from_model(spec: dict, w: int = 2, n: int = 61, dt: float = 2.0, seed: int = 0
+                        ) -> replay.Windows:
+    """Windows whose targets are the replay of ``spec`` itself (noise-free), with rudder steps."""
+    rng = np.random.default_rng(seed)
+    speed = spec["service_speed_kn"] * 1852 / 3600
+    x0 = np.zeros((8, w))
+    x0[2] = rng.uniform(0, 2 * np.pi, w)
+    x0[3] = speed
+    inputs = np.zeros((w, n, 2))
+    inputs[..., 0] = np.radians(np.repeat(rng.uniform(-20, 20, (w, n // 15 + 1)), 15,
+                                          axis=1)[:, :n])
+    inputs[..., 1] = 0.8 * float(spec["actuators"]["rps_max"])
+    win = replay.Windows(x0, inputs, np.zeros((w, n, 4)), np.full(w, dt), np.full(w, n),
+                         np.full((w, n, 6), np.nan), np.arange(w), np.zeros(w),
+                         tuple(f"w{i}" for i in range(w)))
+    out, _ = replay.simulate(replay.model_rows([spec]), win)
+    return replay.Windows(win.x0, win.inputs, win.env, win.dt_s, win.n_samples, out[0],
+                          win.run, win.t0_s, win.run_names)
+
+
+def test_noise_free_fit_recovers_the_true_coefficients() -> None:
+    """Targets replayed from the cargo ship itself: from a start 30 % off, K' and T' (and the
+    other three Nomoto coefficients) come back to 1e-4 and the cost to ~0."""
+    spec = load_ship("cargo")
+    param = Parametrisation.of(spec)
+    win = _windows_from_model(spec)
+    truth = param.initial()
+    res = output_error.Residuals(param, win)
+    assert np.abs(res(truth[None])).max() < 1e-9
+    fit = output_error.fit(param, win, x0=truth * np.array([1.3, 0.7, 1.0, 1.0, 1.0]),
+                           channels=("u", "v", "r", "psi", "north", "east"))
+    np.testing.assert_allclose(fit.x[:2], truth[:2], rtol=1e-4)
+    assert fit.cost < 1e-8 * fit.cost0 and fit.success
+
+
+def test_channel_scales_by_hand() -> None:
+    """Speed RMS over the valid samples only (padding ignored); the weights of the module doc."""
+    x0 = np.zeros((8, 2))
+    target = np.full((2, 3, 6), np.nan)
+    target[0, :, 3] = [3.0, 4.0, 0.0]
+    target[0, :, 4] = [4.0, 3.0, 5.0]   # |V|^2 = 25 at every sample
+    target[1, :2, 3] = [0.0, 5.0]
+    target[1, :2, 4] = [5.0, 0.0]
+    target[1, 2, 3:5] = 100.0           # padding beyond n_samples: ignored
+    win = replay.Windows(x0, np.zeros((2, 3, 2)), np.zeros((2, 3, 4)), np.ones(2),
+                         np.array([3, 2]), target, np.arange(2), np.zeros(2), ("a", "b"))
+    s = output_error.channel_scales(win, 100.0)
+    assert s == pytest.approx({"u": 0.25, "v": 0.25, "psi": 0.05, "r": 0.0025,
+                               "north": 10.0, "east": 10.0})
+    still = replay.Windows(x0, win.inputs, win.env, win.dt_s, win.n_samples,
+                           np.zeros((2, 3, 6)), win.run, win.t0_s, win.run_names)
+    assert output_error.channel_scales(still, 10.0)["u"] == pytest.approx(0.05 * 1e-3)
+
+
+def test_residual_count_weights_and_masking() -> None:
+    """``m`` counts finite targets of the chosen channels after each window's first sample;
+    each residual is (sim - target) / scale, so doubling a scale halves its residuals."""
+    spec = load_ship("cargo")
+    param = Parametrisation.of(spec)
+    win = _windows_from_model(spec, w=2, n=11)
+    target = win.target.copy()
+    target[0, 4, 3] = np.nan          # one u sample missing
+    target[1, 0, 5] = np.nan          # the first sample never counts anyway
+    offset = target.copy()
+    offset[..., 3] += 0.1            # u measured 0.1 m/s too high
+    win_off = replay.Windows(win.x0, win.inputs, win.env, win.dt_s, win.n_samples, offset,
+                             win.run, win.t0_s, win.run_names)
+    scales = {"u": 0.5, "r": 1e-3}
+    res = output_error.Residuals(param, win_off, channels=("u", "r"), scales=scales)
+    assert res.m == 2 * 2 * 10 - 1
+    r = res(param.initial()[None])[0]
+    assert r.shape == (res.m,)
+    # u residuals are -0.1 / 0.5 = -0.2, r residuals 0 (the model is the truth)
+    assert np.sum(np.isclose(r, -0.2, atol=1e-9)) == 19
+    assert np.sum(np.abs(r) < 1e-9) == 20
+    res2 = output_error.Residuals(param, win_off, channels=("u", "r"),
+                                  scales={"u": 1.0, "r": 1e-3})
+    np.testing.assert_allclose(res2(param.initial()[None])[0], r * np.where(np.abs(r) > 1e-9,
+                                                                           0.5, 1.0),
+                               atol=1e-12)
+    with pytest.raises(ValueError, match="unknown channel"):
+        output_error.Residuals(param, win, channels=("u", "yaw"))
+
+
+@pytest.mark.parametrize("x, x0, lo, hi, expect", [
+    (2.0, 1.0, -np.inf, np.inf, 2e-6),          # relative to |x|
+    (1.0, -4.0, -np.inf, np.inf, 4e-6),         # or to the start, whichever is larger
+    (0.0, 0.0, -np.inf, np.inf, 1e-16),         # floor 1e-10 without bounds
+    (0.0, 0.0, 0.0, 10.0, 1e-8),                # floor 1e-3 of the bounds' width
+    (3.0, 3.0, 0.0, 3.0, -3e-6),                # at the upper bound: step downwards
+    (-1.0, -1.0, -np.inf, 0.0, 1e-6),           # room above: upwards
+])
+def test_fd_steps(x, x0, lo, hi, expect) -> None:
+    h = output_error.fd_steps(np.array([x]), np.array([x0]), np.array([lo]), np.array([hi]),
+                              1e-6)
+    assert h[0] == pytest.approx(expect, rel=1e-12)
+
+
+class _Linear:
+    """A linear residual ``A theta - b`` with the :class:`Residuals` interface."""
+
+    def __init__(self, a: np.ndarray, b: np.ndarray, jac: bool = False) -> None:
+        self.a, self.b = a, b
+        self.channels = ("u",)
+        self.scales = {"u": 1.0}
+        self.last_diverged = np.zeros(0, dtype=bool)
+        self.calls = 0
+        if jac:
+            self.jacobian = lambda x, r0, h: self.a.copy()
+
+    def __call__(self, thetas: np.ndarray) -> np.ndarray:
+        self.calls += 1
+        self.last_diverged = np.array([False, True, True])
+        return thetas @ self.a.T - self.b
+
+
+@pytest.mark.parametrize("analytic", [False, True])
+def test_linear_problem_gives_least_squares_and_its_covariance(analytic: bool) -> None:
+    """On ``r = A theta - b`` the fit is the least-squares solution and the reported std is the
+    textbook ``s^2 (A^T A)^-1`` with ``s^2 = |r|^2 / (m - p)`` (module doc)."""
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(40, 2))
+    b = a @ [1.5, -0.5] + rng.normal(0.0, 0.1, 40)
+    param = Parametrisation.of(load_ship("cargo"), ["K_prime", "T_prime"],
+                               {"K_prime": (-np.inf, np.inf), "T_prime": (-np.inf, np.inf)})
+    lin = _Linear(a, b, jac=analytic)
+    fit = output_error.fit(param, None, x0=np.array([0.3, 0.2]), residuals=lin)
+    sol = np.linalg.lstsq(a, b, rcond=None)[0]
+    np.testing.assert_allclose(fit.x, sol, rtol=1e-7)
+    r = a @ sol - b
+    s2 = r @ r / (40 - 2)
+    cov = s2 * np.linalg.inv(a.T @ a)
+    np.testing.assert_allclose(fit.std, np.sqrt(np.diag(cov)), rtol=1e-5)
+    np.testing.assert_allclose(fit.ci95, 1.959964 * fit.std)
+    assert fit.corr[0, 1] == pytest.approx(cov[0, 1] / np.sqrt(cov[0, 0] * cov[1, 1]), rel=1e-5)
+    assert fit.cost == pytest.approx(0.5 * r @ r, rel=1e-9)
+    r0 = a @ [0.3, 0.2] - b
+    assert fit.cost0 == pytest.approx(0.5 * r0 @ r0) and fit.rms0 == pytest.approx(
+        np.sqrt(np.mean(r0 ** 2)))
+    assert fit.m == 40 and fit.diverged_windows == 2 and fit.channels == ("u",)
+    table = fit.table()
+    assert table["K_prime"]["ci95_low"] == pytest.approx(fit.x[0] - fit.ci95[0])
+    assert table["T_prime"]["initial"] == 0.2
+
+
+def test_bounded_linear_problem_matches_lsq_linear() -> None:
+    """With bounds that cut off the unconstrained optimum the solution is the bounded
+    least-squares one (scipy's ``lsq_linear``), and a start outside the bounds is clipped."""
+    from scipy.optimize import lsq_linear
+
+    rng = np.random.default_rng(9)
+    a = rng.normal(size=(30, 2))
+    b = a @ [2.0, 1.0] + rng.normal(0.0, 0.05, 30)
+    param = Parametrisation.of(load_ship("cargo"), ["K_prime", "T_prime"],
+                               {"K_prime": (0.0, 1.0), "T_prime": (-5.0, 5.0)})
+    fit = output_error.fit(param, None, x0=np.array([7.0, 0.0]), residuals=_Linear(a, b))
+    assert fit.x0[0] == 1.0
+    ref = lsq_linear(a, b, bounds=([0.0, -5.0], [1.0, 5.0]))
+    np.testing.assert_allclose(fit.x, ref.x, atol=1e-6)
+    assert fit.x[0] == pytest.approx(1.0)
+
+
+def test_history_records_every_new_evaluation() -> None:
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(10, 2))
+    b = rng.normal(size=10)
+    param = Parametrisation.of(load_ship("cargo"), ["K_prime", "T_prime"],
+                               {"K_prime": (-np.inf, np.inf), "T_prime": (-np.inf, np.inf)})
+    fit = output_error.fit(param, None, x0=np.array([1.0, 1.0]), residuals=_Linear(a, b))
+    assert len(fit.history_x) == len(fit.history_cost) >= 2
+    for x, c in zip(fit.history_x, fit.history_cost, strict=True):
+        r = a @ x - b
+        assert c == pytest.approx(0.5 * r @ r)
+    assert fit.history_cost[0] == pytest.approx(fit.cost0)
+    s = fit.summary()
+    assert s["cost_final"] == fit.cost and s["correlation"]["K_prime"]["T_prime"] == fit.corr[
+        0, 1]

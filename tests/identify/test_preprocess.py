@@ -95,3 +95,199 @@ def test_a_long_constant_value_is_a_signal_not_a_stale_receiver() -> None:
                               "rudder_deg": t * 0, "rpm": t * 0 + 60})
     out, counts = preprocess.mask_repeats(trial)
     assert counts["heading"] == 0 and np.all(np.isfinite(out.psi_rad))
+
+
+def _trial(t, **cols):
+    t = np.asarray(t, float)
+    base = {"t_s": t, "north_m": t * 0, "east_m": t * 0, "heading_deg": t * 0,
+            "rudder_deg": t * 0, "rpm": t * 0 + 60}
+    base.update(cols)
+    return from_arrays("x", base)
+
+
+def test_uniform_sampling_is_left_alone() -> None:
+    """Already uniform to 1 %: the very same run comes back (no resampling, no copy)."""
+    t = np.arange(10.0) + np.array([0, 0.005, 0, -0.005, 0, 0, 0.009, 0, 0, 0])
+    trial = _trial(t, north_m=t)
+    assert preprocess.resample_uniform(trial) is trial
+    jittery = _trial(t + np.r_[0, 0.02, np.zeros(8)], north_m=t)
+    assert preprocess.resample_uniform(jittery) is not jittery
+
+
+def test_resampling_grid_values_and_gaps() -> None:
+    """Grid from the first time at the given step up to the last (floor); values linear in t;
+    a grid point exactly one step from a sample is kept, farther is NaN; a series with fewer
+    than two finite samples is all NaN; wind direction unwrapped across north."""
+    t = np.array([0.0, 1.0, 2.0, 3.0, 7.0, 8.0, 9.5])
+    wind_from = np.array([350.0, 355.0, 0.0, 5.0, 25.0, 30.0, 37.5])
+    sog = np.full(t.size, np.nan)
+    sog[2] = 4.0
+    trial = _trial(t, north_m=3.0 * t, east_m=-t, wind_speed_mps=t * 0 + 5,
+                   wind_from_deg=wind_from, sog_kn=sog)
+    out = preprocess.resample_uniform(trial, 1.0)
+    np.testing.assert_array_equal(out.t_s, np.arange(10.0))   # floor(9.5 / 1) + 1 points
+    ok = np.isfinite(out.north_m)
+    # 4 (1 s from 3) and 6 (1 s from 7) kept; 5 is 2 s from both: NaN
+    np.testing.assert_array_equal(ok, [True] * 5 + [False] + [True] * 4)
+    np.testing.assert_allclose(out.north_m[ok], 3.0 * out.t_s[ok])
+    np.testing.assert_allclose(out.east_m[ok], -out.t_s[ok])
+    wf = np.degrees(out.wind_from_rad)
+    np.testing.assert_allclose(wf[:4], [350.0, 355.0, 360.0, 365.0])  # not through 180
+    assert out.missing["north_m"] == 1 and out.extra == {}
+    assert np.all(np.isnan(out.sog_mps)) and out.missing["sog_mps"] == 10
+
+
+def test_repeats_up_to_five_seconds_are_stale_longer_ones_are_signal() -> None:
+    """At 1 s: a value repeated 5 times (5 s) is a receiver that did not update; 6 times is a
+    constant signal. Equality is exact; position needs north AND east to repeat."""
+    five = np.r_[0.0, 1.0, [2.0] * 6, 3.0, 4.0]          # 2.0 then 5 repeats
+    six = np.r_[0.0, 1.0, [2.0] * 7, 3.0, 4.0]           # 6 repeats
+    for heading, masked in ((five, 5), (six, 0)):
+        t = np.arange(heading.size, dtype=float)
+        out, counts = preprocess.mask_repeats(_trial(t, heading_deg=heading, north_m=t))
+        assert counts == {"position": 0, "heading": masked}
+        assert int(np.isnan(out.psi_rad).sum()) == masked
+    # 0.5 s sampling: 10 repeats are 5 s, still stale
+    ten = np.r_[0.0, [1.0] * 11, 2.0]
+    t = 0.5 * np.arange(ten.size)
+    _, counts = preprocess.mask_repeats(_trial(t, heading_deg=ten, north_m=t))
+    assert counts["heading"] == 10
+    # a longer limit masks the long run too
+    t = np.arange(six.size, dtype=float)
+    _, counts = preprocess.mask_repeats(_trial(t, heading_deg=six, north_m=t), max_stale_s=6.0)
+    assert counts["heading"] == 6
+
+
+def test_first_usable_sample() -> None:
+    t = np.arange(6.0)
+    psi = np.array([0.0, np.nan, 1.0, 2.0, 3.0, 4.0])
+    north = np.array([np.nan, 1.0, 2.0, np.nan, 4.0, 5.0])
+    # finite position and heading at 2, 4, 5: twice in a row first at 4
+    assert preprocess.first_usable(_trial(t, heading_deg=psi, north_m=north)) == 4
+    assert preprocess.first_usable(_trial(t, north_m=t)) == 0
+    trial = _trial(t, heading_deg=t * np.nan)
+    trial = trial.__class__(**{**trial.__dict__, "path": "runs/r7.csv"})
+    with pytest.raises(DataError, match=r"^runs/r7.csv: no two consecutive samples"):
+        preprocess.first_usable(trial)
+
+
+def test_noise_estimate_ignores_polynomials_and_scales() -> None:
+    """Third differences annihilate quadratics: adding one changes nothing (to rounding);
+    the estimate scales with the noise; under ten third differences it is the floor."""
+    rng = np.random.default_rng(7)
+    e = rng.normal(0.0, 0.5, 400)
+    t = np.arange(400.0)
+    base_ = preprocess.noise_from_data(e, 1e-3)
+    assert preprocess.noise_from_data(e + 3.0 + 2.0 * t - 0.01 * t * t, 1e-3) == pytest.approx(
+        base_, rel=1e-6)
+    assert preprocess.noise_from_data(4.0 * e, 1e-3) == pytest.approx(4.0 * base_)
+    assert base_ == pytest.approx(0.5, rel=0.15)
+    assert preprocess.noise_from_data(np.arange(12.0), 0.25) == 0.25       # no noise: floor
+    assert preprocess.noise_from_data(e[:12], 1e-3) == 1e-3                # 9 differences
+    gappy = e.copy()
+    gappy[::7] = np.nan
+    assert np.isfinite(preprocess.noise_from_data(gappy, 1e-3))
+
+
+@pytest.mark.parametrize("length, speed, expect", [
+    # the module doc's two examples: 225 m at 13 kn and the 3 m model at 0.4 m/s
+    (225.0, 13 * 1852 / 3600, (0.0497, 0.0497 / 225, 0.0297)),
+    (3.0, 0.4, (0.16 / 12, 0.16 / 36, 0.4 / 3)),
+])
+def test_automatic_process_noise(length, speed, expect) -> None:
+    trial = _trial(np.arange(20.0), north_m=np.arange(20.0))
+    s = preprocess.resolve_settings([trial], length, speed, preprocess.SmootherSettings())
+    assert s["sigma_acc_mps2"] == pytest.approx(expect[0], rel=2e-3)
+    assert s["sigma_yaw_acc_radps2"] == pytest.approx(expect[1], rel=2e-3)
+    assert s["alpha_per_s"] == pytest.approx(expect[2], rel=2e-3)
+    # noise-free straight track: the floors
+    assert s["sigma_pos_m"] == preprocess.MIN_SIGMA_POS_M
+    assert s["sigma_heading_rad"] == pytest.approx(preprocess.MIN_SIGMA_HEADING_RAD)
+    assert s["mask_repeats"] is True
+
+
+def test_given_settings_are_kept_and_a_zero_speed_is_floored() -> None:
+    trial = _trial(np.arange(20.0))
+    given = preprocess.SmootherSettings(sigma_pos_m=2.0, sigma_heading_rad=0.01,
+                                        sigma_acc_mps2=0.3, sigma_yaw_acc_radps2=0.002,
+                                        alpha_per_s=0.5, mask_repeats=False)
+    s = preprocess.resolve_settings([trial], 100.0, 5.0, given)
+    assert s == {"sigma_pos_m": 2.0, "sigma_heading_rad": 0.01, "sigma_acc_mps2": 0.3,
+                 "sigma_yaw_acc_radps2": 0.002, "alpha_per_s": 0.5, "mask_repeats": False}
+    still = preprocess.resolve_settings([trial], 100.0, 0.0, preprocess.SmootherSettings())
+    assert still["alpha_per_s"] == pytest.approx(1e-3 / 100.0)
+
+
+def test_position_noise_is_the_median_over_runs_and_axes() -> None:
+    rng = np.random.default_rng(1)
+    t = np.arange(300.0)
+    runs = [_trial(t, north_m=rng.normal(0, s1, t.size), east_m=rng.normal(0, s2, t.size))
+            for s1, s2 in ((1.0, 1.0), (1.0, 8.0))]
+    s = preprocess.resolve_settings(runs, 100.0, 5.0, preprocess.SmootherSettings())
+    # three axes at sigma 1, one at 8: the median is ~1, the mean would be ~2.75
+    assert s["sigma_pos_m"] == pytest.approx(1.0, rel=0.2)
+
+
+def test_straight_crabbing_run_gives_body_velocities() -> None:
+    """Noise-free straight track at 5 m/s on course 40 deg with heading 30 deg, heading written
+    in [0, 360): u = 5 cos 10 deg, v = +5 sin 10 deg (moving to starboard of the heading),
+    r = 0; and a steady turn through north (350 -> 10 deg) keeps a constant yaw rate."""
+    t = np.arange(0.0, 120.0, 1.0)
+    chi = np.radians(40.0)
+    trial = _trial(t, north_m=5 * np.cos(chi) * t, east_m=5 * np.sin(chi) * t,
+                   heading_deg=t * 0 + 30.0)
+    (k,) = preprocess.smooth_runs([trial], 100.0, 5.0)
+    mid = slice(10, -10)
+    np.testing.assert_allclose(k.smooth["u_mps"][mid], 5 * np.cos(np.radians(10)), atol=1e-3)
+    np.testing.assert_allclose(k.smooth["v_mps"][mid], 5 * np.sin(np.radians(10)), atol=1e-3)
+    np.testing.assert_allclose(k.smooth["r_radps"][mid], 0.0, atol=1e-5)
+    heading = np.mod(350.0 + 0.5 * t, 360.0)
+    turn = _trial(t, north_m=5 * t, heading_deg=heading)
+    (k2,) = preprocess.smooth_runs([turn], 100.0, 5.0)
+    np.testing.assert_allclose(k2.smooth["r_radps"][mid], np.radians(0.5), rtol=1e-3)
+
+
+def test_decimation_to_a_working_interval() -> None:
+    """0.5 s data worked at 2 s keeps every 4th sample (after masking repeats); runs of
+    different sampling are smoothed in their own groups; Kinematics.decimate thins both."""
+    t = np.arange(0.0, 60.0, 0.5)
+    fast = _trial(t, north_m=4 * t)
+    slow = _trial(np.arange(0.0, 60.0, 3.0), north_m=4 * np.arange(0.0, 60.0, 3.0))
+    k_fast, k_slow = preprocess.smooth_runs([fast, slow], 100.0, 4.0, dt_s=2.0)
+    np.testing.assert_array_equal(k_fast.t_s, np.arange(0.0, 60.0, 2.0))
+    assert k_fast.dt_s == 2.0 and k_slow.dt_s == 3.0 and k_slow.trial.n == 20
+    for k in (k_fast, k_slow):
+        assert all(v.shape == (k.trial.n,) for v in k.smooth.values())
+        np.testing.assert_allclose(k.smooth["u_mps"][3:-3], 4.0, atol=1e-3)
+    half = k_fast.decimate(3)
+    np.testing.assert_array_equal(half.t_s, k_fast.t_s[::3])
+    np.testing.assert_array_equal(half.smooth["u_mps"], k_fast.smooth["u_mps"][::3])
+    assert k_fast.decimate(1) is k_fast
+
+
+def test_repeat_masking_can_be_switched_off_and_is_reported() -> None:
+    t = np.arange(40.0)
+    north = 4 * t
+    north[10:12] = north[9]
+    east = t * 0.0
+    trial = _trial(t, north_m=north, east_m=east, heading_deg=0.1 * t)
+    (on,) = preprocess.smooth_runs([trial], 100.0, 4.0)
+    (off,) = preprocess.smooth_runs([trial], 100.0, 4.0,
+                                    preprocess.SmootherSettings(mask_repeats=False))
+    assert on.repeats_masked == {"position": 2, "heading": 0}
+    assert off.repeats_masked == {"position": 0, "heading": 0}
+    assert np.isnan(on.trial.north_m[10]) and off.trial.north_m[10] == north[9]
+    rep = on.report()
+    assert rep["repeats_masked"] == on.repeats_masked and rep["samples"] == 40
+    assert rep["nan_counts"] == {"north_m": 2, "east_m": 2}
+    assert set(rep["median_sigma"]) == {"sigma_u_mps", "sigma_v_mps", "sigma_r_radps"}
+
+
+def test_too_short_runs_are_refused() -> None:
+    t = np.arange(5.0)
+    north = np.array([np.nan, np.nan, 2.0, 3.0, 4.0])
+    with pytest.raises(DataError, match="fewer than 4 usable samples"):
+        preprocess.smooth_runs([_trial(t, north_m=north, heading_deg=t)], 100.0, 4.0)
+    (k,) = preprocess.smooth_runs([_trial(t[:4], north_m=t[:4], heading_deg=t[:4])], 100.0,
+                                  4.0)
+    assert k.trial.n == 4

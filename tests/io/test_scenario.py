@@ -402,3 +402,20 @@ def test_random_files_raise_only_scenario_errors(tmp_path_factory, data: bytes) 
         load_scenario(path)
     except ScenarioError as err:
         assert err.path == str(path)
+
+
+@pytest.mark.parametrize("dt, period", [(1.0, 10.0), (3.0, 9.0), (4.0, 8.0), (60.0, 60.0)])
+def test_default_decision_period_is_ten_seconds_in_whole_steps(tmp_path, dt, period) -> None:
+    """Left out, the decision period is 10 s rounded to the nearest whole number of steps (at
+    least one; 2.5 steps round to 2, as Python rounds): what the engine runs, rather than a
+    10 s it cannot keep."""
+    scn = load_scenario(_write(tmp_path, MINIMAL.format(extra=f"dt_s: {dt}\n")))
+    assert scn.decision_period_s == period
+
+
+def test_a_missing_rules_file_is_reported_at_its_line(tmp_path) -> None:
+    """A misspelt ``rules:`` file is an error of the scenario, at the key's line, before the
+    run starts."""
+    with pytest.raises(ScenarioError, match="rules file not found") as info:
+        load_scenario(_write(tmp_path, MINIMAL.format(extra="rules: nope.yaml\n")))
+    assert info.value.line == 4 and info.value.key == "rules"

@@ -1,7 +1,10 @@
 """Standard manoeuvres: the indices are read off the track correctly, and the IMO limits."""
 
+import math
+
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 
 from trafficsim.errors import InputError
 from trafficsim.ships import manoeuvres
@@ -81,3 +84,251 @@ def test_imo_turning_and_stopping_limits():
     assert not crit["advance_L"]["pass"] and crit["tactical_diameter_L"]["pass"]
     crit = manoeuvres.imo_criteria("crash-stop", {"length_m": 100.0, "track_reach_m": 1400.0})
     assert crit["track_reach_L"]["pass"] and crit["track_reach_L"]["limit"] == 15.0
+
+
+# ---------------------------------------------------------------------------------------------
+# indices against closed forms and an independent integration of the same linear Nomoto ship
+
+
+def _nomoto(k_prime=1.0, t_prime=2.0, rate_degps=2.32, rudder_tau_s=1.0, engine_tau_s=20.0,
+            max_dt_s=1.0, length_m=100.0, speed_kn=10.0):
+    """A linear (n3' = 0) Nomoto ship built on the cargo file: at constant propeller speed it
+    keeps its speed exactly and never sways, so its track follows from the heading alone."""
+    spec = load_ship("cargo")
+    spec["particulars"]["length_m"] = length_m
+    spec["service_speed_kn"] = speed_kn
+    spec["coefficients"].update(K_prime=k_prime, T_prime=t_prime, n3_prime=0.0)
+    spec["actuators"].update(rudder_rate_degps=rate_degps, rudder_tau_s=rudder_tau_s,
+                             engine_tau_s=engine_tau_s)
+    spec["integration"] = {"max_dt_s": max_dt_s}
+    return spec
+
+
+def _reference(spec, segments, marks=()):
+    """Nomoto steering at constant speed U integrated by scipy from straight ahead:
+    ``delta' = clip((order - delta) / tau, +-rate)``, ``r' = (K' U / L delta - r) U / (T' L)``,
+    ``psi' = r``, ``n' = U cos psi``, ``e' = U sin psi``. ``segments`` is a list of
+    ``(order_rad, event)``: each runs until its event ``event(t, y)`` crosses zero upwards;
+    ``marks`` are further events recorded on the way (``t_events[1:]``). Returns the solution
+    of each segment."""
+    c, a = spec["coefficients"], spec["actuators"]
+    L, U = spec["particulars"]["length_m"], from_kn(spec["service_speed_kn"])
+    K, T = c["K_prime"] * U / L, c["T_prime"] * L / U
+    tau, rate = a["rudder_tau_s"], math.radians(a["rudder_rate_degps"])
+
+    y, t0, sols = np.zeros(5), 0.0, []
+    for order, event in segments:
+        def rhs(t, s, order=order):
+            d = min(max((order - s[4]) / tau, -rate), rate)
+            return [U * math.cos(s[2]), U * math.sin(s[2]), s[3], (K * s[4] - s[3]) / T, d]
+        event.terminal, event.direction = True, 1.0
+        sol = solve_ivp(rhs, (t0, t0 + 1e5), y, method="DOP853", rtol=1e-11, atol=1e-9,
+                        events=[event, *marks])
+        sols.append(sol)
+        t0, y = sol.t[-1], sol.y[:, -1]
+    return sols
+
+
+def test_turning_indices_of_a_nomoto_ship_agree_with_an_independent_integration():
+    """Advance and transfer at 90 deg, tactical diameter at 180 deg, times to 90 and 180 deg,
+    and the steady diameter (track points 180 deg apart on the steady circle) equal those read
+    off a scipy integration of the same equations by their ITTC definitions; the steady
+    diameter is also the closed form ``2 U / r = 2 L / (K' delta)``; the speed is kept."""
+    spec = _nomoto()
+    rudder = 20.0
+    _, ind = manoeuvres.turning_circle(spec, rudder_deg=rudder)
+
+    levels = (90.0, 180.0, 360.0, 540.0)
+    (sol,) = _reference(spec, [(math.radians(rudder),
+                                lambda t, y: y[2] - math.radians(541.0))],
+                        marks=[lambda t, y, lv=lv: y[2] - math.radians(lv) for lv in levels])
+    ref = {lv: (sol.t_events[k + 1][0], sol.y_events[k + 1][0]) for k, lv in enumerate(levels)}
+    assert ind["advance_m"] == pytest.approx(ref[90.0][1][0], rel=1e-4)
+    assert ind["transfer_m"] == pytest.approx(ref[90.0][1][1], rel=1e-4)
+    assert ind["tactical_diameter_m"] == pytest.approx(ref[180.0][1][1], rel=1e-4)
+    assert ind["time_to_90_s"] == pytest.approx(ref[90.0][0], rel=1e-4)
+    assert ind["time_to_180_s"] == pytest.approx(ref[180.0][0], rel=1e-4)
+    p360, p540 = ref[360.0][1], ref[540.0][1]
+    steady = math.hypot(p360[0] - p540[0], p360[1] - p540[1])
+    assert ind["steady_diameter_m"] == pytest.approx(steady, rel=1e-4)
+    assert ind["steady_diameter_m"] == pytest.approx(2 * 100.0 / math.radians(rudder),
+                                                     rel=1e-3)
+    assert ind["speed_loss_ratio"] == pytest.approx(1.0, abs=1e-9)
+    assert ind["approach_speed_kn"] == pytest.approx(10.0, rel=1e-9)
+
+
+def test_a_ship_without_lags_turns_on_a_perfect_circle():
+    """Rudder and yaw lags of a fraction of a second: the track is a circle of radius
+    ``R = L / (K' delta)`` from the execute point, so advance = transfer = R, tactical and
+    steady diameter = 2 R, and 90 deg take a quarter circle at the approach speed."""
+    spec = _nomoto(t_prime=0.005, rate_degps=90.0, rudder_tau_s=0.01, max_dt_s=0.01)
+    _, ind = manoeuvres.turning_circle(spec, rudder_deg=-20.0)
+    radius = 100.0 / math.radians(20.0)  # 286.5 m
+    speed = from_kn(10.0)
+    assert ind["advance_m"] == pytest.approx(radius, rel=5e-3)
+    assert ind["transfer_m"] == pytest.approx(radius, rel=5e-3)
+    assert ind["tactical_diameter_m"] == pytest.approx(2 * radius, rel=5e-3)
+    assert ind["steady_diameter_m"] == pytest.approx(2 * radius, rel=5e-3)
+    assert ind["time_to_90_s"] == pytest.approx(0.5 * math.pi * radius / speed, rel=5e-3)
+    assert ind["time_to_180_s"] == pytest.approx(math.pi * radius / speed, rel=5e-3)
+
+
+def test_zigzag_indices_agree_with_an_independent_integration():
+    """A 10/10 zig-zag of the linear Nomoto ship: initial turning time, distance run by then
+    (``U t`` at constant speed, in ship lengths) and both overshoots (the heading's extreme
+    after each reversal beyond the heading limit) equal those of a scipy integration that
+    reverses the rudder exactly at the heading limit. Steps of 0.05 s: a reversal is seen at
+    most one step late."""
+    spec = _nomoto()
+    dt = 0.05
+    _, ind = manoeuvres.zigzag(spec, rudder_deg=10.0, dt=dt, reversals=2)
+    lim, rud = math.radians(10.0), math.radians(10.0)
+    sols = _reference(spec, [
+        (rud, lambda t, y: y[2] - lim),  # to the first reversal
+        (-rud, lambda t, y: -y[3]),  # until the heading peaks
+        (-rud, lambda t, y: -y[2] - lim),  # to the second reversal
+        (rud, lambda t, y: y[3]),  # until the heading's trough
+    ])
+    t_init = sols[0].t[-1]
+    first = math.degrees(sols[1].y[2, -1]) - 10.0
+    second = -math.degrees(sols[3].y[2, -1]) - 10.0
+    speed = from_kn(10.0)
+    assert ind["initial_turning_time_s"] == pytest.approx(t_init, abs=dt)
+    assert ind["initial_turning_distance_L"] == pytest.approx(speed * t_init / 100.0,
+                                                              abs=speed * dt / 100.0)
+    r_max = 0.5  # deg/s, a bound on the yaw rate at the reversals (0.36 and 0.45 deg/s)
+    assert ind["first_overshoot_deg"] == pytest.approx(first, abs=2 * r_max * dt)
+    assert ind["second_overshoot_deg"] == pytest.approx(second, abs=4 * r_max * dt)
+    assert first > 1.0 and second > first
+
+
+def test_crash_stop_of_a_nomoto_ship_against_the_quadratic_surge_closed_form():
+    """With the engine reversed at once, ``du/dt = -(u_a^2 + u^2) / (2 U_s T_u)`` (astern
+    steady speed ``u_a = U_s n_min / n_s``) stops the ship after ``t = 2 U_s T_u
+    atan(U_s / u_a) / u_a`` having run ``U_s T_u ln(1 + U_s^2 / u_a^2)`` straight ahead."""
+    spec = _nomoto(engine_tau_s=0.05, max_dt_s=0.02)
+    track, ind = manoeuvres.crash_stop(spec)
+    c = spec["coefficients"]
+    us, tu = from_kn(10.0), c["surge_tau_s"]
+    ua = us * -spec["actuators"]["rps_min"] / c["rps_service"]  # 0.5 U_s
+    t_stop = 2 * us * tu * math.atan(us / ua) / ua
+    reach = us * tu * math.log(1 + (us / ua) ** 2)
+    dt = track["t_s"][1] - track["t_s"][0]
+    assert t_stop <= ind["time_to_stop_s"] <= t_stop + dt + 0.1
+    assert ind["head_reach_m"] == pytest.approx(reach, rel=1e-3)
+    assert ind["track_reach_m"] == pytest.approx(ind["head_reach_m"], rel=1e-12)
+    assert ind["lateral_deviation_m"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_track_has_the_trial_data_columns_and_units():
+    """Every column, equal lengths, time from 0 in steps of dt, rpm = 60 rps, SOG in knots,
+    COG = heading for a ship that does not sway (no current), heading in degrees."""
+    spec = _nomoto()
+    track, _ = manoeuvres.turning_circle(spec, rudder_deg=15.0, dt=0.5, turns_deg=90.0)
+    keys = {"t_s", "north_m", "east_m", "heading_deg", "rudder_deg", "rpm", "u_mps", "v_mps",
+            "r_degps", "sog_kn", "cog_deg"}
+    assert set(track) == keys
+    n = len(track["t_s"])
+    assert all(len(v) == n for v in track.values())
+    np.testing.assert_allclose(track["t_s"], 0.5 * np.arange(n), atol=1e-9)
+    np.testing.assert_allclose(track["sog_kn"], 10.0, rtol=1e-9)
+    np.testing.assert_allclose(track["rpm"], 60.0 * 1.3333 * 10.0 / 10.0, rtol=1e-9)
+    np.testing.assert_allclose(np.cos(np.radians(track["cog_deg"] - track["heading_deg"])), 1.0,
+                               atol=1e-12)
+    assert track["heading_deg"][-2] < 90.0 <= track["heading_deg"][-1]
+    assert track["rudder_deg"][0] == 0.0 and 0.0 < track["rudder_deg"][-1] <= 15.0
+
+
+@pytest.mark.parametrize("kwargs, key", [
+    ({"dt": 0.0}, "dt_s"), ({"dt": 5e-4}, "dt_s"), ({"dt": 60.5}, "dt_s"),
+    ({"dt": float("nan")}, "dt_s"), ({"speed_kn": 30.5}, "speed_kn"),
+    ({"speed_kn": float("nan")}, "speed_kn"), ({"rudder_deg": 35.5}, "rudder_deg"),
+    ({"rudder_deg": -36.0}, "rudder_deg"), ({"rudder_deg": float("nan")}, "rudder_deg"),
+])
+def test_bad_manoeuvre_arguments_are_input_errors_naming_the_argument(kwargs, key):
+    """Time step outside [1 ms, 60 s], approach faster than twice the service speed (15 kn
+    for cargo), rudder beyond the 35 deg limit, or NaN: ``InputError`` with the argument."""
+    with pytest.raises(InputError) as info:
+        manoeuvres.turning_circle(load_ship("cargo"), **kwargs)
+    assert info.value.key == key
+    if "speed_kn" not in kwargs:
+        with pytest.raises(InputError) as info:
+            manoeuvres.zigzag(load_ship("cargo"), **kwargs)
+        assert info.value.key == key
+
+
+def test_limits_of_the_time_step_and_speed_are_accepted():
+    """dt exactly 60 s is accepted; so is an approach at twice the service speed, which this
+    engine cannot hold: the ship approaches at full power and slows for the 60 s settling
+    run as the quadratic surge says, ``u(t) = a coth(a t / c + arcoth(u0 / a))`` with ``a`` the
+    full-power speed (rps_max / rps_service x 10 kn = 13.33 kn) and ``c = 2 U_s T_u``."""
+    _, ind = manoeuvres.turning_circle(load_ship("cargo"), dt=60.0, turns_deg=90.0)
+    assert ind["time_to_90_s"] > 0
+    spec = _nomoto()
+    track, ind = manoeuvres.turning_circle(spec, speed_kn=20.0, dt=0.5, turns_deg=90.0)
+    c = spec["coefficients"]
+    a = from_kn(10.0) * spec["actuators"]["rps_max"] / c["rps_service"]
+    u0, cc = from_kn(20.0), 2 * from_kn(10.0) * c["surge_tau_s"]
+    u60 = a / math.tanh(a * 60.0 / cc + 0.5 * math.log((u0 / a + 1) / (u0 / a - 1)))
+    assert ind["approach_speed_kn"] == pytest.approx(u60 / from_kn(1.0), rel=1e-6)
+    assert track["rpm"][0] == pytest.approx(60.0 * spec["actuators"]["rps_max"], rel=1e-9)
+
+
+@pytest.mark.xfail(strict=True, reason="BUG: zigzag with a negative rudder (port first) "
+                   "reverses the rudder every step and returns meaningless indices")
+def test_zigzag_to_port_first_mirrors_or_is_refused():
+    """A -10/-10 zig-zag (first rudder to port) of a port-starboard symmetric model either
+    mirrors the starboard one (same indices) or is refused as an ``InputError``; it must not
+    return indices of a manoeuvre that never happened."""
+    spec = load_ship("cargo")
+    _, stbd = manoeuvres.zigzag(spec, rudder_deg=10.0)
+    try:
+        _, port = manoeuvres.zigzag(spec, rudder_deg=-10.0)
+    except InputError:
+        return
+    for key in ("initial_turning_time_s", "first_overshoot_deg", "second_overshoot_deg"):
+        assert port[key] == pytest.approx(stbd[key], rel=1e-6), key
+
+
+# ---------------------------------------------------------------------------------------------
+# IMO criteria at their boundaries
+
+
+def _zigzag_indices(l_over_v, rud=10.0, head=10.0, first=10.0, second=25.0, dist=2.5):
+    length = 100.0
+    return {"length_m": length, "approach_speed_kn": length / l_over_v / from_kn(1.0),
+            "rudder_deg": rud, "heading_deg": head, "initial_turning_distance_L": dist,
+            "first_overshoot_deg": first, "second_overshoot_deg": second}
+
+
+def test_imo_limits_are_continuous_at_l_over_v_10_and_30_and_a_value_at_the_limit_passes():
+    """5 + 0.5 x 10 = 10 and 5 + 0.5 x 30 = 20; 17.5 + 0.75 x 10 = 25 and 17.5 + 0.75 x 30 =
+    40: the piecewise limits join. A value equal to the limit passes ("should not exceed");
+    a NaN index (the manoeuvre never got there) fails."""
+    for lv, first, second in ((10.0, 10.0, 25.0), (30.0, 20.0, 40.0)):
+        crit = manoeuvres.imo_criteria("zigzag", _zigzag_indices(lv, first=first,
+                                                                 second=second))
+        assert crit["first_overshoot_deg"]["limit"] == pytest.approx(first, rel=1e-12)
+        assert crit["second_overshoot_deg"]["limit"] == pytest.approx(second, rel=1e-12)
+        assert crit["initial_turning_distance_L"]["pass"]
+    crit = manoeuvres.imo_criteria("zigzag", _zigzag_indices(5.0, first=10.0, second=25.0))
+    assert crit["first_overshoot_deg"]["pass"] and crit["second_overshoot_deg"]["pass"]
+    crit = manoeuvres.imo_criteria("zigzag", _zigzag_indices(5.0, first=float("nan"),
+                                                             dist=2.5001))
+    assert not crit["first_overshoot_deg"]["pass"]
+    assert not crit["initial_turning_distance_L"]["pass"]
+    crit = manoeuvres.imo_criteria("turning", {"length_m": 200.0, "advance_m": 900.0,
+                                               "tactical_diameter_m": 1000.0})
+    assert crit["advance_L"]["value"] == 4.5 and crit["advance_L"]["pass"]
+    assert crit["tactical_diameter_L"]["value"] == 5.0 and crit["tactical_diameter_L"]["pass"]
+
+
+def test_imo_criteria_for_other_zigzags_and_kinds():
+    """20/20: only the first overshoot, limited to 25 deg; other zig-zags and unknown kinds
+    have no criterion in MSC.137(76)."""
+    crit = manoeuvres.imo_criteria("zigzag", _zigzag_indices(20.0, rud=20.0, head=20.0,
+                                                             first=25.0))
+    assert set(crit) == {"first_overshoot_deg"}
+    assert crit["first_overshoot_deg"]["limit"] == 25.0 and crit["first_overshoot_deg"]["pass"]
+    assert manoeuvres.imo_criteria("zigzag", _zigzag_indices(20.0, rud=20.0, head=10.0)) == {}
+    assert manoeuvres.imo_criteria("spiral", {"length_m": 100.0}) == {}

@@ -13,7 +13,8 @@ A campaign draws ``n_encounters`` random encounters and runs them all::
     policy: colregs                # colregs (every ship runs the rules) or no_avoidance
     rules: ../rules/colregs.yaml   # optional, relative to this file
     domain: coldwell               # ship domain of features and metrics
-    decision_period_s: 10          # optional, default 10
+    decision_period_s: 10          # optional, a whole multiple of dt_s; default 10 s rounded
+                                   #   to a whole number of steps
     encounter_types:               # relative weights (any subset; at least one > 0)
       head_on: 1
       crossing_give_way: 1         # the other ship crosses from the own ship's starboard side
@@ -50,7 +51,13 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, PrivateAttr, ValidationInfo, field_validator
 
 from trafficsim.errors import ShipLibraryError
-from trafficsim.io.scenario import MAX_DT_S, MAX_DURATION_S, known_schema_version
+from trafficsim.io.scenario import (
+    MAX_DT_S,
+    MAX_DURATION_S,
+    default_decision_period,
+    known_schema_version,
+    rules_file_errors,
+)
 from trafficsim.io.yamlio import (
     Integer,
     Number,
@@ -81,11 +88,10 @@ def _ordered(value: tuple[float, float]) -> tuple[float, float]:
     return value
 
 
-def _whole(value: float, step: float, name: str, step_name: str) -> None:
+def _whole(value: float, step: float) -> bool:
+    """Whether ``value`` is one or more whole steps of ``step``."""
     steps = value / step
-    if abs(steps - round(steps)) > 1e-9 or round(steps) < 1:
-        raise ValueError(f"{name} ({value:g} s) must be a whole multiple of {step_name} "
-                         f"({step:g} s)")
+    return abs(steps - round(steps)) <= 1e-9 and round(steps) >= 1
 
 
 class Sensors(Strict):
@@ -112,12 +118,13 @@ class CampaignSpec(Strict):
     n_encounters: Annotated[Integer, Field(ge=1, le=10_000_000)]
     seed: Annotated[Integer, Field(ge=0)] = 0
     duration_s: Annotated[Number, Field(gt=0.0, le=MAX_DURATION_S)]
-    dt_s: Annotated[Number, Field(gt=0.0, le=MAX_DT_S)] = 1.0
+    dt_s: Annotated[Number, Field(gt=0.0, le=MAX_DT_S, validate_default=True)] = 1.0
     chunk_encounters: Annotated[Integer, Field(ge=1, le=1_000_000)] = 500
     policy: Literal["colregs", "no_avoidance"] = "colregs"
     rules: Text | None = None
     domain: Literal["coldwell", "goodwin", "fujii", "kijima"] = "coldwell"
-    decision_period_s: Annotated[Number, Field(gt=0.0, le=600.0)] = 10.0
+    decision_period_s: Annotated[Number, Field(gt=0.0, le=600.0)] = Field(
+        default=None, validate_default=True)
     encounter_types: dict[Literal[ENCOUNTER_TYPES], NonNegative] = Field(  # type: ignore[valid-type]
         default_factory=lambda: dict.fromkeys(ENCOUNTER_TYPES, 1.0))
     multi_ships: tuple[Annotated[Integer, Field(ge=3, le=5)],
@@ -160,15 +167,23 @@ class CampaignSpec(Strict):
     @field_validator("dt_s")
     @classmethod
     def _dt_divides_duration(cls, dt: float, info: ValidationInfo) -> float:
-        if "duration_s" in info.data:
-            _whole(info.data["duration_s"], dt, "duration_s", "dt_s")
+        duration = info.data.get("duration_s")
+        if duration is not None and not _whole(duration, dt):
+            raise ValueError(f"duration_s ({duration:g} s) must be a whole multiple of dt_s "
+                             f"({dt:g} s; 1 s when not given)")
         return dt
+
+    @field_validator("decision_period_s", mode="before")
+    @classmethod
+    def _default_decision_period(cls, period: Any, info: ValidationInfo) -> Any:
+        return default_decision_period(period, info.data.get("dt_s"))
 
     @field_validator("decision_period_s")
     @classmethod
     def _dt_divides_period(cls, period: float, info: ValidationInfo) -> float:
-        if "dt_s" in info.data:
-            _whole(period, info.data["dt_s"], "decision_period_s", "dt_s")
+        dt = info.data.get("dt_s")
+        if dt is not None and not _whole(period, dt):
+            raise ValueError(f"must be a whole multiple of dt_s ({dt:g} s), got {period:g}")
         return period
 
 
@@ -192,6 +207,7 @@ def load_spec(path: str | os.PathLike[str]) -> CampaignSpec:
             except ShipLibraryError as exc:
                 message = exc.message if exc.path is None else str(exc)
                 errors.append(doc.error(message, ("ship_types", kind)))
+    errors += rules_file_errors(doc, absolute.parent)
     if errors:
         raise_errors(errors)
     assert spec is not None

@@ -31,7 +31,8 @@ A scenario places one or more ships in an environment for a fixed duration::
     domain: coldwell               # optional ship domain: coldwell, goodwin, fujii, kijima
     visibility_nm: 10              # optional, default 10; below the rules' threshold the
                                    #   restricted-visibility mode (Rule 19) applies
-    decision_period_s: 10          # optional, default 10 s; a whole multiple of dt_s
+    decision_period_s: 10          # optional, a whole multiple of dt_s; default 10 s rounded
+                                   #   to a whole number of steps (dt_s 3: 9 s)
 
 Values keep the file's units (knots, degrees); conversion to SI happens when the batch is built.
 """
@@ -77,6 +78,7 @@ SCHEMA_VERSION = 1
 MAX_DURATION_S = 30 * 86400.0
 """Longest scenario accepted: 30 days, in seconds."""
 
+DEFAULT_DECISION_PERIOD_S = 10.0
 MAX_DT_S = 60.0
 """Longest time step accepted, in seconds."""
 
@@ -210,7 +212,9 @@ class Scenario(Strict):
     rules: Text | None = None
     domain: Literal["coldwell", "goodwin", "fujii", "kijima"] = "coldwell"
     visibility_nm: Annotated[Number, Field(gt=0.0, le=100.0)] = 10.0
-    decision_period_s: Annotated[Number, Field(gt=0.0, le=600.0)] = 10.0
+    # None (absent or empty) becomes the default in _default_decision_period
+    decision_period_s: Annotated[Number, Field(gt=0.0, le=600.0)] = Field(
+        default=None, validate_default=True)
     ships: Annotated[tuple[ShipEntry, ...], BeforeValidator(_at_least_one_ship)]
 
     _path: Path | None = PrivateAttr(default=None)
@@ -260,6 +264,11 @@ class Scenario(Strict):
             raise ValueError(f"must be a whole multiple of dt_s ({dt:g} s), got {every:g}; "
                              f"e.g. {nearest:g}")
         return every
+
+    @field_validator("decision_period_s", mode="before")
+    @classmethod
+    def _default_decision_period(cls, period: Any, info: ValidationInfo) -> Any:
+        return default_decision_period(period, info.data.get("dt_s"))
 
     @field_validator("decision_period_s")
     @classmethod
@@ -327,6 +336,24 @@ def _find_ship_files(doc: Document, base_dir: Path
     return found, errors
 
 
+def default_decision_period(period: Any, dt: float | None) -> Any:
+    """``period`` as given; absent (None), the default 10 s rounded to a whole number of steps
+    of ``dt`` (at least one)."""
+    if period is not None:
+        return period
+    return DEFAULT_DECISION_PERIOD_S if dt is None else max(
+        1, round(DEFAULT_DECISION_PERIOD_S / dt)) * dt
+
+
+def rules_file_errors(doc: Document, base_dir: Path) -> list[ScenarioError]:
+    """The ``rules:`` file of a scenario or campaign spec must exist (relative to the file),
+    so that a wrong name is reported at its line before anything runs."""
+    rules = doc.data.get("rules")
+    if not isinstance(rules, str) or not rules.strip() or (base_dir / rules).is_file():
+        return []
+    return [doc.error(f"rules file not found: {base_dir / rules}", ("rules",))]
+
+
 def load_scenario(path: str | os.PathLike[str]) -> Scenario:
     """Load and validate a scenario file, resolving every ship's ``type`` to a ship file.
 
@@ -344,7 +371,7 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
     absolute = Path(os.path.abspath(path))
     scenario, errors = collect_errors(doc, Scenario)
     ship_files, lookup_errors = _find_ship_files(doc, absolute.parent)
-    errors += lookup_errors
+    errors += lookup_errors + rules_file_errors(doc, absolute.parent)
     if errors:
         raise_errors(errors)
     assert scenario is not None

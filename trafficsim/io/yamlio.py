@@ -670,6 +670,8 @@ def _message(err: Mapping[str, Any], loc: Loc, node: Node | None,
     value = err.get("input")
     got = shown(value, node)
     if kind == "missing":
+        if loc and isinstance(loc[-1], int):  # a position of a list, not a key
+            return f"missing list item {loc[-1] + 1} (the list has too few items)"
         return f"missing required key '{loc[-1]}'" if loc else "missing value"
     if kind == "extra_forbidden":
         key = str(loc[-1])

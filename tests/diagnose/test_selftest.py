@@ -1,0 +1,213 @@
+"""Injection and recovery: the hidden effects' sizes, the manoeuvres sailed, the measurement of
+their tracks, and the bookkeeping of a small self-test."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trafficsim import effects
+from trafficsim.diagnose import selftest
+from trafficsim.sensors import ais
+from trafficsim.ships.base import PSI, RPS, RUDDER, Env, U, V
+from trafficsim.ships.library import load_ship
+
+#: the documented ranges (module code) of each hidden effect's parameters
+RANGES = {
+    "gnss_lag": {"tau_s": (10.0, 30.0)},
+    "steering_lag": {"tau_s": (4.0, 12.0), "rate_degps": (1.0, 2.5)},
+    "shallow_water": {"draught_to_depth": (0.5, 0.8)},
+    "ais_latency": {"latency_s": (4.0, 15.0)},
+}
+MAGNITUDE = {"current": (0.2, 0.6), "wind": (25.0, 40.0), "compass_bias": (1.5, 5.0),
+             "propeller_asymmetry": (1.5, 3.5), "resistance": (0.25, 0.8)}
+
+
+@pytest.mark.parametrize("name", effects.NAMES)
+def test_hidden_effects_are_valid_and_in_range(name: str) -> None:
+    """Every draw is a valid ``effects:`` entry (off values filling the rest), within its
+    range, with both signs where a sign is drawn."""
+    rng = np.random.default_rng(0)
+    draws = [selftest.hidden_effect(name, rng) for _ in range(200)]
+    eff = effects.REGISTRY[name]
+    signs = set()
+    for d in draws:
+        assert set(d) <= set(eff.keys)
+        full = effects.check({name: d})[name]
+        for key, (lo, hi) in RANGES.get(name, {}).items():
+            assert lo <= full[key] <= hi, (key, full[key])
+        if name in MAGNITUDE:
+            lo, hi = MAGNITUDE[name]
+            assert lo <= eff.magnitude(full) <= hi + 1e-12
+        if name == "lever_arm":
+            assert 40.0 <= abs(full["x_m"]) <= 120.0 and abs(full["y_m"]) <= 15.0
+        assert eff.magnitude(full) > 0.0  # the self-test divides by it
+        signs.add(np.sign(next(iter(full.values()))))
+    if name in ("lever_arm", "compass_bias", "propeller_asymmetry", "current", "wind"):
+        assert signs == {-1.0, 1.0}
+
+
+def test_resistance_is_raised_or_lowered() -> None:
+    rng = np.random.default_rng(1)
+    scales = np.array([selftest.hidden_effect("resistance", rng)["scale"] for _ in range(200)])
+    up, down = scales[scales > 1], scales[scales < 1]
+    assert up.size > 50 and down.size > 50
+    assert up.min() >= 1.3 and up.max() <= 1.8 and down.min() >= 0.55 and down.max() <= 0.75
+
+
+@pytest.fixture(scope="module")
+def kvlcc2() -> dict:
+    return load_ship("kvlcc2")
+
+
+def test_turning_manoeuvre(kvlcc2) -> None:
+    """Approach 60 s with the rudder amidships, then the rudder hard over to port until the
+    heading has changed by 360 deg (the last row just short of it); samples every 2 s."""
+    tr = selftest._manoeuvre(kvlcc2, Env(), "turning", 25.0, 360.0, -1.0)
+    t, x, order = tr["t"], tr["x"], tr["order"]
+    np.testing.assert_allclose(np.diff(t), selftest.STEP_S * selftest.SAMPLE_EVERY)
+    assert np.all(order[t < selftest.APPROACH_S] == 0.0)
+    assert np.all(order[t > selftest.APPROACH_S] == -np.radians(25.0))
+    psi0 = x[PSI][np.searchsorted(t, selftest.APPROACH_S)]
+    change = x[PSI] - psi0
+    assert np.all(np.diff(x[PSI][t > selftest.APPROACH_S]) < 0)   # turning to port
+    assert -2 * np.pi < change.min() < -2 * np.pi + np.radians(5.0)
+    speed = kvlcc2["service_speed_kn"] * 1852 / 3600
+    assert x[U][0] == pytest.approx(speed, rel=1e-6) and x[V][0] == 0.0
+    assert np.ptp(x[RPS]) < 1e-9  # constant engine order
+
+
+def test_zigzag_manoeuvre(kvlcc2) -> None:
+    """20/20 starboard first: order +20 deg, reversed each time the heading change passes
+    20 deg on the order's side; the run stops at the fifth reversal, so four are recorded."""
+    tr = selftest._manoeuvre(kvlcc2, Env(), "zigzag", 20.0, 20.0, 1.0)
+    t, x, order = tr["t"], tr["x"], tr["order"]
+    after = order[t >= selftest.APPROACH_S]
+    assert after[0] == np.radians(20.0)
+    assert set(np.round(np.degrees(after), 9)) == {20.0, -20.0}
+    reversals = np.flatnonzero(np.diff(np.sign(after)) != 0)
+    assert reversals.size == 4
+    psi0 = x[PSI][np.searchsorted(t, selftest.APPROACH_S)]
+    change = np.degrees(x[PSI][t >= selftest.APPROACH_S] - psi0)
+    for i in reversals:  # just before each reversal the heading is near the 20 deg limit
+        side = np.sign(after[i])
+        assert side * change[i + 1] > 15.0 and side * change[i] < 20.0 + 1e-9
+    assert t[-1] <= selftest.MAX_RUN_S
+
+
+def _track(n: int = 50, psi0: float = 3.0) -> dict[str, np.ndarray]:
+    """A straight track at 6 m/s forward, 0.5 m/s to starboard, heading psi0 + 0.01 t."""
+    t = 2.0 * np.arange(n)
+    x = np.zeros((8, n))
+    x[PSI] = psi0 + 0.01 * t
+    x[U], x[V], x[5] = 6.0, 0.5, 0.01
+    x[0], x[1] = 10.0 * t, -5.0 * t
+    x[RUDDER] = np.radians(7.0)
+    x[RPS] = 1.25
+    return {"t": t, "x": x, "order": np.full(n, np.radians(-3.0))}
+
+
+class _NoNoise:
+    def normal(self, loc, scale, size):
+        return np.zeros(size)
+
+
+def test_measured_run_without_noise_is_the_truth() -> None:
+    """Zero noise and no effect: positions and heading (written in [0, 360)) as sailed, SOG
+    the speed through the water (no current), COG the heading plus the drift angle, rudder the
+    actual angle, rpm = 60 rps."""
+    tr = _track()
+    run = selftest.measured_run("r", tr, {}, _NoNoise())
+    x = tr["x"]
+    np.testing.assert_allclose(run.north_m, x[0])
+    np.testing.assert_allclose(run.east_m, x[1])
+    deg = np.degrees(run.psi_rad)
+    assert deg.min() >= 0.0 and deg.max() < 360.0
+    np.testing.assert_allclose(np.unwrap(run.psi_rad), x[PSI], atol=1e-12)
+    np.testing.assert_allclose(run.sog_mps, np.hypot(6.0, 0.5), rtol=1e-12)
+    cog = np.unwrap(run.cog_rad)
+    expect = x[PSI] + np.arctan2(0.5, 6.0)
+    np.testing.assert_allclose(cog - 2 * np.pi * np.round((cog - expect) / (2 * np.pi)),
+                               expect, atol=1e-12)
+    np.testing.assert_allclose(run.rudder_rad, np.radians(7.0))
+    np.testing.assert_allclose(run.rps, 1.25)
+    np.testing.assert_array_equal(run.t_s, tr["t"])
+    lagged = selftest.measured_run("r", tr, {"steering_lag": {"tau_s": 5.0, "rate_degps": 2.0}},
+                                   _NoNoise())
+    np.testing.assert_allclose(lagged.rudder_rad, np.radians(-3.0))  # the order is logged
+
+
+def test_measured_run_noise_levels() -> None:
+    """Position noise 1 m per axis and heading 0.2 deg (sample std within 20 %)."""
+    tr = _track(n=2000, psi0=1.0)
+    run = selftest.measured_run("r", tr, {}, np.random.default_rng(3))
+    assert np.std(run.north_m - tr["x"][0]) == pytest.approx(1.0, rel=0.2)
+    assert np.std(run.east_m - tr["x"][1]) == pytest.approx(1.0, rel=0.2)
+    dpsi = np.angle(np.exp(1j * (run.psi_rad - tr["x"][PSI])))
+    assert np.degrees(np.std(dpsi)) == pytest.approx(0.2, rel=0.2)
+    # velocity noise 0.05 m/s per axis: SOG scatter about that
+    assert np.std(run.sog_mps - np.hypot(6.0, 0.5)) == pytest.approx(0.05, rel=0.2)
+
+
+def test_ais_latency_adds_ais_quantisation() -> None:
+    tr = _track()
+    run = selftest.measured_run("r", tr, {"ais_latency": {"latency_s": 4.0}}, _NoNoise())
+    step = ais.POSITION_STEP_M
+    np.testing.assert_allclose(run.north_m / step, np.round(run.north_m / step), atol=1e-6)
+    heading_deg = np.degrees(run.psi_rad)
+    np.testing.assert_allclose(heading_deg, np.round(heading_deg), atol=1e-6)
+    sog_steps = run.sog_mps / ais.SOG_STEP_MPS
+    np.testing.assert_allclose(sog_steps, np.round(sog_steps), atol=1e-6)
+    # reported late: 4 s = 2 samples behind the truth (which moves 10 m/s north)
+    np.testing.assert_allclose(run.north_m[5:], tr["x"][0][5:] - 40.0, atol=step)
+
+
+def test_simulated_trial_runs_and_windows(kvlcc2) -> None:
+    """Three training runs and two held-out ones, named by kind, rudder and side, cut into
+    windows of 3 L / U."""
+    train, hold = selftest.simulate_trial(kvlcc2, {}, np.random.default_rng(0))
+    assert [t.name for t in train] == ["zigzag_10_s", "zigzag_20_p", "turning_35_s"]
+    assert [t.name for t in hold] == ["zigzag_15_s", "turning_25_p"]
+    assert all(t.dt_s == selftest.STEP_S * selftest.SAMPLE_EVERY for t in (*train, *hold))
+    dtrain, dhold = selftest.prepare(kvlcc2, train, hold)
+    assert dtrain.windows.run_names == ("zigzag_10_s", "zigzag_20_p", "turning_35_s")
+    assert dhold.windows.run_names == ("zigzag_15_s", "turning_25_p")
+    horizon = 3 * 320.0 / (15.5 * 1852 / 3600)
+    per = round(horizon / 2.0) + 1
+    assert dtrain.windows.n_samples.max() == per
+
+
+def test_small_run_bookkeeping() -> None:
+    """Two trials over two candidates: each hidden once (balanced order); the confusion
+    matrix, accuracy and the magnitude count agree with the trials; progress per trial."""
+    calls = []
+    res = selftest.run(2, seed=4, candidates=("current", "resistance"),
+                       progress=lambda i, t: calls.append((i, t["hidden"])))
+    assert res["labels"] == ["current", "resistance", "not attributable"]
+    assert sorted(t["hidden"] for t in res["trials"]) == ["current", "resistance"]
+    assert [c[0] for c in calls] == [0, 1]
+    conf = np.array(res["confusion"])
+    assert conf.shape == (2, 3) and conf.sum() == 2
+    for t in res["trials"]:
+        i = res["hidden_labels"].index(t["hidden"])
+        assert conf[i, res["labels"].index(t["first_ranked"])] >= 1
+        assert t["magnitude_rel_error"] == pytest.approx(
+            (t["magnitude_fitted"] - t["magnitude_true"]) / t["magnitude_true"])
+    correct = sum(t["hidden"] == t["first_ranked"] for t in res["trials"])
+    assert res["correct"] == correct == int(np.trace(conf[:, :2]))
+    assert res["accuracy"] == correct / 2
+    assert res["magnitude_within_20pct"] == sum(abs(t["magnitude_rel_error"]) <= 0.2
+                                                for t in res["trials"])
+    assert res["ship"] == "kvlcc2" and res["seed"] == 4 and res["n"] == 2
+
+
+def test_confusion_text() -> None:
+    res = {"labels": ["current", "propeller_asymmetry", "not attributable"],
+           "hidden_labels": ["current", "propeller_asymmetry"],
+           "confusion": [[3, 0, 1], [1, 2, 0]], "correct": 5, "n": 7, "accuracy": 5 / 7,
+           "magnitude_within_20pct": 4}
+    lines = selftest.confusion_text(res).splitlines()
+    assert lines[0] == f"{'hidden / ranked':<20}{'current':>9}{'propelle':>9}{'not attr':>9}"
+    assert lines[1] == f"{'current':<20}{3:>9d}{0:>9d}{1:>9d}"
+    assert lines[2] == f"{'propeller_asymmetry':<20}{1:>9d}{2:>9d}{0:>9d}"
+    assert lines[3] == "first-ranked correct: 5/7 (71 %); magnitude within 20 %: 4/7"
