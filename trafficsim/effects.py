@@ -15,7 +15,7 @@ effect                 parameters (off value)                              where
                        ground, "towards" (a true wind from ``atan2(-e,
                        -n)`` at ``hypot(n, e)`` m/s)
 ``gnss_lag``           ``tau_s`` (0): the receiver's PV filter with        position, SOG, COG
-                       ``S_p = sigma^2 / tau^4`` (:mod:`trafficsim.
+                       ``S_p = sigma^2 dt / tau^4`` (:mod:`trafficsim.
                        estimation.pv`; its gains depend on ``dt / tau``
                        only)
 ``lever_arm``          ``x_m``, ``y_m`` (0): GNSS antenna in the body      position, SOG, COG
@@ -41,9 +41,10 @@ effect                 parameters (off value)                              where
 =====================  ==================================================  =====================
 
 In a scenario: ``current`` and ``wind`` add to the encounter's environment for that ship;
-``gnss_lag``, ``lever_arm``, ``compass_bias`` and ``ais_latency`` set the ship's instruments
-(``navigation.pv_sp_m2ps3``, ``gnss.antenna_x_m/y_m``, ``compass.bias_deg/deviation_deg``,
-``ais.latency_s``); ``steering_lag`` sets the steering gear (``actuators.rudder_tau_s`` and
+``lever_arm``, ``compass_bias`` and ``ais_latency`` add to the ship's instruments
+(``gnss.antenna_x_m/y_m``, ``compass.bias_deg`` and the B and C terms of ``deviation_deg``,
+``ais.latency_s``), and ``gnss_lag`` sets its receiver filter (``navigation.pv_sp_m2ps3``
+for the scenario's step); ``steering_lag`` sets the steering gear (``actuators.rudder_tau_s`` and
 ``rudder_rate_degps``: the logged rudder is then the order); ``resistance``,
 ``propeller_asymmetry`` and ``shallow_water`` change the ship's hull coefficients, for the two
 families with a hull model of the MMG kind (:data:`HULL_FAMILIES`). In ``mmg_berthing`` (the
@@ -67,6 +68,9 @@ from typing import Any
 import numpy as np
 
 from trafficsim.errors import InputError
+
+#: at most this many fixed-point steps to undo a compass deviation (each gains a digit or so)
+_DEVIATION_ITERATIONS = 60
 
 
 @dataclass(frozen=True)
@@ -170,14 +174,27 @@ def check(effects: Mapping[str, Any] | None, where: str = "effects") -> dict[str
                 hint = f" (did you mean '{close[0]}'?)" if close else ""
                 raise InputError(f"unknown key '{key}' of effect '{name}'{hint}; expected "
                                  f"some of {', '.join(eff.keys)}", key=f"{where}.{name}.{key}")
-            if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                    or not math.isfinite(float(value)):
-                raise InputError(f"expected a finite number, got {value!r}",
+            number = _finite(value)
+            if number is None:
+                shown = repr(value) if len(repr(value)) <= 40 else f"{repr(value)[:37]}..."
+                raise InputError(f"expected a finite number, got {shown}",
                                  key=f"{where}.{name}.{key}")
-            full[key] = float(value)
+            full[key] = number
         _check_range(name, full, f"{where}.{name}")
         out[str(name)] = full
     return out
+
+
+def _finite(value: Any) -> float | None:
+    """``value`` as a finite float, or None (booleans, text, NaN, inf and integers beyond the
+    float range are not numbers here)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 def _check_range(name: str, v: Mapping[str, float], where: str) -> None:
@@ -332,37 +349,44 @@ def add_wind(speed_mps: np.ndarray, from_rad: np.ndarray, north_mps: np.ndarray,
 # instruments
 
 
-def apply_sensors(sensors: Mapping[str, Any], effects: Mapping[str, Mapping[str, float]]
-                  ) -> dict[str, dict[str, Any]]:
-    """Instrument configs with the measurement effects applied (a copy)."""
+def apply_sensors(sensors: Mapping[str, Any], effects: Mapping[str, Mapping[str, float]],
+                  dt_s: float) -> dict[str, dict[str, Any]]:
+    """Instrument configs with the measurement effects applied (a copy): antenna offset,
+    compass bias and deviation and AIS latency added to the ship's own (an effect at its off
+    values changes nothing); ``gnss_lag`` sets the receiver filter for steps of ``dt_s``."""
     out = {k: dict(v) for k, v in sensors.items()}
-    if "lever_arm" in effects:
+    if "lever_arm" in effects and any(effects["lever_arm"].values()):
         g = out.setdefault("gnss", {})
-        g["antenna_x_m"] = effects["lever_arm"]["x_m"]
-        g["antenna_y_m"] = effects["lever_arm"]["y_m"]
-    if "compass_bias" in effects:
+        g["antenna_x_m"] = float(g.get("antenna_x_m", 0.0)) + effects["lever_arm"]["x_m"]
+        g["antenna_y_m"] = float(g.get("antenna_y_m", 0.0)) + effects["lever_arm"]["y_m"]
+    if "compass_bias" in effects and any(effects["compass_bias"].values()):
         e = effects["compass_bias"]
         c = out.setdefault("compass", {})
-        c["bias_deg"] = e["bias_deg"]
+        c["bias_deg"] = float(c.get("bias_deg", 0.0)) + e["bias_deg"]
         if e["deviation_b_deg"] or e["deviation_c_deg"]:
             if c.get("kind", "gyro") != "magnetic":
                 raise InputError("compass deviation needs a magnetic compass (sensors.compass."
                                  "kind: magnetic)", key="effects.compass_bias")
-            c["deviation_deg"] = [0.0, e["deviation_b_deg"], e["deviation_c_deg"], 0.0, 0.0]
-    if "ais_latency" in effects:
-        out.setdefault("ais", {})["latency_s"] = effects["ais_latency"]["latency_s"]
+            dev = [float(d) for d in c.get("deviation_deg", [0.0] * 5)]
+            dev[1] += e["deviation_b_deg"]
+            dev[2] += e["deviation_c_deg"]
+            c["deviation_deg"] = dev
+    if "ais_latency" in effects and effects["ais_latency"]["latency_s"]:
+        a = out.setdefault("ais", {})
+        a["latency_s"] = float(a.get("latency_s", 2.0)) + effects["ais_latency"]["latency_s"]
     if "gnss_lag" in effects and effects["gnss_lag"]["tau_s"] > 0.0:
         sigma = float(out.get("gnss", {}).get("sigma_m", 2.0))
         out.setdefault("navigation", {})["pv_sp_m2ps3"] = pv_sp(effects["gnss_lag"]["tau_s"],
-                                                               sigma)
+                                                               sigma, dt_s)
     return out
 
 
-def pv_sp(tau_s: float, sigma_m: float) -> float:
-    """Acceleration spectral density ``S_p`` (m^2/s^3) of a PV filter with time scale ``tau``:
-    ``S_p = sigma^2 / tau^4``; the filter's tracking index ``sqrt(S_p dt^3) / sigma``
-    [seed 000] is then ``(dt / tau)^2``, whatever ``sigma``."""
-    return float(sigma_m) ** 2 / float(tau_s) ** 4
+def pv_sp(tau_s: float, sigma_m: float, dt_s: float) -> float:
+    """Acceleration spectral density ``S_p`` (m^2/s^3) of a PV filter stepping ``dt_s`` with
+    time scale ``tau``: ``S_p = sigma^2 dt / tau^4``; the filter's tracking index
+    ``sqrt(S_p dt^3) / sigma`` [seed 000] is then ``(dt / tau)^2``, whatever ``sigma``, so its
+    lag in seconds does not depend on the sampling interval."""
+    return float(sigma_m) ** 2 * float(dt_s) / float(tau_s) ** 4
 
 
 def true_start(x0: np.ndarray, effects: Mapping[str, Mapping[str, float]],
@@ -388,9 +412,18 @@ def true_start(x0: np.ndarray, effects: Mapping[str, Mapping[str, float]],
         x[1] += lat * (x[3] * s + x[4] * c)
         x[2] += lat * x[5]
     if "compass_bias" in effects:
-        # heading, and the smoothed velocities from the measured body frame to the true one
-        e = compass_error(x[2], effects["compass_bias"])
-        x[2] -= e
+        # heading, and the smoothed velocities from the measured body frame to the true one;
+        # the error is a function of the TRUE heading: psi = psi_m - e(psi) by fixed-point
+        # iteration (a contraction: |de/dpsi| <= |B| + |C|, a few tenths at most)
+        measured = x[2].copy()
+        e = compass_error(measured, effects["compass_bias"])
+        for _ in range(_DEVIATION_ITERATIONS):
+            e_next = compass_error(measured - e, effects["compass_bias"])
+            if np.all(np.abs(e_next - e) <= 1e-13):
+                e = e_next
+                break
+            e = e_next
+        x[2] = measured - e
         c, s = np.cos(e), np.sin(e)
         x[3], x[4] = x[3] * c - x[4] * s, x[3] * s + x[4] * c
     if "lever_arm" in effects:
@@ -475,7 +508,9 @@ def measure(truth: np.ndarray, dt_s: np.ndarray,
     if np.any(lat > 0.0):
         shift = lat[:, None] / np.asarray(dt_s, float)[None, :]  # (k, W) samples
         out["cog"] = np.unwrap(out["cog"], axis=-1)
+        out["psi"] = np.unwrap(out["psi"], axis=-1)  # (a wrapped heading crosses north)
         out = {key: delay(val, shift) for key, val in out.items()}
+        out["psi"] = np.mod(out["psi"], 2.0 * np.pi)
     out["cog"] = np.mod(out["cog"], 2.0 * np.pi)
     return out
 
@@ -503,7 +538,7 @@ def _receiver_filter(pn: np.ndarray, pe: np.ndarray, vn: np.ndarray, ve: np.ndar
     on = np.flatnonzero(taus > 0.0)
     pn, pe, vn, ve = pn.copy(), pe.copy(), vn.copy(), ve.copy()
     sigma = 1.0  # the gains depend on dt / tau only (pv_sp)
-    cfgs = [{"sigma_m": sigma, "sp_m2ps3": pv_sp(taus[i], sigma), "dt_s": float(d)}
+    cfgs = [{"sigma_m": sigma, "sp_m2ps3": pv_sp(taus[i], sigma, float(d)), "dt_s": float(d)}
             for i in on for d in dt_s]
     params = pv.build(cfgs)
     m = on.size * w

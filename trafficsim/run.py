@@ -52,7 +52,7 @@ def scenario_setups(scn: Scenario, encounter: int = 0) -> tuple[list[ShipSetup],
         sensors = merge_sensors(spec.get("sensors"), s.sensors)
         if found:
             spec = effects.apply_spec(spec, found)
-            sensors = effects.apply_sensors(sensors, found)
+            sensors = effects.apply_sensors(sensors, found, scn.dt_s)
         speed_kn = s.speed_kn if s.speed_kn is not None else spec["service_speed_kn"]
         route = np.array(s.route, dtype=float).reshape(-1, 2) if s.route else np.zeros((0, 2))
         ships.append(ShipSetup(name=s.name, spec=spec, encounter=encounter, north_m=s.north_m,
