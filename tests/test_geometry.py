@@ -107,8 +107,6 @@ def test_norm_side_on_exact_ties_nan_infinity_and_zero():
     assert not hypot_below(0.0, 0.0, 0.0) and not hypot_below(0.0, 0.0, -1.0)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: norm_side trusts squares that underflow to "
-                   "subnormals (a = b = 1.6e-162 squares to 1e-323) and answers 'surely above'")
 def test_hypot_below_with_squares_in_the_subnormal_range():
     """hypot(1.6e-162, 1.6e-162) = 2.26e-162 < 2.4e-162, but each square (2.56e-324) rounds
     to the smallest subnormal 4.9e-324, so the sum of squares (9.9e-324) exceeds the

@@ -15,13 +15,20 @@ from trafficsim.jit import kernel
 NORM_MARGIN = 1e-9
 
 
+#: limits below this have squares near the subnormal range, where the squares do not decide
+_SQUARE_SAFE = 1e-140
+
+
 @kernel
 def norm_side(a: float, b: float, limit: float, scale: float) -> int:
     """+1 if ``hypot(a, b) / scale`` is surely above ``limit`` (>= 0), -1 if surely below, 0
-    within :data:`NORM_MARGIN` of it (or NaN): the caller then evaluates the comparison itself
-    (libm's ``hypot`` costs about 40 ns, the squares 5)."""
+    within :data:`NORM_MARGIN` of it (or NaN, or a positive limit below 1e-140, whose square is
+    near the subnormal range): the caller then evaluates the comparison itself (libm's
+    ``hypot`` costs about 40 ns, the squares 5)."""
     s2 = a * a + b * b
     hi = limit * scale * (1.0 + NORM_MARGIN)
+    if 0.0 < hi <= _SQUARE_SAFE:  # squares of this size lose precision (subnormal): undecided
+        return 0
     if s2 > hi * hi:
         return 1
     lo = limit * scale * (1.0 - NORM_MARGIN)

@@ -314,6 +314,16 @@ def test_scores_take_each_ship_by_the_rule_of_its_part(kind):
         assert np.isnan(out["score_rule14"][0])
 
 
+def test_head_on_rule16_column_is_the_lower_of_the_two_ships():
+    """Head-on, Rule 16 binds both ships (both give way): its column is the lower score,
+    whichever ship of the pair has it, as for Rule 14."""
+    for stbd in ([40.0, 12.0], [12.0, 40.0]):
+        obs = _pair(stbd_cpa=np.radians(stbd))
+        g = grade(obs)
+        assert g[16][0] != g[16][1]
+        assert obs.scores(["head_on"])["score_rule16"][0] == pytest.approx(min(g[16]))
+
+
 def test_scores_of_an_unknown_kind_are_nan():
     out = _pair().scores(["no_such_kind"])
     assert np.isnan(out["compliance_i"][0]) and np.isnan(out["compliance_j"][0])

@@ -212,6 +212,7 @@ def test_rules_are_found_relative_to_the_spec(tmp_path):
     """``rules:`` is relative to the spec file's folder, not the working directory."""
     sub = tmp_path / "a" / "b"
     sub.mkdir(parents=True)
+    (tmp_path / "a" / "rules.yaml").write_text("x: 1\n")  # (it must exist to load the spec)
     spec = _rows_spec(sub, extra="rules: ../rules.yaml")
     assert _rules_path(spec) == sub / "../rules.yaml"
     assert _rules_path(_rows_spec(sub, name="n.yaml")) is None

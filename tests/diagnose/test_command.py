@@ -150,8 +150,6 @@ def test_confirmation_absent_without_logged_wind_or_environment_effect() -> None
     assert np.isnan(one["wind"]["component_correlation"])  # one run: no correlation
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: confirmation counts a run whose wind columns are "
-                   "present but empty as logged wind; its NaN row turns the medians into NaN")
 def test_confirmation_skips_a_run_without_any_wind_reading() -> None:
     """A run whose wind columns hold no value (a failed anemometer) has no logged wind: it is
     left out like a run without the columns, and the other run's comparison stands."""

@@ -143,20 +143,22 @@ def test_noise_sigma_of_too_short_a_series_is_nan() -> None:
 
 
 def test_dataset_windows_carry_the_measured_channels_at_their_offsets() -> None:
-    n = 23  # horizon 5 s at 1 s: windows of 6 samples from 0, 5, 10, 15 and a last one of 3
+    n = 24  # horizon 5 s at 1 s: windows of 6 samples from 0, 5, 10, 15 and a last one of 4
+    # (3 s, at least half the horizon: kept; a last piece of 2 s would be dropped)
     north = np.arange(n) ** 1.5
     u = 5.0 + 0.1 * np.arange(n)
     ds = dataset([_kin("a", n, north=north, u_mps=u)], 5.0)
     assert ds.windows.w == 5 and ds.windows.n == 6
-    assert ds.windows.n_samples.tolist() == [6, 6, 6, 6, 3]
+    assert ds.windows.n_samples.tolist() == [6, 6, 6, 6, 4]
     for i, start in enumerate((0, 5, 10, 15, 20)):
         c = ds.windows.n_samples[i]
         assert np.array_equal(ds.target[i, :c, CHANNELS.index("north")],
                               north[start:start + c])
         assert np.array_equal(ds.target[i, :c, CHANNELS.index("u")], u[start:start + c])
     # padding: no target and phase -1
-    assert np.isnan(ds.target[4, 3:]).all() and (ds.phase[4, 3:] == -1).all()
-    assert (ds.phase[:4] >= 0).all() and (ds.phase[4, :3] >= 0).all()
+    assert np.isnan(ds.target[4, 4:]).all() and (ds.phase[4, 4:] == -1).all()
+    assert (ds.phase[:4] >= 0).all() and (ds.phase[4, :4] >= 0).all()
+    assert dataset([_kin("b", 23, north=north[:23], u_mps=u[:23])], 5.0).windows.w == 4
 
 
 def test_dataset_channels_present_and_absent() -> None:

@@ -380,8 +380,6 @@ def test_last_piece_of_half_a_horizon_is_kept() -> None:
     assert list(win.n_samples) == [11, 6]
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: windows_from_runs keeps a last piece shorter "
-                   "than half a horizon (compares samples with per // 2 instead of intervals)")
 def test_last_piece_shorter_than_half_a_horizon_is_dropped() -> None:
     """10 s horizon at 1 s, 15 samples: the last piece (samples 10-14) spans 4 s, shorter than
     half a horizon (5 s), so the module doc says it is dropped."""
@@ -420,8 +418,6 @@ def test_a_run_without_any_rudder_reading_is_refused() -> None:
         replay.windows_from_runs([], 10.0)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: windows_from_runs interpolates a missing wind "
-                   "direction linearly in raw angle, 350 -> 10 deg through 180 (not unwrapped)")
 def test_missing_wind_direction_interpolated_across_north() -> None:
     """Wind from 350 deg, then a missing sample, then from 10 deg: the gap is from north
     (0 deg), the short way round as preprocess.resample_uniform does for angles."""

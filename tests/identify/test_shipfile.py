@@ -55,9 +55,7 @@ def test_text_reads_back_as_the_same_string(s: str) -> None:
     assert parse_yaml(f"x: {text(s)}\n").data["x"] == s
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: shipfile.text leaves C1 controls (U+0080-U+009F, "
-                   "U+007F) unescaped; YAML folds NEL to a space and rejects the others")
-@pytest.mark.parametrize("s", ["a\x85b", "del\x7f", "csi\x9b"])
+@pytest.mark.parametrize("s", ["a\x85b", "del\x7f", "csi\x9b", "ls\u2028x", "bom\ufeffz"])
 def test_text_escapes_characters_yaml_does_not_take_literally(s: str) -> None:
     assert parse_yaml(f"x: {text(s)}\n").data["x"] == s
 

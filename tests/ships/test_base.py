@@ -285,6 +285,16 @@ def test_steady_rps_for_speed_inverts_the_nomoto_surge_law_and_caps_at_rps_max()
     assert out[4] == pytest.approx(spec["actuators"]["rps_max"], rel=1e-12)
 
 
+def test_steady_rps_for_speed_wants_one_speed_per_ship():
+    """The compiled loop reads one parameter row per speed: more speeds than ships would read
+    past the tables, so it is refused."""
+    spec = load_ship("cargo")
+    fam = _family(spec)
+    with pytest.raises(ValueError, match="one speed per ship"):
+        base.steady_rps_for_speed(fam, fam.build([spec]), Actuators.from_specs([spec]),
+                                  np.full(4, 5.0))
+
+
 def test_steady_rps_for_speed_of_the_response_model_is_the_root_of_its_surge_balance():
     """[seed 001, eq 2] straight ahead: a1 u|u| + 60 a8 u n + 3600 a9 n^2 = 0 (n in rev/s),
     whose positive root gives u = 0.0781 m/s per rpm (response module docstring)."""

@@ -133,9 +133,6 @@ def test_files_that_are_not_ship_files(tmp_path, text, expect):
     assert "ship.yaml" in str(err.value)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: Particulars accepts NaN/inf in its extra keys "
-                   "(displacement_m3, propeller_diameter_m, ...), though file schemas refuse "
-                   "NaN and infinity; the ship then accelerates by NaN")
 @pytest.mark.parametrize("old, new", [
     ("  displacement_m3: 312600.0", "  displacement_m3: .nan"),
     ("  propeller_diameter_m: 9.86", "  propeller_diameter_m: .inf")])

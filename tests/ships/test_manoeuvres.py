@@ -274,8 +274,6 @@ def test_limits_of_the_time_step_and_speed_are_accepted():
     assert track["rpm"][0] == pytest.approx(60.0 * spec["actuators"]["rps_max"], rel=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: zigzag with a negative rudder (port first) "
-                   "reverses the rudder every step and returns meaningless indices")
 def test_zigzag_to_port_first_mirrors_or_is_refused():
     """A -10/-10 zig-zag (first rudder to port) of a port-starboard symmetric model either
     mirrors the starboard one (same indices) or is refused as an ``InputError``; it must not
@@ -332,3 +330,32 @@ def test_imo_criteria_for_other_zigzags_and_kinds():
     assert crit["first_overshoot_deg"]["limit"] == 25.0 and crit["first_overshoot_deg"]["pass"]
     assert manoeuvres.imo_criteria("zigzag", _zigzag_indices(20.0, rud=20.0, head=10.0)) == {}
     assert manoeuvres.imo_criteria("spiral", {"length_m": 100.0}) == {}
+
+
+def test_zigzag_to_port_first_is_the_mirror_image_and_zero_is_refused():
+    """Port first (-10/10) on a symmetric ship: the heading history is the starboard one
+    mirrored, the indices the same, and the IMO criteria are those of the 10/10 test; a zero
+    rudder or heading angle (a zig-zag that never reverses) is an input error."""
+    spec = load_ship("cargo")
+    stbd_track, stbd = manoeuvres.zigzag(spec, rudder_deg=10.0)
+    port_track, port = manoeuvres.zigzag(spec, rudder_deg=-10.0)
+    change = np.unwrap(np.radians(stbd_track["heading_deg"]))
+    mirrored = np.unwrap(np.radians(port_track["heading_deg"]))
+    np.testing.assert_allclose(mirrored - mirrored[0], -(change - change[0]), atol=1e-9)
+    assert port["rudder_deg"] == -10.0
+    assert set(manoeuvres.imo_criteria("zigzag", port)) == set(
+        manoeuvres.imo_criteria("zigzag", stbd))
+    for key, kwargs in (("rudder_deg", {"rudder_deg": 0.0}),
+                        ("heading_deg", {"rudder_deg": 10.0, "heading_deg": 0.0})):
+        with pytest.raises(InputError) as info:
+            manoeuvres.zigzag(spec, **kwargs)
+        assert info.value.key == key
+
+
+@pytest.mark.parametrize("speed_kn", [0.0, -3.0])
+def test_an_approach_speed_not_above_zero_is_refused(speed_kn):
+    """A standard manoeuvre needs headway: 0 kn (or astern) gives no indices worth the name, so
+    it is an input error under ``speed_kn``."""
+    with pytest.raises(InputError, match="above 0 kn") as info:
+        manoeuvres.turning_circle(load_ship("cargo"), speed_kn=speed_kn)
+    assert info.value.key == "speed_kn"

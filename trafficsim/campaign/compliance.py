@@ -176,7 +176,7 @@ class PairObserver:
     def scores(self, pair_kind: list[str]) -> dict[str, np.ndarray]:
         """Compliance per undirected pair: the score of each ship (``compliance_i``, ``_j``,
         by the rule of its part) and one column per rule (``score_rule13`` ... ``17``: the
-        ship the rule binds; head-on: the lower of the two)."""
+        ship the rule binds; head-on, where Rules 14 and 16 bind both: the lower of the two)."""
         half = self.own.shape[0] // 2
         kinds = list(pair_kind) + [MIRROR.get(k, k) for k in pair_kind]
         graded = grade(self)
@@ -189,11 +189,8 @@ class PairObserver:
         for r in RULES:
             mine = np.where((rule == r) | ((r == 16) & np.isin(rule, (13, 15, 14))),
                             graded[r], np.nan)
-            if r == 14:
-                both = np.fmin(mine[:half], mine[half:])
-            else:
-                both = np.where(np.isnan(mine[:half]), mine[half:], mine[:half])
-            out[f"score_rule{r}"] = both
+            # the ship the rule binds; where it binds both (head-on: Rules 14 and 16), the lower
+            out[f"score_rule{r}"] = np.fmin(mine[:half], mine[half:])
         return out
 
 

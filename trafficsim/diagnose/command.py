@@ -116,12 +116,14 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
     return rep
 
 
-def logged_wind(trial: Any) -> tuple[float, float, float, float]:
+def logged_wind(trial: Any) -> tuple[float, float, float, float] | None:
     """A run's logged true wind: mean air velocity over ground (towards) north and east,
-    mean speed and RMS speed (m/s)."""
+    mean speed and RMS speed (m/s); None when no sample has both speed and direction."""
     sp = np.asarray(trial.wind_speed_mps, float)
     fr = np.asarray(trial.wind_from_rad, float)
     ok = np.isfinite(sp) & np.isfinite(fr)
+    if not ok.any():
+        return None
     sp, fr = sp[ok], fr[ok]
     return (float(np.mean(-sp * np.cos(fr))), float(np.mean(-sp * np.sin(fr))),
             float(np.mean(sp)), float(np.sqrt(np.mean(sp * sp))))
@@ -133,8 +135,11 @@ def confirmation(diag: fit.Diagnosis, runs: Sequence[preprocess.Kinematics],
     environmental effect (wind, and current) against the run's mean logged true wind as an
     air velocity over ground: direction error, speed ratio, and over all runs the
     correlation of the fitted and logged north and east components."""
-    logged = {r.name: (role, logged_wind(r.trial)) for r, role in zip(runs, roles, strict=True)
-              if r.trial.has_wind}
+    logged = {}
+    for run, role in zip(runs, roles, strict=True):
+        wind = logged_wind(run.trial) if run.trial.has_wind else None
+        if wind is not None:  # (wind columns left blank throughout say nothing)
+            logged[run.name] = (role, wind)
     if not logged:
         return None
     out: dict[str, Any] = {}

@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from trafficsim.estimation.smoother import unwrap_finite
 from trafficsim.jit import kernel
 from trafficsim.ships import base, kernels
 
@@ -327,7 +328,8 @@ def windows_from_runs(runs: Sequence[Any], horizon_s: float | None = None,
         start = 0
         while start < n - 1:
             count = min(per, n - start)
-            if count >= max(2, per // 2) or start == 0:
+            # keep a last piece of at least half a horizon (in intervals, not samples)
+            if (count >= 2 and 2 * (count - 1) >= per - 1) or start == 0:
                 pieces.append((r, start, count))
             start += per - 1
     if not pieces:
@@ -352,8 +354,9 @@ def windows_from_runs(runs: Sequence[Any], horizon_s: float | None = None,
         wind = np.zeros((tr.n, 2))
         if use_wind and tr.has_wind:
             wind[:, 0] = np.nan_to_num(_filled(tr.wind_speed_mps, tr.t_s, "wind speed", tr.path))
-            wind[:, 1] = np.nan_to_num(_filled(tr.wind_from_rad, tr.t_s, "wind direction",
-                                               tr.path))
+            # a gap in the direction is bridged the short way round (350 deg ... 10 deg)
+            wind[:, 1] = np.nan_to_num(np.mod(_filled(unwrap_finite(tr.wind_from_rad), tr.t_s,
+                                                      "wind direction", tr.path), 2.0 * np.pi))
         outs = np.stack([sm[k] for k in OUTPUTS], axis=1)
         prepared.append((rud, rps, wind, outs))
     for i, (r, s, c) in enumerate(pieces):

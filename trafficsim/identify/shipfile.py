@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -30,9 +31,16 @@ def number(value: float) -> str:
     return mantissa + ("e" + exponent if exponent else "")
 
 
+#: characters YAML does not take literally inside a double-quoted scalar (DEL and the C1
+#: controls are refused, NEL and the Unicode line and paragraph separators fold to a space,
+#: a byte-order mark is dropped): written as escapes
+_YAML_ESCAPE = re.compile("[\x7f-\x9f\u2028\u2029\ufeff]")
+
+
 def text(value: str) -> str:
     """A string as a YAML double-quoted scalar (JSON escapes are valid YAML escapes)."""
-    return json.dumps(value, ensure_ascii=False)
+    return _YAML_ESCAPE.sub(lambda m: f"\\u{ord(m.group()):04x}",
+                            json.dumps(value, ensure_ascii=False))
 
 
 def _value(value: Any) -> str:

@@ -241,10 +241,15 @@ def steady_rps_for_speed(family: ModelFamily, params: Any, act: Actuators,
 
     speed = np.ascontiguousarray(speed_mps, dtype=float)
     n = speed.shape[0]
+    table = pack(params)
+    rps_max = np.ascontiguousarray(act.rps_max, dtype=float)
+    if speed.ndim != 1 or table.shape[0] != n or rps_max.shape != (n,):
+        # (the compiled loop does not check its indices)
+        raise ValueError(f"one speed per ship: {table.shape[0]} ships' parameters, "
+                         f"{rps_max.shape[0]} actuators and speeds of shape {speed.shape}")
     out = np.empty(n)
     kernels.steady_rps(np.full(n, kernels.FAMILY_CODE[family.name], dtype=np.int64),
-                       pack(params), speed, np.ascontiguousarray(act.rps_max, dtype=float),
-                       env_table(Env(), n), int(iters), out)
+                       table, speed, rps_max, env_table(Env(), n), int(iters), out)
     return out
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import difflib
 import hashlib
+import math
 from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
@@ -41,6 +42,8 @@ class Particulars(Strict):
             for key, value in data.items():
                 if isinstance(value, bool) or not isinstance(value, (int, float)):
                     raise FieldError(f"expected a number, got {value!r}", loc=(key,))
+                if not math.isfinite(value):
+                    raise FieldError(f"expected a finite number, got {value!r}", loc=(key,))
         return data
 
 

@@ -42,6 +42,9 @@ class _Ship:
         self.env = env
         self.length = float(spec["particulars"]["length_m"])
         speed = from_kn(speed_kn if speed_kn is not None else spec["service_speed_kn"])
+        if not speed > 0.0:
+            raise InputError(f"expected an approach speed above 0 kn, got {to_kn(speed):g} kn",
+                             key="speed_kn")
         if not speed <= MAX_SPEED_FACTOR * from_kn(spec["service_speed_kn"]):
             raise InputError(f"expected at most {MAX_SPEED_FACTOR:g} times the service speed "
                              f"of '{spec['name']}' ({spec['service_speed_kn']:g} kn), got "
@@ -196,7 +199,9 @@ def turning_circle(spec: Mapping[str, Any], rudder_deg: float = 35.0,
 def zigzag(spec: Mapping[str, Any], rudder_deg: float = 10.0, heading_deg: float | None = None,
            speed_kn: float | None = None, dt: float | None = None, env: Env | None = None,
            reversals: int = 4) -> tuple[Track, dict[str, float]]:
-    """Zig-zag ``rudder_deg``/``heading_deg`` (e.g. 10/10, 20/20), first rudder to starboard.
+    """Zig-zag ``rudder_deg``/``heading_deg`` (e.g. 10/10, 20/20), first rudder to starboard
+    (a negative ``rudder_deg``: to port, the mirror image; the indices are then measured to
+    port, so a symmetric ship gives the same ones; the sign of ``heading_deg`` is not used).
 
     Indices (ITTC 7.5-04-02-01): initial turning time (execute to first reversal), distance run
     by then in ship lengths (IMO initial turning ability), first and second overshoot angles.
@@ -205,10 +210,15 @@ def zigzag(spec: Mapping[str, Any], rudder_deg: float = 10.0, heading_deg: float
     heading_deg = rudder_deg if heading_deg is None else heading_deg
     ship = _Ship(spec, speed_kn, env)
     ship.check_rudder(rudder_deg)
+    for key, value in (("rudder_deg", rudder_deg), ("heading_deg", heading_deg)):
+        if not abs(value) > 0.0:
+            raise InputError(f"expected an angle other than 0, got {value:g}", key=key)
+    side = 1.0 if rudder_deg > 0.0 else -1.0  # first rudder to starboard (+1) or port
+    heading_deg = abs(heading_deg)
     step = _auto_dt(ship, dt)
     ship.settle(60.0, step)
-    rud, lim, rps0 = np.radians(rudder_deg), np.radians(heading_deg), ship.rps0
-    state = {"sign": 1.0, "reversals": 0, "t_rev": []}
+    rud, lim, rps0 = np.radians(abs(rudder_deg)), np.radians(heading_deg), ship.rps0
+    state = {"sign": side, "reversals": 0, "t_rev": []}
 
     def command(t: float, change: float) -> tuple[float, float] | None:
         sgn = state["sign"]
@@ -222,8 +232,8 @@ def zigzag(spec: Mapping[str, Any], rudder_deg: float = 10.0, heading_deg: float
 
     track = _run(ship, step, 3600.0 * 3, command)
     t = track["t_s"]
-    change = np.degrees(np.unwrap(np.radians(track["heading_deg"]))
-                        - np.radians(track["heading_deg"][0]))
+    change = side * np.degrees(np.unwrap(np.radians(track["heading_deg"]))
+                               - np.radians(track["heading_deg"][0]))  # towards the first side
     t_rev = state["t_rev"]
     first = second = float("nan")
     if len(t_rev) >= 2:
@@ -301,7 +311,7 @@ def imo_criteria(kind: str, indices: Mapping[str, float]) -> dict[str, dict[str,
         add("tactical_diameter_L", indices["tactical_diameter_m"] / L, 5.0)
     elif kind == "zigzag":
         l_over_v = L / from_kn(indices["approach_speed_kn"])
-        rud, head = indices["rudder_deg"], indices["heading_deg"]
+        rud, head = abs(indices["rudder_deg"]), indices["heading_deg"]  # either side first
         if rud == 10 and head == 10:
             add("initial_turning_distance_L", indices["initial_turning_distance_L"], 2.5)
             add("first_overshoot_deg", indices["first_overshoot_deg"],
