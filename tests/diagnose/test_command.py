@@ -4,7 +4,6 @@ run end to end on runs sailed in a known wind."""
 
 from __future__ import annotations
 
-import csv
 import json
 import warnings
 from pathlib import Path
@@ -13,30 +12,19 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from tests.conftest import error_line
 from trafficsim import cli, effects
 from trafficsim.diagnose import command, selftest
 from trafficsim.errors import InputError, ShipLibraryError
 from trafficsim.identify.parameters import DEFAULT_FIT
+from trafficsim.io.results import write_csv
 from trafficsim.io.trialdata import from_arrays
 from trafficsim.ships.library import load_ship
 
 
 def _write_csv(path: Path, columns: dict) -> Path:
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(list(columns))
-        for row in zip(*columns.values(), strict=True):
-            w.writerow([repr(float(x)) for x in row])
+    write_csv(path, columns, fmt="%.17g")  # (every digit: the file reads back exactly)
     return path
-
-
-def _error_line(capsys, argv: list) -> str:
-    assert cli.main([str(a) for a in argv]) == 2
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in err, err
-    assert lines[0].startswith("trafficsim: error: ")
-    return lines[0]
 
 
 def test_load_base() -> None:
@@ -209,11 +197,11 @@ def test_self_test_writes_its_result_and_reports_progress(tmp_path, monkeypatch,
      "--ship: unknown ship 'kvlc2'"),
 ])
 def test_cli_argument_errors(capsys, argv, expect) -> None:
-    assert expect in _error_line(capsys, argv)
+    assert expect in error_line(capsys, argv)
 
 
 def test_cli_missing_data_file(tmp_path, capsys) -> None:
-    line = _error_line(capsys, ["diagnose", "--ship", "kvlcc2", "--data", tmp_path / "none.csv",
+    line = error_line(capsys, ["diagnose", "--ship", "kvlcc2", "--data", tmp_path / "none.csv",
                                 "--out", tmp_path / "o"])
     assert "none.csv: trial data file not found (given with --data)" in line
     assert not (tmp_path / "o").exists()
@@ -234,7 +222,7 @@ def test_too_little_data_to_hold_out(tmp_path, capsys) -> None:
     path = _write_csv(tmp_path / "short.csv", {
         "t_s": t, "north_m": 7 * t, "east_m": 0.01 * t * t, "heading_deg": 0.1 * t,
         "rudder_deg": t * 0 + 10, "rpm": t * 0 + 60})
-    line = _error_line(capsys, ["diagnose", "--ship", "kvlcc2", "--data", path, "--out",
+    line = error_line(capsys, ["diagnose", "--ship", "kvlcc2", "--data", path, "--out",
                                 tmp_path / "o", "--horizon-s", "1000", "--effects", "current"])
     assert "--data: too little data to hold any window out" in line
 

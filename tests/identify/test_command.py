@@ -4,17 +4,18 @@ ship's coefficients."""
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.conftest import error_line
 from trafficsim import cli
 from trafficsim.errors import DataError, InputError
 from trafficsim.identify import command
 from trafficsim.identify.preprocess import Kinematics
+from trafficsim.io.results import write_csv
 from trafficsim.io.trialdata import from_arrays
 from trafficsim.ships import manoeuvres
 from trafficsim.ships.library import LIBRARY_DIR, load_ship
@@ -23,11 +24,7 @@ KNOT = 1852.0 / 3600.0
 
 
 def _write_csv(path: Path, columns: dict) -> Path:
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(list(columns))
-        for row in zip(*columns.values(), strict=True):
-            w.writerow([repr(float(x)) for x in row])
+    write_csv(path, columns, fmt="%.17g")  # (every digit: the file reads back exactly)
     return path
 
 
@@ -36,16 +33,6 @@ def _simple_run(path: Path, n: int = 60) -> Path:
     return _write_csv(path, {"t_s": t, "north_m": 7 * t, "east_m": 0.01 * t * t,
                              "heading_deg": 0.1 * t, "rudder_deg": t * 0 + 10,
                              "rpm": t * 0 + 80})
-
-
-def _error_line(capsys, argv: list) -> str:
-    """Run the CLI in-process: exit code 2 and exactly one line on stderr."""
-    assert cli.main([str(a) for a in argv]) == 2
-    err = capsys.readouterr().err
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and "Traceback" not in err, err
-    assert lines[0].startswith("trafficsim: error: ")
-    return lines[0]
 
 
 def test_expand_paths(tmp_path: Path) -> None:
@@ -198,7 +185,7 @@ def _bad_time_csv(tmp_path: Path, t: list[float]) -> Path:
 def test_duplicate_or_unsorted_time_stamps(tmp_path, capsys, t, expect) -> None:
     """A repeated or backward time stamp: the file, its line (header = line 1) and the key."""
     path = _bad_time_csv(tmp_path, t)
-    line = _error_line(capsys, ["identify", "--model", "nomoto", "--base", "cargo", "--data",
+    line = error_line(capsys, ["identify", "--model", "nomoto", "--base", "cargo", "--data",
                                 path, "--out", tmp_path / "o"])
     assert line.endswith(f"{path}{expect}")
 
@@ -240,7 +227,7 @@ def test_bad_input_is_one_located_line(tmp_path, capsys, make, extra, expect) ->
             tmp_path / "o", *extra]
     if "--base" in extra:
         argv[3:5] = []
-    line = _error_line(capsys, argv)
+    line = error_line(capsys, argv)
     assert expect in line
     assert not (tmp_path / "o").exists()
 
@@ -322,6 +309,6 @@ def test_an_output_path_that_is_a_file(cargo_zigzag, tmp_path, capsys) -> None:
     data, base = cargo_zigzag
     blocker = tmp_path / "o"
     blocker.write_text("not a folder")
-    line = _error_line(capsys, ["identify", "--model", "nomoto", "--base", base, "--data",
+    line = error_line(capsys, ["identify", "--model", "nomoto", "--base", base, "--data",
                                 data, "--out", blocker, "--fit", "K_prime", "--max-nfev", "3"])
     assert str(blocker) in line and "File exists" in line
