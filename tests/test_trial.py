@@ -114,6 +114,22 @@ def test_crash_stop_trial_ends_dead_in_the_water(tmp_path):
     assert (stored["ship"], stored["manoeuvre"]) == ("cargo", "crash-stop")
 
 
+def test_port_zigzag_trial_puts_the_first_rudder_to_port(tmp_path):
+    """``--port`` on a zig-zag: the first rudder order is to port (negative), the log mirrors
+    the starboard-first trial, and the indices and IMO verdicts are those of that trial."""
+    stbd, crit_s = _trial(tmp_path / "s", "container", "zigzag")
+    port, crit_p = _trial(tmp_path / "p", "container", "zigzag", port=True)
+    _, col_s = _read_csv(tmp_path / "s" / "trial.csv")
+    _, col_p = _read_csv(tmp_path / "p" / "trial.csv")
+    first = np.flatnonzero(col_p["rudder_deg"] != 0.0)[0]
+    assert col_p["rudder_deg"][first] < 0.0
+    np.testing.assert_allclose(col_p["rudder_deg"], -col_s["rudder_deg"], atol=1e-9)
+    assert port["rudder_deg"] == -10.0
+    for key in ("initial_turning_time_s", "first_overshoot_deg", "second_overshoot_deg"):
+        assert port[key] == pytest.approx(stbd[key], rel=1e-6)
+    assert {k: v["pass"] for k, v in crit_p.items()} == {k: v["pass"] for k, v in crit_s.items()}
+
+
 # --- checks under their flags ----------------------------------------------------------------
 
 

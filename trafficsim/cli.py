@@ -101,7 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="rudder angle (turning: 35, zigzag: 10 by default)")
     trial.add_argument("--heading-deg", type=_positive(float), default=None,
                        help="zig-zag heading change (default: equal to the rudder angle)")
-    trial.add_argument("--port", action="store_true", help="turn to port (turning circle)")
+    trial.add_argument("--port", action="store_true",
+                       help="turn to port (turning circle) or put the first rudder to port "
+                            "(zig-zag)")
     trial.add_argument("--speed-kn", type=_positive(float), default=None,
                        help="approach speed (default: the ship's service speed)")
     trial.add_argument("--dt-s", type=_positive(float), default=None,
@@ -374,8 +376,7 @@ def _cmd_trial(args: argparse.Namespace) -> int:
                "to --manoeuvre turning or zigzag")
     _only_with("--heading-deg", args.heading_deg is not None, m == "zigzag",
                "to --manoeuvre zigzag")
-    _only_with("--port", args.port, m == "turning", "to --manoeuvre turning (a zig-zag starts "
-               "to starboard)")
+    _only_with("--port", args.port, m != "crash-stop", "to --manoeuvre turning or zigzag")
     for flag, value in (("--sp", args.sp), ("--seed", args.seed)):
         _only_with(flag, value is not None, args.sensors, "with --sensors")
     indices, criteria = run_trial(args.ship, m, args.rudder_deg, args.heading_deg, args.port,

@@ -47,7 +47,8 @@ def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: 
                                                        speed_kn, dt_s)
         elif manoeuvre == "zigzag":
             rudder = rudder_deg if rudder_deg is not None else 10.0
-            track, indices = manoeuvres.zigzag(spec, rudder, heading_deg, speed_kn, dt_s)
+            track, indices = manoeuvres.zigzag(spec, -rudder if port else rudder, heading_deg,
+                                               speed_kn, dt_s)
         else:
             track, indices = manoeuvres.crash_stop(spec, speed_kn, dt_s)
     except InputError as err:
