@@ -92,3 +92,62 @@ def test_same_draws_give_same_readings_and_ships_are_independent():
     a = go([0, 1, 2])
     np.testing.assert_array_equal(a, go([0, 1, 2]))
     np.testing.assert_array_equal(go([1, 0, 2]), a[:, :, [1, 0, 2]])
+
+
+def test_quantise_is_nearest_multiple_idempotent_and_odd():
+    """Nearest multiple of q (error at most q/2), a fixed point of itself, the same for -x as
+    for x, and untouched where the resolution is 0."""
+    rng = np.random.default_rng(7)
+    v = rng.uniform(-40.0, 40.0, 5000)
+    q = rng.choice([0.0, 0.1, 0.5, 2.0], 5000)
+    out = actuators.quantise(v, q)
+    on = q > 0.0
+    np.testing.assert_array_equal(out[~on], v[~on])
+    assert np.all(np.abs(out[on] - v[on]) <= q[on] / 2.0 + 1e-12)
+    k = out[on] / q[on]
+    np.testing.assert_allclose(k, np.round(k), atol=1e-9)
+    np.testing.assert_array_equal(actuators.quantise(out, q), out)
+    np.testing.assert_array_equal(actuators.quantise(-v, q), -out)
+    # by hand: 0.74 -> 0.5 and 0.76 -> 1.0 at q = 0.5; -1.26 -> -1.5
+    np.testing.assert_allclose(actuators.quantise(np.array([0.74, 0.76, -1.26]),
+                                                  np.full(3, 0.5)), [0.5, 1.0, -1.5])
+
+
+def test_vectorised_measure_matches_a_scalar_loop():
+    """Readings in SI: degrees and rpm converted (1 rpm = 1/60 rev/s), noise and bias added,
+    then rounded to the resolution; compared with a per-ship loop."""
+    rng = np.random.default_rng(8)
+    n = 40
+    configs = [{"rudder_sigma_deg": float(rng.uniform(0, 2)),
+                "rudder_bias_deg": float(rng.normal(0, 1)),
+                "rudder_resolution_deg": float(rng.choice([0.0, 0.1, 1.0])),
+                "shaft_sigma_rpm": float(rng.uniform(0, 5)),
+                "shaft_bias_rpm": float(rng.normal(0, 2)),
+                "shaft_resolution_rpm": float(rng.choice([0.0, 1.0, 5.0]))} for _ in range(n)]
+    params = actuators.build(configs)
+    x = truth(n, rudder=rng.uniform(-0.6, 0.6, n), rps=rng.uniform(-3, 3, n))
+    z = rng.standard_normal((n, ACTUATOR_NORMAL_DIMS))
+    got = actuators.measure(params, x, z)
+    for i, c in enumerate(configs):
+        rudder = x[6, i] + math.radians(c["rudder_bias_deg"] + c["rudder_sigma_deg"] * z[i, 0])
+        rps = x[7, i] + (c["shaft_bias_rpm"] + c["shaft_sigma_rpm"] * z[i, 1]) / 60.0
+        qr, qs = math.radians(c["rudder_resolution_deg"]), c["shaft_resolution_rpm"] / 60.0
+        if qr:
+            rudder = round(rudder / qr) * qr
+        if qs:
+            rps = round(rps / qs) * qs
+        assert got.rudder_rad[i] == pytest.approx(rudder, rel=1e-12, abs=1e-14)
+        assert got.rps[i] == pytest.approx(rps, rel=1e-12, abs=1e-14)
+
+
+@pytest.mark.parametrize(("cfg", "key"), [
+    ({"rudder_sigma_deg": -1.0}, "actuator_sensors[1].rudder_sigma_deg"),
+    ({"rudder_resolution_deg": math.inf}, "actuator_sensors[1].rudder_resolution_deg"),
+    ({"shaft_bias_rpm": "fast"}, "actuator_sensors[1].shaft_bias_rpm"),
+    ({"shaft_sigma_rpm": math.nan}, "actuator_sensors[1].shaft_sigma_rpm"),
+    ({"shaft_resolution_rps": 1.0}, "actuator_sensors[1]"),
+])
+def test_config_errors_name_the_ship_and_key(cfg, key):
+    with pytest.raises(InputError) as err:
+        actuators.build([{}, cfg])
+    assert err.value.key == key

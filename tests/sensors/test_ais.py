@@ -371,3 +371,154 @@ def test_reception_range_boundary_matches_array_formulas() -> None:
     _, rep = ais.receive(params, state, 0.0, obs, tgt, x, rx)
     np.testing.assert_array_equal(rep.valid, valid)
     assert 0 < valid.sum() < n_pairs
+
+
+def _itu_table(kn: float, turning: bool, anchored: bool) -> float:
+    """ITU-R M.1371-5 annex 1 table 1 (class A), one ship, written row by row."""
+    if anchored:
+        return 180.0 if kn <= 3.0 else 10.0
+    if kn <= 14.0:
+        return 10.0 / 3.0 if turning else 10.0
+    if kn <= 23.0:
+        return 2.0 if turning else 6.0
+    return 2.0
+
+
+def test_reporting_interval_matches_the_table_row_by_row() -> None:
+    """Random speeds (plus the bin edges and a hair either side) in knots, turning and
+    anchored flags: the vectorised intervals equal a row-by-row reading of the table."""
+    rng = np.random.default_rng(30)
+    edges = np.array([0.0, 3.0, 14.0, 23.0])
+    kn = np.concatenate([rng.uniform(0.0, 40.0, 3000), edges, edges + 1e-9, edges - 1e-9])
+    kn = np.abs(kn)
+    turning = rng.random(kn.size) < 0.5
+    anchored = rng.random(kn.size) < 0.3
+    got = ais.reporting_interval_s(kn * KN, turning, anchored)
+    want = [_itu_table(k, t, a) for k, t, a in zip(kn, turning, anchored, strict=True)]
+    np.testing.assert_allclose(got, want, rtol=1e-15)
+    # a scalar anchored flag applies to every ship
+    np.testing.assert_array_equal(ais.reporting_interval_s(np.array([1.0, 10.0]) * KN,
+                                                           np.array([True, False]), True),
+                                  [180.0, 10.0])
+
+
+def test_quantisers_round_to_the_nearest_step_and_are_idempotent() -> None:
+    rng = np.random.default_rng(31)
+    north, east = rng.uniform(-3e4, 3e4, (2, 2000))
+    step_e = 0.1852 * math.cos(math.radians(48.0))
+    qn, qe = ais.quantise_position(north, east, step_e)
+    assert np.abs(qn - north).max() <= 0.1852 / 2 + 1e-9
+    assert np.abs(qe - east).max() <= step_e / 2 + 1e-9
+    np.testing.assert_array_equal(ais.quantise_position(qn, qe, step_e), (qn, qe))
+    sog = rng.uniform(0.0, 50.0, 2000)
+    qs = ais.quantise_sog(sog)
+    assert np.abs(qs - sog).max() <= 0.05 * KN + 1e-12
+    np.testing.assert_array_equal(ais.quantise_sog(qs), qs)
+    # angles from several turns either way land in [0, 2 pi), within half a step (mod 2 pi)
+    ang = rng.uniform(-20.0, 20.0, 2000)
+    for step in (ais.COG_STEP_RAD, ais.HEADING_STEP_RAD):
+        qa = ais.quantise_angle(ang, step)
+        assert np.all((qa >= 0.0) & (qa < 2 * math.pi - step / 2))
+        diff = np.mod(qa - ang + math.pi, 2 * math.pi) - math.pi
+        assert np.abs(diff).max() <= step / 2 + 1e-9
+        np.testing.assert_allclose(ais.quantise_angle(qa, step), qa, atol=1e-12)
+    # by hand: 359.6 deg heading is 0 (360 wraps); -0.4 deg is 0; 0.5 + 1e-6 deg rounds to 1
+    np.testing.assert_allclose(
+        ais.quantise_angle(np.radians([359.6, -0.4, 0.500001]), ais.HEADING_STEP_RAD),
+        np.radians([0.0, 0.0, 1.0]), atol=1e-12)
+
+
+def test_first_report_time_and_disabled_ships() -> None:
+    """The first report goes out on the first step at or after ``first_report_s``; a ship
+    without transponder neither sends nor receives, and nothing is drawn for it."""
+    params = ais.build([{"first_report_s": 2.5, "latency_s": 0.0},
+                        {"enabled": False, "latency_s": 0.0}, {"latency_s": 0.0}])
+    x, current, _ = _ships([10.0, 10.0, 10.0])
+    x[NORTH] = [0.0, 500.0, 1000.0]
+    obs, tgt = directed_pairs(np.array([0, 0, 1]), np.array([1, 2, 2]))
+    state = ais.init(params, obs.shape[0])
+    tx, rx = independent_streams(3, 2), independent_streams(obs.shape[0], 3)
+    first = {}
+    heard = np.zeros(obs.shape[0], dtype=int)
+    for k in range(25):
+        tx_before = tx.copy()
+        state, sent = ais.transmit(params, state, 0.5 * k, x, current, tx)
+        np.testing.assert_array_equal(tx[1], tx_before[1])
+        for i in np.flatnonzero(sent):
+            first.setdefault(int(i), 0.5 * k)
+        state, rep = ais.receive(params, state, 0.5 * k, obs, tgt, x, rx)
+        heard += rep.valid
+    assert first == {0: 2.5, 2: 0.0}
+    for k, (i, j) in enumerate(zip(obs, tgt, strict=True)):
+        assert (heard[k] > 0) == (i != 1 and j != 1), (i, j)
+
+
+def test_every_receiver_hears_the_same_report() -> None:
+    """One noisy report per transmission, heard alike by every receiver (module docstring)."""
+    n = 6
+    params = ais.build([{"latency_s": 0.0}] * n)
+    x, current, _ = _ships([12.0] * n, headings=np.linspace(0.0, 5.0, n))
+    x[NORTH] = np.arange(n) * 300.0
+    obs = np.arange(1, n)
+    tgt = np.zeros(n - 1, dtype=int)
+    state, rep = ais.step(params, ais.init(params, n - 1), 0.0, obs, tgt, x, current,
+                          independent_streams(n, 4), independent_streams(n - 1, 5))
+    assert rep.valid.all()
+    for field in (rep.north_m, rep.east_m, rep.sog_mps, rep.cog_rad, rep.heading_rad):
+        assert np.unique(field).size == 1
+    assert rep.north_m[0] == state.buf[0, state.head[0], 0]
+
+
+@pytest.mark.parametrize(("latency", "dt"), [
+    *[(lat, dt) for lat in (10.0, 13.0) for dt in (0.5, 1.0, 1.5, 1.9)],
+    (14.0, 0.5), (14.0, 1.0), (14.0, 1.5), (14.0, 1.9), (14.0, 2.0), (14.0, 5.0),
+])
+def test_latency_delivers_like_an_unbounded_history(latency: float, dt: float) -> None:
+    """A 30 kn target reports every 2 s. At every step the receiver must get the newest report
+    stamped after the last one it got, among those with ``stamp + latency <= t`` (module
+    docstring), as an unbounded list of sent reports says; ``build`` accepts latencies up to
+    ``MAX_LATENCY_S`` (14 s) and the docstring calls them exact at the highest rate."""
+    params = ais.build([{"latency_s": latency}] * 2)
+    x, current, _ = _ships([0.0, 30.0])
+    x[NORTH, 1] = 200.0
+    obs, tgt = np.array([0]), np.array([1])
+    state = ais.init(params, 1)
+    tx, rx = independent_streams(2, 6), independent_streams(1, 7)
+    stamps: list[float] = []
+    last = -math.inf
+    lost = []
+    for k in range(round(80.0 / dt)):
+        t = k * dt
+        state, sent = ais.transmit(params, state, t, x, current, tx)
+        if sent[1]:
+            stamps.append(t)
+        state, rep = ais.receive(params, state, t, obs, tgt, x, rx)
+        arrived = [s for s in stamps if s > last and s + latency <= t + 1e-9]
+        want = max(arrived) if arrived else None
+        if want is not None:
+            last = want
+        got = float(rep.stamp_s[0]) if rep.valid[0] else None
+        if got != want:
+            lost.append((t, want, got))
+    assert len(stamps) >= min(39, round(80.0 / dt) - 1)  # every 2 s, or every step if longer
+    assert lost == []
+
+
+@pytest.mark.parametrize(("cfg", "key"), [
+    ({"sigma_position_m": -1.0}, "ais[1].sigma_position_m"),
+    ({"sigma_velocity_mps": math.nan}, "ais[1].sigma_velocity_mps"),
+    ({"sigma_heading_deg": "big"}, "ais[1].sigma_heading_deg"),
+    ({"latency_s": -0.5}, "ais[1].latency_s"),
+    ({"first_report_s": math.inf}, "ais[1].first_report_s"),
+    ({"max_range_nm": -1.0}, "ais[1].max_range_nm"),
+    ({"turn_rate_degps": -0.1}, "ais[1].turn_rate_degps"),
+    ({"enabled": 1}, "ais[1].enabled"),
+    ({"latency_s": 14.5}, "ais.latency_s"),
+    ({"p_receive": 1.5}, "ais.p_receive"),
+    ({"ref_latitude_deg": -90.0}, "ais.ref_latitude_deg"),
+    ({"mmsi": 123}, "ais[1]"),
+])
+def test_config_errors_name_the_key(cfg, key) -> None:
+    with pytest.raises(InputError) as err:
+        ais.build([{}, cfg])
+    assert err.value.key == key

@@ -125,3 +125,112 @@ def test_same_draws_give_same_readings_and_ships_are_independent():
     a = go([0, 1, 2])
     np.testing.assert_array_equal(a, go([0, 1, 2]))
     np.testing.assert_array_equal(go([1, 2, 0]), a[:, [1, 2, 0]])
+
+
+def test_vectorised_step_matches_a_scalar_compass_loop():
+    """Mixed gyros and magnetic compasses with bias, drift, deviation and wave yaw, 40 steps:
+    the array code equals a per-ship loop of the docstring's formula."""
+    rng = np.random.default_rng(11)
+    n, dt = 10, 0.7
+    configs = []
+    for i in range(n):
+        cfg = {"kind": "magnetic" if i % 2 else "gyro", "bias_deg": float(rng.normal(0, 2)),
+               "drift_sigma_deg": float(rng.choice([0.0, 1.5])), "drift_tau_s": 90.0}
+        if i % 3:
+            cfg["sigma_deg"] = float(rng.uniform(0.0, 3.0))
+        if i % 2 and i % 5:
+            cfg["deviation_deg"] = [float(v) for v in rng.normal(0, 3, 5)]
+        configs.append(cfg)
+    params = compass.build(configs, dt)
+    z0 = rng.standard_normal((n, COMPASS_NORMAL_DIMS))
+    state = compass.init(params, z0)
+    drift = [configs[i]["drift_sigma_deg"] * DEG * z0[i, 1] for i in range(n)]
+    psi = rng.uniform(-7.0, 7.0, n)
+    a = math.exp(-dt / 90.0)
+    for _ in range(40):
+        psi = psi + rng.normal(0.0, 0.2, n)
+        z = rng.standard_normal((n, COMPASS_NORMAL_DIMS))
+        wave = rng.normal(0.0, 0.01, n)
+        state, reading = compass.step(params, state, psi, z, wave)
+        for i, cfg in enumerate(configs):
+            sd = cfg.get("sigma_deg", 1.0 if cfg["kind"] == "gyro"
+                         else math.degrees(math.sqrt(0.0054)))
+            drift[i] = a * drift[i] + cfg["drift_sigma_deg"] * DEG * math.sqrt(1 - a * a) * z[i, 1]
+            h = psi[i] + wave[i]
+            A, B, C, D, E = np.radians(cfg.get("deviation_deg", [0.0] * 5))
+            dev = (A + B * math.sin(h) + C * math.cos(h) + D * math.sin(2 * h)
+                   + E * math.cos(2 * h))
+            want = (h + cfg["bias_deg"] * DEG + drift[i] + sd * DEG * z[i, 0] + dev) % (2 * math.pi)
+            diff = (reading[i] - want + math.pi) % (2 * math.pi) - math.pi
+            assert abs(diff) < 1e-12, (i, reading[i], want)
+        assert np.all((reading >= 0.0) & (reading < 2 * math.pi))
+
+
+def test_deviation_coefficients_recovered_by_least_squares():
+    """Swinging the compass through all headings and fitting A + B sin + C cos + D sin 2 +
+    E cos 2 to its errors returns the configured coefficients (seed 002 fits its fluxgate
+    compass the same way, sec 3.4)."""
+    coef = np.array([0.8, -4.0, 2.5, 1.2, -0.6])
+    params = compass.build([{"kind": "magnetic", "sigma_deg": 0.0, "deviation_deg":
+                             coef.tolist()}], 1.0)
+    psi = np.radians(np.arange(0.0, 360.0, 7.5))
+    errors = []
+    for p in psi:
+        state = compass.init(params, np.zeros((1, 2)))
+        _, r = compass.step(params, state, np.array([p]), np.zeros((1, 2)))
+        errors.append(wrap_pi(r - p)[0])
+    basis = np.stack([np.ones_like(psi), np.sin(psi), np.cos(psi), np.sin(2 * psi),
+                      np.cos(2 * psi)], axis=1)
+    fit, *_ = np.linalg.lstsq(basis, np.degrees(errors), rcond=None)
+    np.testing.assert_allclose(fit, coef, atol=1e-9)
+    # the deviation function itself is periodic in heading
+    one = compass.deviation(params, np.array([0.4]))
+    np.testing.assert_allclose(compass.deviation(params, np.array([0.4 + 2 * math.pi])), one,
+                               atol=1e-14)
+    np.testing.assert_allclose(compass.deviation(params, np.array([0.4 - 6 * math.pi])), one,
+                               atol=1e-13)
+
+
+def test_reading_near_north_wraps_both_ways():
+    """True heading just west of north with a positive error reads just east of north, and a
+    heading just east of north with a negative error reads just below 2 pi."""
+    cfg = [{"sigma_deg": 0.0, "bias_deg": 0.5}, {"sigma_deg": 0.0, "bias_deg": -0.5}]
+    params = compass.build(cfg, 1.0)
+    state = compass.init(params, np.zeros((2, 2)))
+    psi = np.array([2 * math.pi - 0.2 * DEG, 0.2 * DEG])
+    _, r = compass.step(params, state, psi, np.zeros((2, 2)))
+    np.testing.assert_allclose(r, [0.3 * DEG, 2 * math.pi - 0.3 * DEG], atol=1e-13)
+
+
+def test_drift_is_white_when_the_step_is_long():
+    """dt >> tau: the drift loses its memory (a = exp(-dt/tau) -> 0) and keeps its sd."""
+    cfg = {"sigma_deg": 0.0, "drift_sigma_deg": 2.0, "drift_tau_s": 1.0}
+    _, _, err = run([cfg] * N, random_headings(N, 7), steps=2, dt=200.0, seed=12)
+    assert_std(err[1], 2.0 * DEG)
+    assert abs(np.corrcoef(err[0], err[1])[0, 1]) < Z / math.sqrt(N)
+
+
+def test_defaults_by_kind_per_ship():
+    params = compass.build([{}, {"kind": "magnetic"}, {"kind": "magnetic", "sigma_deg": 0.5}],
+                           1.0)
+    np.testing.assert_allclose(np.degrees(params.sigma_rad),
+                               [1.0, math.degrees(math.sqrt(0.0054)), 0.5])
+    assert params.magnetic.tolist() == [False, True, True]
+    assert not params.has_deviation
+
+
+@pytest.mark.parametrize(("cfg", "key"), [
+    ({"sigma_deg": -0.1}, "compass[1].sigma_deg"),
+    ({"drift_tau_s": 0.0}, "compass[1].drift_tau_s"),
+    ({"drift_sigma_deg": math.inf}, "compass[1].drift_sigma_deg"),
+    ({"bias_deg": "east"}, "compass[1].bias_deg"),
+    ({"kind": "magnetic", "deviation_deg": [1, 2, 3, 4, 5, 6]}, "compass[1].deviation_deg"),
+    ({"kind": "magnetic", "deviation_deg": [1, 2, "x", 4, 5]}, "compass[1].deviation_deg"),
+    ({"kind": "magnetic", "deviation_deg": [0, 0, math.nan, 0, 0]}, "compass[1].deviation_deg"),
+    ({"kind": "gyro", "deviation_deg": [0, 0, 0, 0, 0]}, "compass[1].deviation_deg"),
+    ({"kind": "Gyro"}, "compass[1].kind"),
+])
+def test_config_errors_name_the_ship_and_key(cfg, key):
+    with pytest.raises(InputError) as err:
+        compass.build([{}, cfg], 1.0)
+    assert err.value.key == key

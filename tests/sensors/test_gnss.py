@@ -8,6 +8,7 @@ from trafficsim.errors import InputError
 from trafficsim.noise import NoiseBank
 from trafficsim.sensors import gnss
 from trafficsim.sensors.gnss import GNSS_NORMAL_DIMS, GNSS_UNIFORM_DIMS
+from trafficsim.ships.base import EAST, NORTH, PSI
 
 N = 20_000
 
@@ -230,3 +231,173 @@ def test_same_draws_give_same_fixes_and_ships_are_independent():
     np.testing.assert_array_equal(a, b)
     c = go([2, 0, 1])
     np.testing.assert_array_equal(c, a[:, :, [2, 0, 1]])
+
+
+def _scalar_step(cfg, dt, k, up, gm, last, x_col, z, u, wave_ne=None, wave_psi=0.0):
+    """One receiver, one step, from the module docstring with plain floats: returns the new
+    (up, gm, last) and the fix (north, east, valid, gross)."""
+    sigma = cfg.get("sigma_m", cfg.get("drms_m", 2.0 * math.sqrt(2.0)) / math.sqrt(2.0))
+    every = max(1, round(1.0 / (cfg.get("rate_hz", 1.0) * dt)))
+    p_start = 1.0 - math.exp(-cfg.get("dropout_rate_per_h", 0.0) / 3600.0 * dt)
+    p_end = min(1.0, dt / cfg.get("dropout_mean_s", 30.0))
+    a = math.exp(-dt / cfg.get("gm_tau_s", 300.0))
+    q = cfg.get("gm_sigma_m", 0.0) * math.sqrt(1.0 - a * a)
+    up = u[2] >= p_start if up else u[2] < p_end
+    valid = k % every == 0 and up
+    gm = [a * gm[0] + q * z[2], a * gm[1] + q * z[3]]
+    gross = valid and u[0] < cfg.get("gross_prob", 0.0)
+    jump = cfg.get("gross_size_m", 50.0) if gross else 0.0
+    psi = x_col[2] + wave_psi
+    ax, ay = cfg.get("antenna_x_m", 0.0), cfg.get("antenna_y_m", 0.0)
+    north = x_col[0] + ax * math.cos(psi) - ay * math.sin(psi)
+    east = x_col[1] + ax * math.sin(psi) + ay * math.cos(psi)
+    if wave_ne is not None:
+        north, east = north + wave_ne[0], east + wave_ne[1]
+    north += sigma * z[0] + gm[0] + jump * math.cos(2 * math.pi * u[1])
+    east += sigma * z[1] + gm[1] + jump * math.sin(2 * math.pi * u[1])
+    if valid:
+        last = [north, east]
+    return up, gm, last, (last[0], last[1], valid, gross)
+
+
+@pytest.mark.parametrize("dt", [0.2, 1.0, 3.0])
+def test_vectorised_step_matches_a_scalar_receiver_loop(dt):
+    """Twelve receivers with every feature switched on in different mixes, 60 steps with a
+    moving truth and wave motion: the array code equals a per-ship loop of the docstring's
+    model (lever arm turned by wave yaw, wave displacement, schedule, outages, gross errors,
+    Gauss-Markov error)."""
+    rng = np.random.default_rng(5)
+    n = 12
+    configs = []
+    for i in range(n):
+        cfg = {"rate_hz": float(rng.choice([0.25, 1.0, 5.0])),
+               "gm_sigma_m": float(rng.choice([0.0, 4.0])), "gm_tau_s": 40.0,
+               "gross_prob": float(rng.choice([0.0, 0.3])), "gross_size_m": 25.0,
+               "dropout_rate_per_h": float(rng.choice([0.0, 400.0])), "dropout_mean_s": 5.0}
+        cfg["drms_m" if i % 3 == 0 else "sigma_m"] = float(rng.uniform(0.5, 9.0))
+        if i % 2:
+            cfg["antenna_x_m"], cfg["antenna_y_m"] = (float(v) for v in rng.normal(0, 20, 2))
+        configs.append(cfg)
+    params = gnss.build(configs, dt)
+    z0 = rng.standard_normal((n, GNSS_NORMAL_DIMS))
+    state = gnss.init(params, z0)
+    gm = [list(configs[i]["gm_sigma_m"] * z0[i, 2:4]) for i in range(n)]
+    up, last = [True] * n, [[math.nan, math.nan] for _ in range(n)]
+    x = truth(n, north=rng.uniform(-1e3, 1e3, n), east=rng.uniform(-1e3, 1e3, n),
+              psi=rng.uniform(-1.0, 7.0, n))
+    for k in range(60):
+        x[PSI] += 0.05
+        x[NORTH] += 3.0
+        z = rng.standard_normal((n, GNSS_NORMAL_DIMS))
+        u = rng.random((n, GNSS_UNIFORM_DIMS))
+        wave_ne = rng.normal(0.0, 1.0, (2, n))
+        wave_psi = rng.normal(0.0, 0.02, n)
+        state, fix = gnss.step(params, state, x, z, u, wave_ne, wave_psi)
+        for i in range(n):
+            up[i], gm[i], last[i], want = _scalar_step(configs[i], dt, k, up[i], gm[i], last[i],
+                                                       x[:, i], z[i], u[i], wave_ne[:, i],
+                                                       wave_psi[i])
+            got = (fix.north_m[i], fix.east_m[i], fix.valid[i], fix.gross[i])
+            assert got[2:] == want[2:], (k, i)
+            np.testing.assert_allclose(got[:2], want[:2], rtol=1e-12, atol=1e-9)
+
+
+def test_gross_errors_are_per_fix_not_per_step():
+    """With a fix every 4th step, gross errors occur on a fraction ``gross_prob`` of the fixes
+    and never on a step without a fix."""
+    cfg = {"sigma_m": 0.0, "gross_prob": 0.2, "rate_hz": 0.25}
+    _, _, _, valid, gross = run([cfg] * 5000, truth(5000), steps=8)
+    assert not gross[~valid].any()
+    assert valid.sum() == 2 * 5000
+    assert_rate(int(gross.sum()), int(valid.sum()), 0.2)
+
+
+def test_outages_hide_scheduled_fixes_only_and_short_mean_lasts_one_step():
+    """``dropout_mean_s`` below the step: ``p_end = 1``, every outage is one step long. With a
+    fix every 2nd step, the scheduled fixes are missing at the stationary unavailable
+    fraction ``p_start / (p_start + p_end)``."""
+    dt, rate_h = 1.0, 720.0
+    cfg = {"sigma_m": 0.0, "dropout_rate_per_h": rate_h, "dropout_mean_s": 0.5, "rate_hz": 0.5}
+    params = gnss.build([cfg] * N, dt)
+    assert params.p_end[0] == 1.0 and params.every[0] == 2
+    rng = np.random.default_rng(8)
+    state = gnss.init(params, rng.standard_normal((N, 4)))
+    ups = []
+    for _ in range(6):
+        state, _ = gnss.step(params, state, truth(N), rng.standard_normal((N, 4)),
+                             rng.random((N, 3)))
+        ups.append(state.up.copy())
+    ups = np.array(ups)
+    assert not np.any(~ups[:-1] & ~ups[1:])  # never two steps down in a row
+    p_start = 1.0 - math.exp(-rate_h / 3600.0)
+    _, _, _, valid, _ = run([cfg] * N, truth(N), steps=6, dt=dt)
+    assert not valid[1::2].any()
+    missing = int((~valid[2::2]).sum())  # scheduled steps 2, 4
+    assert_rate(missing, valid[2::2].size, p_start / (p_start + 1.0))
+
+
+def test_gauss_markov_error_is_white_when_the_step_is_long():
+    """dt >> tau: ``a = exp(-dt/tau)`` vanishes, the error is white with the stationary sd."""
+    cfg = {"sigma_m": 0.0, "gm_sigma_m": 3.0, "gm_tau_s": 1.0}
+    _, en, _, _, _ = run([cfg] * N, truth(N), steps=2, dt=100.0, seed=9)
+    assert_std(en[1], 3.0)
+    assert abs(np.corrcoef(en[0], en[1])[0, 1]) < 5.0 / math.sqrt(N)
+
+
+@pytest.mark.parametrize(("cfg", "key", "match"), [
+    ({"rate_hz": -1.0}, "gnss[1].rate_hz", "> 0"),
+    ({"drms_m": -3.0}, "gnss[1].drms_m", ">= 0"),
+    ({"gm_tau_s": 0.0}, "gnss[1].gm_tau_s", "> 0"),
+    ({"dropout_mean_s": 0.0}, "gnss[1].dropout_mean_s", "> 0"),
+    ({"dropout_rate_per_h": -1.0}, "gnss[1].dropout_rate_per_h", ">= 0"),
+    ({"gross_size_m": math.nan}, "gnss[1].gross_size_m", "finite"),
+    ({"antenna_x_m": "fore"}, "gnss[1].antenna_x_m", "number"),
+    ({"sigma_m": 1.0, "drms_m": 1.0}, "gnss[1]", "not both"),
+    ({"antenna_z_m": 1.0}, "gnss[1]", "unknown"),
+])
+def test_config_errors_name_the_ship_and_key(cfg, key, match):
+    with pytest.raises(InputError, match=match) as err:
+        gnss.build([{}, cfg], 1.0)
+    assert err.value.key == key
+
+
+@pytest.mark.parametrize("dt", [0.0, -1.0, math.nan])
+def test_time_step_must_be_positive(dt):
+    with pytest.raises(InputError, match="dt"):
+        gnss.build([{}], dt)
+
+
+def test_reference_point_round_trip_and_heading_wrap():
+    """``to_reference_point`` undoes ``antenna_position`` at the true heading, and a heading
+    of psi + 2 pi gives the same antenna position as psi."""
+    rng = np.random.default_rng(3)
+    n = 200
+    cfgs = [{"antenna_x_m": float(a), "antenna_y_m": float(b)} for a, b in rng.normal(0, 40,
+                                                                                       (n, 2))]
+    params = gnss.build(cfgs, 1.0)
+    psi = rng.uniform(0.0, 2 * math.pi, n)
+    x = truth(n, north=rng.normal(0, 1e4, n), east=rng.normal(0, 1e4, n), psi=psi)
+    north, east = gnss.antenna_position(params, x)
+    np.testing.assert_allclose(np.hypot(north - x[NORTH], east - x[EAST]),
+                               np.hypot(params.antenna_x_m, params.antenna_y_m), rtol=1e-9)
+    pn, pe = gnss.to_reference_point(params, north, east, psi)
+    np.testing.assert_allclose(pn, x[NORTH], atol=1e-9)
+    np.testing.assert_allclose(pe, x[EAST], atol=1e-9)
+    x2 = x.copy()
+    x2[PSI] = psi - 2 * math.pi
+    n2, e2 = gnss.antenna_position(params, x2)
+    np.testing.assert_allclose(n2, north, atol=1e-9)
+    np.testing.assert_allclose(e2, east, atol=1e-9)
+
+
+def test_antenna_position_without_lever_arm_is_a_copy():
+    """No lever arm: the reference point itself, as a new array (the caller may add to it)."""
+    params = gnss.build([{}] * 3, 1.0)
+    x = truth(3, north=[1.0, 2.0, 3.0], east=[4.0, 5.0, 6.0], psi=[0.0, 1.0, 2.0])
+    north, east = gnss.antenna_position(params, x, np.array([0.3, 0.3, 0.3]))
+    np.testing.assert_array_equal(north, x[NORTH])
+    np.testing.assert_array_equal(east, x[EAST])
+    north += 100.0
+    east += 100.0
+    np.testing.assert_array_equal(x[NORTH], [1.0, 2.0, 3.0])
+    np.testing.assert_array_equal(x[EAST], [4.0, 5.0, 6.0])

@@ -297,3 +297,142 @@ def test_compiled_plots_match_array_formulas(own_uncertainty: bool) -> None:
         want = np.where(valid.reshape((-1,) + (1,) * (want.ndim - 1)), want, np.nan)
         np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-9)
     assert plots.t_s == 5.0
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_scan_steps_are_the_first_steps_at_or_after_each_scheduled_scan(seed: int) -> None:
+    """Steps no longer than the period: scans happen exactly on the first step at or after
+    ``scan_phase_s + k scan_period_s`` (k = 0, 1, ...), one per revolution; a disabled radar
+    never scans and keeps its schedule."""
+    rng = np.random.default_rng(seed)
+    period = float(rng.uniform(1.0, 4.0))
+    dt = float(rng.uniform(0.05, 1.0)) * period
+    phase = float(rng.uniform(-0.5, 3.0)) * period
+    params = radar.build([{"scan_period_s": period, "scan_phase_s": phase},
+                          {"scan_period_s": period, "scan_phase_s": phase, "enabled": False}])
+    state = radar.init(params)
+    steps = 400
+    got = []
+    for k in range(steps):
+        state, due = radar.scan_due(params, state, k * dt)
+        assert not due[1]
+        if due[0]:
+            got.append(k)
+    assert state.next_scan_s[1] == phase
+    want = sorted({max(0, math.ceil((phase + j * period - 1e-9) / dt)) for j in range(10_000)
+                   if phase + j * period <= (steps - 1) * dt + 1e-9})
+    assert got == want
+
+
+def test_steps_longer_than_the_period_scan_every_step() -> None:
+    params = radar.build([{"scan_period_s": 2.0}])
+    state = radar.init(params)
+    for k in range(30):
+        state, due = radar.scan_due(params, state, 5.0 * k)
+        assert due[0]
+        assert state.next_scan_s[0] == pytest.approx(5.0 * k + 2.0)
+
+
+def test_range_limits_are_inclusive_and_negative_ranges_are_dropped() -> None:
+    """A target exactly at ``min_range_m`` or ``max_range_nm`` is plotted; a plot whose noisy
+    range is not positive is not (target 50 m away, range sd 60 m: P(50 + 60 z > 0) =
+    Phi(5/6) = 0.798)."""
+    x = np.zeros((N_STATE, 4))
+    x[NORTH, 2], x[EAST, 3] = 40.0, 12.0 * NM
+    params = radar.build([{"p_detect": 1.0, "sigma_range_m": 0.0, "sigma_bearing_deg": 0.0}] * 4)
+    obs, tgt = np.array([0, 1]), np.array([2, 3])
+    plots = _measure(params, x, obs, tgt)
+    assert plots.valid.tolist() == [True, True]
+    np.testing.assert_allclose(plots.range_m, [40.0, 12.0 * NM])
+    np.testing.assert_allclose(plots.bearing_rad, [0.0, math.pi / 2], atol=1e-15)
+
+    n_pairs = 20000
+    x = np.zeros((N_STATE, 2 * n_pairs))
+    x[NORTH, n_pairs:] = 50.0
+    params = radar.build([{"p_detect": 1.0, "sigma_range_m": 60.0}] * (2 * n_pairs))
+    obs = np.arange(n_pairs)
+    plots = _measure(params, x, obs, obs + n_pairs, seed=9)
+    assert np.all(plots.range_m[plots.valid] > 0.0)
+    p = 0.5 * (1.0 + math.erf(50.0 / 60.0 / math.sqrt(2.0)))
+    assert plots.valid.mean() == pytest.approx(p, abs=5 * math.sqrt(p * (1 - p) / n_pairs))
+
+
+@pytest.mark.parametrize("p_detect", [0.0, 1.0])
+def test_detection_probability_zero_and_one(p_detect: float) -> None:
+    n_pairs = 2000
+    x, obs, tgt = _scene(n_pairs, seed=10)
+    params = radar.build([{"p_detect": p_detect}] * (2 * n_pairs))
+    valid = _measure(params, x, obs, tgt, seed=11).valid
+    assert valid.all() == valid.any() == bool(p_detect)
+
+
+def test_polar_noise_pulls_the_mean_plot_in_by_the_conversion_bias() -> None:
+    """Bearing noise sd s: ``E[cos(b + s z)] = cos(b) exp(-s^2/2)``, so the mean plot lies at
+    ``r exp(-s^2/2)`` along the line of sight (the bias the module docstring works out;
+    r = 5 km, s = 10 deg: 75.6 m short) with no mean cross-range error."""
+    n_pairs = 20000
+    r, s = 5000.0, math.radians(10.0)
+    rng = np.random.default_rng(12)
+    b = rng.uniform(0.0, 2 * math.pi, n_pairs)
+    x = np.zeros((N_STATE, 2 * n_pairs))
+    x[PSI, :n_pairs] = rng.uniform(0.0, 2 * math.pi, n_pairs)
+    x[NORTH, n_pairs:], x[EAST, n_pairs:] = r * np.cos(b), r * np.sin(b)
+    params = radar.build([{"p_detect": 1.0, "sigma_range_m": 0.0,
+                           "sigma_bearing_deg": 10.0}] * (2 * n_pairs))
+    obs = np.arange(n_pairs)
+    plots = _measure(params, x, obs, obs + n_pairs, seed=13)
+    along = plots.north_m * np.cos(b) + plots.east_m * np.sin(b)
+    cross = -plots.north_m * np.sin(b) + plots.east_m * np.cos(b)
+    sd_along = r * math.sqrt((1 + math.exp(-2 * s * s)) / 2 - math.exp(-s * s))
+    assert abs(along.mean() - r * math.exp(-s * s / 2)) < 5 * sd_along / math.sqrt(n_pairs)
+    assert abs(cross.mean()) < 5 * r * s / math.sqrt(n_pairs)
+    assert r - along.mean() == pytest.approx(75.6, abs=3.0)
+
+
+def test_bearing_dead_astern_wraps_into_minus_pi_pi() -> None:
+    """Targets right astern (true relative bearing +-pi): every bearing is in [-pi, pi) and
+    its error, taken the short way round, has the configured sd."""
+    n_pairs = 20000
+    rng = np.random.default_rng(14)
+    psi = rng.uniform(0.0, 2 * math.pi, n_pairs)
+    x = np.zeros((N_STATE, 2 * n_pairs))
+    x[PSI, :n_pairs] = psi
+    x[NORTH, n_pairs:], x[EAST, n_pairs:] = -3000.0 * np.cos(psi), -3000.0 * np.sin(psi)
+    params = radar.build([{"p_detect": 1.0, "sigma_bearing_deg": 1.0}] * (2 * n_pairs))
+    obs = np.arange(n_pairs)
+    plots = _measure(params, x, obs, obs + n_pairs, seed=15)
+    assert np.all((plots.bearing_rad >= -math.pi) & (plots.bearing_rad < math.pi))
+    assert (plots.bearing_rad > 0).any() and (plots.bearing_rad < 0).any()
+    err = np.mod(plots.bearing_rad, 2 * math.pi) - math.pi  # bearing - pi, the short way
+    assert np.std(err) == pytest.approx(math.radians(1.0), rel=0.03)
+    assert abs(np.mean(err)) < 5 * math.radians(1.0) / math.sqrt(n_pairs)
+
+
+def test_plot_is_the_same_for_own_heading_estimate_plus_a_turn() -> None:
+    """The own heading estimate enters through cos and sin only: psi_est and psi_est + 2 pi
+    put the plot (and its antenna offset) in the same place."""
+    x, obs, tgt = _scene(50, seed=16)
+    params = radar.build([{"antenna_x_m": 30.0, "antenna_y_m": -4.0}] * 100)
+    a = _measure(params, x, obs, tgt, seed=17)
+    b = _measure(params, x, obs, tgt, seed=17,
+                 est=(x[NORTH], x[EAST], x[PSI] + 2 * math.pi))
+    np.testing.assert_array_equal(a.valid, b.valid)
+    np.testing.assert_allclose(b.north_m, a.north_m, atol=1e-8)
+    np.testing.assert_allclose(b.east_m, a.east_m, atol=1e-8)
+
+
+@pytest.mark.parametrize(("cfg", "key"), [
+    ({"sigma_range_m": -1.0}, "radar[1].sigma_range_m"),
+    ({"sigma_bearing_deg": math.nan}, "radar[1].sigma_bearing_deg"),
+    ({"max_range_nm": -12.0}, "radar[1].max_range_nm"),
+    ({"min_range_m": "near"}, "radar[1].min_range_m"),
+    ({"scan_period_s": 0.0}, "radar[1].scan_period_s"),
+    ({"scan_phase_s": math.inf}, "radar[1].scan_phase_s"),
+    ({"p_detect": -0.1}, "radar[1].p_detect"),
+    ({"enabled": "on"}, "radar[1].enabled"),
+    ({"range_nm": 6.0}, "radar[1]"),
+])
+def test_config_errors_name_the_ship_and_key(cfg, key) -> None:
+    with pytest.raises(InputError) as err:
+        radar.build([{}, cfg])
+    assert err.value.key == key

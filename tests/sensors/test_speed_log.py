@@ -123,3 +123,98 @@ def test_same_draws_give_same_readings_and_ships_are_independent():
     a = go([0, 1, 2])
     np.testing.assert_array_equal(a, go([0, 1, 2]))
     np.testing.assert_array_equal(go([2, 1, 0]), a[:, :, [2, 1, 0]])
+
+
+def test_vectorised_measure_matches_a_scalar_log_loop():
+    """Every kind and reference, lever arms, scale and bias errors, relative noise, a
+    per-ship current: the array code equals a per-ship loop in which the ground velocity is
+    worked out in the earth frame (velocity through the water turned by psi, plus current)
+    and turned back into the body frame."""
+    rng = np.random.default_rng(21)
+    n = 24
+    kinds = ["em", "doppler", "pulse"]
+    configs = []
+    for i in range(n):
+        kind = kinds[i % 3]
+        cfg = {"kind": kind, "scale_error": float(rng.uniform(-0.05, 0.05)),
+               "bias_mps": float(rng.normal(0, 0.1)), "lever_x_m": float(rng.normal(0, 40)),
+               "lever_y_m": float(rng.normal(0, 5)), "sigma_rel": float(rng.choice([0.0, 0.01]))}
+        if kind == "doppler":
+            cfg["reference"] = "ground" if i % 2 else "water"
+            cfg["transverse_bias_mps"] = float(rng.normal(0, 0.05))
+        if kind == "em" and i % 2:
+            cfg["transverse"] = True
+        configs.append(cfg)
+    params = speed_log.build(configs)
+    x = truth(n, psi=rng.uniform(-7, 7, n), u=rng.uniform(-2, 12, n), v=rng.normal(0, 1, n),
+              r=rng.normal(0, 0.02, n))
+    cn, ce = rng.normal(0, 1, n), rng.normal(0, 1, n)
+    z = rng.standard_normal((n, LOG_NORMAL_DIMS))
+    reading = speed_log.measure(params, x, Env(current_north_mps=cn, current_east_mps=ce), z)
+    for i, cfg in enumerate(configs):
+        kind = cfg["kind"]
+        psi, u, v, r = x[2, i], x[3, i], x[4, i], x[5, i]
+        if cfg.get("reference", "ground" if kind == "doppler" else "water") == "ground":
+            vn = u * math.cos(psi) - v * math.sin(psi) + cn[i]
+            ve = u * math.sin(psi) + v * math.cos(psi) + ce[i]
+            u, v = vn * math.cos(psi) + ve * math.sin(psi), -vn * math.sin(psi) + ve * math.cos(psi)
+        u, v = u - r * cfg["lever_y_m"], v + r * cfg["lever_x_m"]
+        floor = math.sqrt(0.5) if kind == "pulse" else 0.1 * KNOT_MPS
+        gain = 1.0 + cfg["scale_error"]
+        want_u = gain * u + cfg["bias_mps"] + max(floor, cfg["sigma_rel"] * abs(u)) * z[i, 0]
+        assert reading.u_mps[i] == pytest.approx(want_u, rel=1e-12, abs=1e-12)
+        has_v = kind == "doppler" or cfg.get("transverse", False)
+        assert reading.v_valid[i] == has_v
+        if has_v:
+            want_v = (gain * v + cfg.get("transverse_bias_mps", 0.0)
+                      + max(floor, cfg["sigma_rel"] * abs(v)) * z[i, 1])
+            assert reading.v_mps[i] == pytest.approx(want_v, rel=1e-12, abs=1e-12)
+        else:
+            assert math.isnan(reading.v_mps[i])
+
+
+def test_bottom_track_keeps_the_speed_over_ground_at_any_heading():
+    """A Doppler log in bottom track measures the ground speed: its (u, v) has the length of
+    the earth-frame ground velocity at every heading (also across north, psi near 0 / 2 pi),
+    and psi and psi + 2 pi read the same."""
+    n = 721
+    psi = np.linspace(-2 * math.pi, 2 * math.pi, n)
+    x = truth(n, psi=psi, u=6.0, v=-0.7)
+    env = Env(current_north_mps=0.8, current_east_mps=-1.1)
+    cfg = {"kind": "doppler", "sigma_mps": 0.0, "sigma_rel": 0.0}
+    _, u, v, _ = read([cfg] * n, x, env)
+    vn = 6.0 * np.cos(psi) + 0.7 * np.sin(psi) + 0.8
+    ve = 6.0 * np.sin(psi) - 0.7 * np.cos(psi) - 1.1
+    np.testing.assert_allclose(np.hypot(u[0], v[0]), np.hypot(vn, ve), rtol=1e-12)
+    # psi = -2 pi, 0 and 2 pi are the first, middle and last samples
+    np.testing.assert_allclose(u[0, [0, 360, 720]], u[0, 360], atol=1e-12)
+    np.testing.assert_allclose(v[0, [0, 360, 720]], v[0, 360], atol=1e-12)
+
+
+def test_relative_noise_on_the_transverse_channel():
+    """The transverse channel's sd is max(floor, sigma_rel |v|): with |v| = 10 m/s and
+    sigma_rel 0.02 that is 0.2 m/s, above the 0.05 m/s floor."""
+    cfg = {"kind": "doppler", "reference": "water", "sigma_rel": 0.02,
+           "transverse_sigma_mps": 0.05, "sigma_mps": 0.3}
+    _, u, v, _ = read([cfg] * N, truth(N, u=1.0, v=-10.0), steps=2, seed=6)
+    assert_std(v, 0.2)
+    assert_mean(v, -10.0, 0.2)
+    assert_std(u, 0.3)  # 0.02 * 1 < 0.3
+
+
+@pytest.mark.parametrize(("cfg", "key"), [
+    ({"scale_error": -1.0}, "log[1].scale_error"),
+    ({"sigma_mps": -0.1}, "log[1].sigma_mps"),
+    ({"sigma_rel": math.nan}, "log[1].sigma_rel"),
+    ({"transverse_sigma_mps": -1.0}, "log[1].transverse_sigma_mps"),
+    ({"lever_x_m": "bow"}, "log[1].lever_x_m"),
+    ({"kind": "pulse", "reference": "ground"}, "log[1].reference"),
+    ({"kind": "doppler", "reference": "bottom"}, "log[1].reference"),
+    ({"kind": "pitot"}, "log[1].kind"),
+    ({"transverse": 1}, "log[1].transverse"),
+    ({"bias_kn": 0.1}, "log[1]"),
+])
+def test_config_errors_name_the_ship_and_key(cfg, key):
+    with pytest.raises(InputError) as err:
+        speed_log.build([{}, cfg])
+    assert err.value.key == key

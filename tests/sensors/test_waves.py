@@ -219,3 +219,156 @@ def test_same_draws_give_same_motion_and_ships_are_independent():
     a = go([0, 1, 2])
     np.testing.assert_array_equal(a, go([0, 1, 2]))
     np.testing.assert_array_equal(go([2, 0, 1]), a[:, [2, 0, 1]])
+
+
+def _phi(w0, zeta, t):
+    return np.array(waves.transition(np.array([w0]), np.array([zeta]), t))[:, 0].reshape(2, 2)
+
+
+@pytest.mark.parametrize("zeta", [0.05, 0.5, 1.0, 1.0 + 1e-9, 3.0])
+def test_transition_is_a_semigroup(zeta):
+    """``expm(A (t1 + t2)) = expm(A t1) expm(A t2)`` and ``expm(0) = I`` in every damping
+    regime (including the switch between the branches at critical damping)."""
+    w0 = 1.3
+    np.testing.assert_allclose(_phi(w0, zeta, 0.0), np.eye(2), atol=1e-15)
+    for t1, t2 in ((0.3, 1.1), (2.0, 5.0), (0.01, 7.3)):
+        np.testing.assert_allclose(_phi(w0, zeta, t1 + t2), _phi(w0, zeta, t1) @ _phi(w0, zeta, t2),
+                                   rtol=1e-11, atol=1e-14)
+
+
+def test_overdamped_transition_over_a_long_step_is_finite():
+    """Over-damped, w0 = 2 pi / 8, lam = 10, t = 100 s: the slow root ``mu - sqrt(mu^2 - w0^2)``
+    = 0.0394 1/s leaves ``phi11 = (e^-(mu-r)t (1 + mu/r) + e^-(mu+r)t (1 - mu/r)) / 2`` =
+    0.0196, which the module's 'exact for any dt' discretisation must reproduce."""
+    w0, zeta, t = 2 * math.pi / 8.0, 10.0, 100.0
+    mu = zeta * w0
+    r = math.sqrt(mu * mu - w0 * w0)
+    slow, fast = math.exp(-(mu - r) * t), math.exp(-(mu + r) * t)
+    want11 = 0.5 * (slow * (1 + mu / r) + fast * (1 - mu / r))
+    want12 = 0.5 * (slow - fast) / r
+    with np.errstate(all="ignore"):
+        phi = _phi(w0, zeta, t)
+    assert phi[0, 0] == pytest.approx(want11, rel=1e-9)
+    assert phi[0, 1] == pytest.approx(want12, rel=1e-9)
+
+
+@pytest.mark.parametrize("dt", [0.02, 1.0, 30.0])
+@pytest.mark.parametrize("zeta", [0.1, 1.0, 2.0])
+def test_discrete_lyapunov_identity(dt, zeta):
+    """Stationary covariance is kept exactly: ``Phi P Phi^T + L L^T = P`` with ``P =
+    diag(1/(4 lam w0^3), 1/(4 lam w0))``; ``L`` is lower triangular with a non-negative
+    diagonal."""
+    params = waves.build([{"peak_period_s": 9.0, "damping_ratio": zeta}], dt)
+    w0 = 2 * math.pi / 9.0
+    P = np.diag([1 / (4 * zeta * w0**3), 1 / (4 * zeta * w0)])
+    np.testing.assert_allclose(np.diag(P), [params.p11[0, 0], params.p22[0, 0]], rtol=1e-14)
+    phi = np.array([[params.phi11[0, 0], params.phi12[0, 0]],
+                    [params.phi21[0, 0], params.phi22[0, 0]]])
+    lo = np.array([[params.l11[0, 0], 0.0], [params.l21[0, 0], params.l22[0, 0]]])
+    assert lo[0, 0] >= 0.0 and lo[1, 1] >= 0.0
+    np.testing.assert_allclose(phi @ P @ phi.T + lo @ lo.T, P, rtol=1e-10, atol=1e-12 * P.max())
+
+
+def test_gains_are_seed_004_eq_16_and_the_bandpass_counterpart():
+    """Lowpass ``c = 2 b sqrt(D mu)`` [seed 004, eq 16] with ``b = w0``, ``mu = lam w0``,
+    ``D = sigma^2``; bandpass ``c = sigma sqrt(4 lam w0)`` (module docstring)."""
+    cfg = {**SIGMAS, "peak_period_s": 6.5, "damping_ratio": 0.17}
+    low = waves.build([{**cfg, "form": "lowpass"}], 0.5)
+    band = waves.build([cfg], 0.5)
+    b = 2 * math.pi / 6.5
+    mu = 0.17 * b
+    np.testing.assert_allclose(low.gain[0], 2 * b * np.sqrt(SIGMA_SI**2 * mu), rtol=1e-13)
+    np.testing.assert_allclose(band.gain[0], SIGMA_SI * math.sqrt(4 * 0.17 * b), rtol=1e-13)
+
+
+def test_bandpass_autocorrelation_is_the_derivative_process():
+    """Bandpass output ``z2``: correlation ``exp(-mu t) (cos bt - mu/b sin bt)`` (module
+    docstring; derivative of the seed 004 eq 15 process, eq 24), negative at half a period."""
+    n, dt = 20_000, 0.5
+    params = waves.build([{**SIGMAS, "peak_period_s": 6.0, "damping_ratio": 0.2}] * n, dt)
+    rng = np.random.default_rng(18)
+    state = waves.init(params, rng.standard_normal((n, WAVE_NORMAL_DIMS)))
+    y0 = waves.outputs(params, state)[:, 0]
+    _, ys = _simulate(params, state, 8, rng, keep=True)
+    w0 = 2 * math.pi / 6.0
+    mu = 0.2 * w0
+    beta = math.sqrt(w0 * w0 - mu * mu)
+    for k in (1, 3, 6, 8):
+        t = k * dt
+        expected = math.exp(-mu * t) * (math.cos(beta * t) - mu / beta * math.sin(beta * t))
+        rho = np.corrcoef(y0, ys[k - 1][:, 0])[0, 1]
+        assert abs(rho - expected) < Z / math.sqrt(n), (k, rho, expected)
+
+
+def test_vectorised_step_matches_a_per_ship_matrix_loop():
+    """Ships with different periods, damping and forms: the array step equals, ship by ship
+    and channel by channel, ``z <- Phi z + L e`` with ``Phi`` the series matrix exponential
+    and ``L`` the Cholesky factor of ``P - Phi P Phi^T``."""
+    rng = np.random.default_rng(19)
+    configs = [{**SIGMAS, "peak_period_s": float(rng.uniform(3, 15)),
+                "damping_ratio": float(rng.choice([0.05, 0.3, 1.0, 1.7])),
+                "form": "lowpass" if i % 2 else "bandpass"} for i in range(8)]
+    dt = 0.4
+    params = waves.build(configs, dt)
+    n = len(configs)
+    state = waves.init(params, rng.standard_normal((n, WAVE_NORMAL_DIMS)))
+    z = np.stack([state.z1, state.z2], axis=-1)  # (n, 3, 2)
+    mats = []
+    for cfg in configs:
+        w0, lam = 2 * math.pi / cfg["peak_period_s"], cfg["damping_ratio"]
+        phi = expm_series(np.array([[0.0, 1.0], [-w0 * w0, -2 * lam * w0]]) * dt)
+        P = np.diag([1 / (4 * lam * w0**3), 1 / (4 * lam * w0)])
+        mats.append((phi, np.linalg.cholesky(P - phi @ P @ phi.T), P))
+    for _ in range(25):
+        e = rng.standard_normal((n, WAVE_NORMAL_DIMS))
+        state = waves.step(params, state, e)
+        out = waves.outputs(params, state)
+        for i, (cfg, (phi, lo, P)) in enumerate(zip(configs, mats, strict=True)):
+            for ch in range(3):
+                z[i, ch] = phi @ z[i, ch] + lo @ e[i, 2 * ch:2 * ch + 2]
+                row = 1 if cfg["form"] == "bandpass" else 0
+                want = SIGMA_SI[ch] * z[i, ch, row] / math.sqrt(P[row, row])
+                assert out[i, ch] == pytest.approx(want, rel=1e-8, abs=1e-12)
+
+
+def test_position_offset_keeps_length_and_is_periodic_in_heading():
+    params = waves.build([SIGMAS] * 50, 1.0)
+    rng = np.random.default_rng(4)
+    state = waves.init(params, rng.standard_normal((50, WAVE_NORMAL_DIMS)))
+    y = waves.outputs(params, state)
+    psi = rng.uniform(0, 2 * math.pi, 50)
+    ne = waves.position_offset(params, state, psi)
+    np.testing.assert_allclose(np.hypot(*ne), np.hypot(y[:, 1], y[:, 2]), rtol=1e-12)
+    np.testing.assert_allclose(waves.position_offset(params, state, psi + 2 * math.pi), ne,
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize(("cfg", "key"), [
+    ({"peak_period_s": 0.0}, "waves[1].peak_period_s"),
+    ({"peak_period_s": -8.0}, "waves[1].peak_period_s"),
+    ({"damping_ratio": -0.1}, "waves[1].damping_ratio"),
+    ({"heading_sigma_deg": -1.0}, "waves[1].heading_sigma_deg"),
+    ({"surge_sigma_m": math.inf}, "waves[1].surge_sigma_m"),
+    ({"sway_sigma_m": "big"}, "waves[1].sway_sigma_m"),
+    ({"form": "highpass"}, "waves[1].form"),
+    ({"hs_m": 2.0}, "waves[1]"),
+])
+def test_config_errors_name_the_ship_and_key(cfg, key):
+    with pytest.raises(InputError) as err:
+        waves.build([{}, cfg], 1.0)
+    assert err.value.key == key
+
+
+@pytest.mark.parametrize("zeta", [0.05, 0.3, 0.69, 0.72, 1.5])
+def test_peak_frequency_is_the_argmax_of_the_transfer_function(zeta):
+    """``|h(jw)|^2`` on a fine grid from 0: bandpass ``w^2 / D(w)`` peaks at w0 for any damping;
+    lowpass ``1 / D(w)`` at ``w0 sqrt(1 - 2 lam^2)``, at 0 once ``lam >= 1/sqrt 2``
+    (``D(w) = (w0^2 - w^2)^2 + 4 lam^2 w0^2 w^2``)."""
+    params = waves.build([{"peak_period_s": 10.0, "damping_ratio": zeta},
+                          {"peak_period_s": 10.0, "damping_ratio": zeta, "form": "lowpass"}], 1.0)
+    w0 = 2 * math.pi / 10.0
+    w = np.linspace(0.0, 3.0 * w0, 300_001)
+    den = (w0 * w0 - w * w) ** 2 + 4 * zeta**2 * w0 * w0 * w * w
+    peaks = waves.peak_frequency(params)
+    assert peaks[0] == pytest.approx(w[np.argmax(w * w / den)], abs=2e-5)
+    assert peaks[1] == pytest.approx(w[np.argmax(1.0 / den)], abs=2e-5)

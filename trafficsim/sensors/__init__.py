@@ -26,6 +26,7 @@ first-order Gauss-Markov coefficients). Truth comes as the ``(8, n)`` state of
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -68,7 +69,10 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
     values = [d if (v := cfg.get(key, None)) is None else v
               for cfg, d in zip(configs, defaults, strict=True)]
     if set(map(type, values)) <= _PLAIN_NUMBERS:  # the common case, at once
-        out = np.array(values, dtype=float)
+        try:
+            out = np.array(values, dtype=float)
+        except OverflowError:  # an integer beyond the float range: reported below
+            out = np.array([math.nan])
         if np.isfinite(out).all() and (minimum is None or not np.any(
                 out <= minimum if strictly else out < minimum)):
             return out * scale
@@ -76,12 +80,15 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
     for i, cfg in enumerate(configs):  # build time only, never on the step path
         raw = cfg.get(key, None)
         value = defaults[i] if raw is None else raw
+        shown = repr(raw) if len(repr(raw)) <= 40 else f"{repr(raw)[:37]}..."
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise InputError(f"expected a number, got {shown}", key=f"{what}[{i}].{key}")
         try:
             value = float(value)
-        except (TypeError, ValueError):
-            raise InputError(f"expected a number, got {raw!r}", key=f"{what}[{i}].{key}") from None
+        except OverflowError:
+            value = math.inf  # (an integer beyond the float range)
         if not math.isfinite(value):
-            raise InputError(f"expected a finite number, got {raw!r}", key=f"{what}[{i}].{key}")
+            raise InputError(f"expected a finite number, got {shown}", key=f"{what}[{i}].{key}")
         if minimum is not None and (value < minimum or (strictly and value == minimum)):
             rel = ">" if strictly else ">="
             raise InputError(f"must be {rel} {minimum}, got {value}", key=f"{what}[{i}].{key}")
@@ -125,7 +132,7 @@ def mod_2pi_scalar(angle: float) -> float:
     outside ``(-2 pi, 2 pi)`` (within it ``fmod`` is exact and the result is ``angle`` or
     ``angle + 2 pi``; the division costs more than the rest of a typical caller)."""
     if 0.0 <= angle < TWO_PI:
-        return angle
+        return angle + 0.0  # (-0.0 becomes +0.0, as np.mod gives it)
     if -TWO_PI < angle < 0.0:
         return angle + TWO_PI
     return angle % TWO_PI

@@ -41,8 +41,9 @@ Reception (per directed pair, :func:`receive`): a report stamped ``t_r`` reaches
 delay) later, i.e. on the first step at or after ``t_r + latency_s``; within ``max_range_nm`` of
 the receiver (VHF line of sight) and with probability ``p_receive`` (slot collisions, fading).
 If a long step makes several reports deliverable at once, only the newest is delivered (the
-others are superseded). Each ship keeps its last ``AIS_BUFFER`` reports in flight, so latencies
-up to ``(AIS_BUFFER - 1) * 2 s`` are exact at the highest rate.
+others are superseded). Each ship keeps its last ``AIS_BUFFER`` (9) reports in flight, so
+latencies up to ``MAX_LATENCY_S`` (14 s) are exact at the highest rate and any step (a 2 s
+reporter has at most ``(14 + 2) / 2 + 1 = 9`` reports in flight, with steps just under 2 s).
 
 Draws, at need (:func:`trafficsim.noise.normal_from`): ``AIS_TX_NORMAL_DIMS`` standard normals
 from the transmitting ship's stream (``ais`` purpose) per report sent (position north, east;
@@ -78,7 +79,7 @@ AIS_TX_NORMAL_DIMS = 5
 AIS_RX_NORMAL_DIMS = 1
 AIS_PURPOSE = "ais"
 #: reports kept in flight per ship
-AIS_BUFFER = 8
+AIS_BUFFER = 9
 
 #: message 1-3 field resolutions (ITU-R M.1371-5 annex 2)
 POSITION_STEP_M = 1852.0 / 10000.0  # 1/10000 min of latitude
@@ -95,6 +96,8 @@ INTERVAL_MEDIUM_S = 6.0
 INTERVAL_FAST_S = 2.0
 ANCHOR_SPEED_KN, SLOW_KN, MEDIUM_KN = 3.0, 14.0, 23.0
 DEFAULT_TURN_RATE_DEGPS = 5.0 / 30.0
+#: the longest latency delivered exactly (the buffer holds every report still in flight)
+MAX_LATENCY_S = (AIS_BUFFER - 2) * INTERVAL_FAST_S
 
 KEYS = ("enabled", "sigma_position_m", "sigma_velocity_mps", "sigma_heading_deg", "latency_s",
         "first_report_s", "max_range_nm", "p_receive", "turn_rate_degps", "ref_latitude_deg")
@@ -179,9 +182,8 @@ def build(configs: Sequence[Mapping]) -> AisParams:
     if np.any(p_receive > 1.0):
         raise InputError(f"p_receive must be <= 1, got {p_receive.max()}", key=f"{what}.p_receive")
     latency = column(configs, "latency_s", 2.0, what, minimum=0.0)
-    max_latency = (AIS_BUFFER - 1) * INTERVAL_FAST_S
-    if np.any(latency > max_latency):
-        raise InputError(f"latency_s must be <= {max_latency:g} s, got {latency.max():g}",
+    if np.any(latency > MAX_LATENCY_S):
+        raise InputError(f"latency_s must be <= {MAX_LATENCY_S:g} s, got {latency.max():g}",
                          key=f"{what}.latency_s")
     lat = column(configs, "ref_latitude_deg", 0.0, what, scale=math.pi / 180.0)
     if np.any(np.abs(lat) >= math.pi / 2):

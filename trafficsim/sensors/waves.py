@@ -119,12 +119,17 @@ def transition(omega0: np.ndarray, zeta: np.ndarray,
     root = np.sqrt(np.abs(d))
     arg = root * t
     under = d >= 0.0
-    c = np.where(under, np.cos(arg), np.cosh(np.where(under, 0.0, arg)))
-    # sin(x)/x and sinh(x)/x, both -> 1 at x = 0 (critical damping) without division by 0
-    sinh_over = np.where(arg > 0.0, np.sinh(arg) / np.where(arg > 0.0, arg, 1.0), 1.0)
-    s = t * np.where(under, np.sinc(arg / math.pi), sinh_over)
     decay = np.exp(-mu * t)
-    return (decay * (c + mu * s), decay * s, -decay * omega0 * omega0 * s, decay * (c - mu * s))
+    # over-damped: exp(-mu t) cosh and sinh as two decaying exponentials (cosh alone overflows
+    # where exp(-mu t) underflows, a long step of a strongly damped filter)
+    over = np.where(under, 0.0, root)
+    fast, slow = np.exp(-(mu + over) * t), np.exp(-(mu - over) * t)
+    dc = np.where(under, decay * np.cos(arg), 0.5 * (slow + fast))
+    # decay sin(x)/x t and decay sinh(x)/x t, -> decay t at x = 0 (critical damping)
+    ds = np.where(under, decay * t * np.sinc(arg / math.pi),
+                  np.where(arg > 0.0, 0.5 * (slow - fast) / np.where(arg > 0.0, over, 1.0),
+                           decay * t))
+    return dc + mu * ds, ds, -omega0 * omega0 * ds, dc - mu * ds
 
 
 def stationary_variances(omega0: np.ndarray, zeta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
