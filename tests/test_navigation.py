@@ -344,3 +344,280 @@ def test_every_filter_gives_the_velocity_over_ground_decisions_use():
     # both filters within the current's 0.4 m/s: the ekf closely; the pv filter lags the
     # route's turns by some tenths of a m/s [seed 000]
     assert err[2] < 0.1 and err[1] < 0.3, err
+
+
+# --------------------------------------------------------------------------------------------
+# Navigation on its own: configs, the estimate per filter, ground velocity, independence
+# --------------------------------------------------------------------------------------------
+
+from trafficsim.estimation import ekf as ekf_module  # noqa: E402
+from trafficsim.estimation import gating, pv  # noqa: E402
+from trafficsim.navigation import Navigation, check_sensor_config, merge_sensors  # noqa: E402
+from trafficsim.ships.base import RPS, Env, U, V  # noqa: E402
+from trafficsim.ships.base import R as YAW_RATE  # noqa: E402
+
+
+def _truth(n, k, turn=0.0, psi0=0.3):
+    """(8, n) true state at step k (dt 1 s): ship j at (200 j, -100 j), 6 m/s, heading psi0
+    turning at ``turn`` rad/s (positions need not follow; the instruments only sample them)."""
+    x = np.zeros((8, n))
+    x[NORTH] = 200.0 * np.arange(n) + 6.0 * k * np.cos(psi0)
+    x[EAST] = -100.0 * np.arange(n) + 6.0 * k * np.sin(psi0)
+    x[PSI] = np.mod(psi0 + turn * k, 2 * np.pi)
+    x[U], x[V], x[YAW_RATE], x[RPS] = 6.0, 0.2, turn, 1.5
+    return x
+
+
+def test_merge_sensors_overrides_key_by_key_without_touching_the_ship_file():
+    ship = {"gnss": {"sigma_m": 2.0, "rate_hz": 1.0}, "compass": {"kind": "gyro"}}
+    merged = merge_sensors(ship, {"gnss": {"sigma_m": 5.0}, "log": {"kind": "em"},
+                                  "compass": None})
+    assert merged == {"gnss": {"sigma_m": 5.0, "rate_hz": 1.0}, "compass": {"kind": "gyro"},
+                      "log": {"kind": "em"}}
+    assert ship == {"gnss": {"sigma_m": 2.0, "rate_hz": 1.0}, "compass": {"kind": "gyro"}}
+    merged["compass"]["kind"] = "magnetic"  # the result is a copy
+    assert ship["compass"]["kind"] == "gyro"
+    assert merge_sensors(None, None) == {}
+    assert merge_sensors({"gnss": None}, {"gnss": {"sigma_m": 1.0}}) == {"gnss": {"sigma_m": 1.0}}
+
+
+@pytest.mark.parametrize(("config", "key"), [
+    ({"sonar": {}}, "sonar"),
+    ({"gnss": {"sigma_m": -1.0}}, "gnss[0].sigma_m"),
+    ({"compass": {"kind": "laser"}}, "compass[0].kind"),
+    ({"navigation": {"pv_sp": 1.0}}, "navigation"),
+    ({"navigation": {"adaptive_min_samples": 5}}, "navigation"),
+    ({"fusion": {"correlation": 0.2}}, "fusion"),
+    ({"gnss2": {"sigma_m": 2.0}, "fusion": {"correlation": 1.0}}, "fusion"),
+    ({"gnss2": {"sigma_m": 0.0}}, "gnss2"),
+])
+def test_bad_sensor_configs_name_the_key(config, key):
+    with pytest.raises(InputError) as err:
+        check_sensor_config(config)
+    assert err.value.key == key
+
+
+@pytest.mark.parametrize(("config", "section"), [
+    ({"gate": {"gate_sigma": -1.0}}, "gate"),
+    ({"gate": {"gate_sigma": float("nan")}}, "gate"),
+    ({"ekf": {"no_such_key": 1.0}}, "ekf"),
+    ({"ekf": {"gnss_sigma_m": float("nan")}}, "ekf"),
+    ({"navigation": {"heading_sp_rad2ps3": -1.0}}, "navigation"),
+    ({"navigation": {"pv_sp_m2ps3": -1.0}}, "navigation"),
+])
+@pytest.mark.filterwarnings("ignore:invalid value encountered:RuntimeWarning")
+def test_bad_filter_settings_are_input_errors_naming_their_section(config, section):
+    """Every section of a ship's sensors is checked when the scenario is validated (the
+    docstring: 'every instrument and setting is built and checked'), and the error names the
+    section the user wrote."""
+    with pytest.raises(InputError) as err:
+        check_sensor_config(config)
+    assert (err.value.key or "").startswith(section)
+
+
+def test_a_perfect_receiver_is_a_valid_config():
+    """The gnss module allows ``sigma_m: 0`` (minimum 0); the compass's 0 is accepted (its
+    filter gain floors the sigma). A ship with filter ``none`` never runs the pv filter."""
+    check_sensor_config({"gnss": {"sigma_m": 0.0}})
+
+
+def test_unknown_filter_missing_specs_and_adaptive_pv_are_refused():
+    x = _truth(1, 0)
+    with pytest.raises(InputError, match="unknown filter 'kf'") as err:
+        Navigation.build([{}], ["kf"], x, 0, [0], [0], 1.0)
+    assert err.value.key == "filter"
+    with pytest.raises(InputError, match="model files") as err:
+        Navigation.build([{}], ["ekf"], x, 0, [0], [0], 1.0)
+    assert err.value.key == "filter"
+    with pytest.raises(InputError, match="needs filter: ekf") as err:
+        Navigation.build([{"navigation": {"adaptive_window_steps": 20}}], ["pv"], x, 0, [0],
+                         [0], 1.0)
+    assert err.value.key == "navigation"
+
+
+def test_filter_none_estimate_is_the_truth_and_its_ground_velocity_adds_the_current():
+    """Perfect knowledge: the estimate is the true state bit for bit although the instruments
+    (5 m GNSS) are simulated; the ground velocity is the water velocity rotated to north/east
+    plus the ship's own current: u = 6, v = 0.2 at psi = 0.3 rad is
+    (6 cos 0.3 - 0.2 sin 0.3, 6 sin 0.3 + 0.2 cos 0.3) = (5.67291, 1.96419) m/s."""
+    cfg = {"gnss": {"sigma_m": 5.0}, "compass": {"sigma_deg": 2.0}}
+    nav = Navigation.build([cfg, cfg], ["none", "none"], _truth(2, 0), 1, [0, 1], [0, 0], 1.0)
+    for k in range(5):
+        x = _truth(2, k, turn=0.01)
+        est = nav.update(x, Env())
+        np.testing.assert_array_equal(est, x[:6])
+    assert np.abs(nav.fix.north_m - x[NORTH]).max() > 0.01  # the fixes are noisy
+    x = _truth(2, 0)
+    nav.update(x, Env())
+    env = Env(current_north_mps=np.array([0.5, -0.1]), current_east_mps=np.array([0.0, 0.3]))
+    vel = nav.ground_velocity(env)
+    c, s = np.cos(0.3), np.sin(0.3)
+    np.testing.assert_allclose(vel[:, 0], [6 * c - 0.2 * s + 0.5, 6 * s + 0.2 * c], rtol=1e-14)
+    np.testing.assert_allclose(vel[:, 1], [6 * c - 0.2 * s - 0.1, 6 * s + 0.2 * c + 0.3],
+                               rtol=1e-14)
+    np.testing.assert_allclose(vel[:, 0] - [0.5, 0.0], [5.672915, 1.964189], atol=1e-6)
+
+
+def test_pv_step_agrees_with_the_vectorised_modules():
+    """The compiled step of the pv ships is the receiver's fix moved to the reference point
+    with the filtered heading (gnss.to_reference_point), pv.predict, the gate on the
+    normalised innovation (gating.normalised_distance, gating.gate), pv.update where accepted,
+    a restart on the fix after max_rejections; the estimate's u, v are the filter's
+    over-ground velocity in the body frame. Checked step by step on two ships with a lever
+    arm, gross errors, outages and a 2 Hz / 0.5 Hz receiver."""
+    cfgs = [{"gnss": {"sigma_m": 3.0, "antenna_x_m": -40.0, "antenna_y_m": 5.0,
+                      "gross_prob": 0.1, "gross_size_m": 150.0},
+             "compass": {"sigma_deg": 0.5}, "gate": {"gate_sigma": 4.0, "max_rejections": 2}},
+            {"gnss": {"sigma_m": 6.0, "rate_hz": 0.5, "dropout_rate_per_h": 300.0},
+             "compass": {"sigma_deg": 1.0}, "navigation": {"pv_sp_m2ps3": 0.05}}]
+    nav = Navigation.build(cfgs, ["pv", "pv"], _truth(2, 0), 11, [0, 0], [0, 1], 1.0)
+    seen_reject = seen_skip = False
+    for k in range(80):
+        x0, P0 = nav.pv_s.x.copy(), nav.pv_s.P.copy()
+        rej0 = nav.gate_rejections.copy()
+        est = nav.update(_truth(2, k, turn=0.004), Env()).copy()
+        psi, r = nav.heading_est[0], nav.heading_est[1]
+        zn, ze = gnss_module.to_reference_point(nav.gnss_p, nav.fix.north_m, nav.fix.east_m,
+                                                psi)
+        pred = pv.predict(nav.pv_p, pv.PVState(x0, P0))
+        s = pred.P[:, :, 0, 0] + nav.pv_p.sigma_m[:, None] ** 2
+        d = gating.normalised_distance(np.stack([zn - pred.x[:, 0], ze - pred.x[:, 1]], 1), s)
+        g = gating.gate(nav.gate_p, np.where(nav.fix.valid, d, np.nan), rej0)
+        upd = pv.update(nav.pv_p, pred, zn, ze, g.accept)
+        xs = upd.x.copy()
+        xs[g.restart, 0], xs[g.restart, 1] = zn[g.restart], ze[g.restart]
+        np.testing.assert_allclose(nav.pv_s.x, xs, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(nav.pv_s.P, upd.P, rtol=1e-12)
+        np.testing.assert_array_equal(nav.gate_rejections, g.rejections)
+        vn, ve = xs[:, 2], xs[:, 3]
+        expect = np.stack([xs[:, 0], xs[:, 1], psi, vn * np.cos(psi) + ve * np.sin(psi),
+                           -vn * np.sin(psi) + ve * np.cos(psi), r])
+        np.testing.assert_allclose(est, expect, rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(nav.ground_velocity(Env(0.7, 0.7)), [vn, ve], atol=1e-12)
+        seen_reject |= bool(np.any(nav.fix.valid & ~g.accept))
+        seen_skip |= bool(np.any(~nav.fix.valid))
+    assert seen_reject and seen_skip  # both branches of the gate and the schedule ran
+
+
+def test_heading_filter_is_the_alpha_beta_recursion_across_north():
+    """Heading estimate: predict psi + r dt, innovation wrapped to [-pi, pi), alpha and beta
+    gains; a ship turning through north (2 pi -> 0) and back keeps its estimate in [0, 2 pi)
+    and within a few compass sigmas of the truth, the scalar recursion reproduces it."""
+    nav = Navigation.build([{"compass": {"sigma_deg": 0.2}}], ["pv"], _truth(1, 0, 0.02, 6.2),
+                           4, [0], [0], 1.0)
+    alpha, beta = nav.heading_gain[0]
+    h, rate = float(6.2 - 0.02), 0.02  # converged one step before the start
+    for k in range(40):
+        turn = 0.02 if k < 20 else -0.02
+        psi_true = (6.2 + 0.02 * min(k, 20) - 0.02 * max(0, k - 20)) % (2 * np.pi)
+        x = _truth(1, 0, turn)
+        x[PSI] = psi_true
+        est = nav.update(x, Env())
+        pred = h + rate
+        innov = (nav.heading_meas[0] - pred + np.pi) % (2 * np.pi) - np.pi
+        h, rate = (pred + alpha * innov) % (2 * np.pi), rate + beta * innov
+        assert est[PSI, 0] == pytest.approx(h, abs=1e-12)
+        assert est[5, 0] == pytest.approx(rate, abs=1e-12)
+        assert 0.0 <= est[PSI, 0] < 2 * np.pi
+        err = (est[PSI, 0] - psi_true + np.pi) % (2 * np.pi) - np.pi
+        assert abs(err) < np.radians(1.0)
+
+
+def test_lever_arm_fix_by_hand_and_the_estimate_moves_it_back():
+    """A near-perfect receiver 50 m forward and 10 m to starboard at heading 30 deg: the fix
+    is N + 50 cos 30 - 10 sin 30 = N + 38.3013, E + 50 sin 30 + 10 cos 30 = E + 33.6603
+    [seed 003, eq 5]; the pv estimate puts the reference point back on the truth."""
+    cfg = {"gnss": {"sigma_m": 1e-6, "antenna_x_m": 50.0, "antenna_y_m": 10.0},
+           "compass": {"sigma_deg": 0.0}}
+    psi0 = np.radians(30.0)
+    nav = Navigation.build([cfg], ["pv"], _truth(1, 0, 0.0, psi0), 0, [0], [0], 1.0)
+    for k in range(3):
+        x = _truth(1, k, 0.0, psi0)
+        est = nav.update(x, Env())
+        assert nav.fix.north_m[0] - x[NORTH, 0] == pytest.approx(38.30127, abs=1e-4)
+        assert nav.fix.east_m[0] - x[EAST, 0] == pytest.approx(33.66025, abs=1e-4)
+        np.testing.assert_allclose(est[[NORTH, EAST], 0], x[[NORTH, EAST], 0], atol=1e-4)
+        assert est[PSI, 0] == pytest.approx(psi0, abs=1e-12)
+
+
+def test_a_slow_receiver_updates_on_schedule_and_the_filter_coasts_between():
+    """rate_hz 0.25 at dt 1 s: a fix every 4th step from the first (steps 0, 4, 8 ...);
+    between fixes the reading repeats the last fix and the pv state is its prediction
+    x + v dt with the velocity unchanged."""
+    nav = Navigation.build([{"gnss": {"sigma_m": 2.0, "rate_hz": 0.25}}], ["pv"], _truth(1, 0),
+                           2, [0], [0], 1.0)
+    valid, last = [], None
+    for k in range(12):
+        before = nav.pv_s.x.copy()
+        nav.update(_truth(1, k), Env())
+        valid.append(bool(nav.fix.valid[0]))
+        if not valid[-1]:
+            assert nav.fix.north_m[0] == last
+            np.testing.assert_allclose(nav.pv_s.x[0, :2], before[0, :2] + before[0, 2:],
+                                       rtol=1e-15)
+            np.testing.assert_array_equal(nav.pv_s.x[0, 2:], before[0, 2:])
+        last = nav.fix.north_m[0]
+    assert valid == [k % 4 == 0 for k in range(12)]
+
+
+def test_ekf_ground_velocity_adds_its_current_estimate():
+    """The ekf's over-ground velocity is its water velocity rotated by its heading plus its
+    own current states (not the env current, which it does not know)."""
+    spec = load_ship("container")
+    cfg = {"gnss": {"sigma_m": 2.0}, "compass": {"sigma_deg": 0.3}}
+    nav = Navigation.build([cfg], ["ekf"], _truth(1, 0), 0, [0], [0], 1.0, [spec])
+    for k in range(20):
+        nav.update(_truth(1, k), Env())
+    xs = nav.ekf_s.x[0]
+    c, s = np.cos(xs[ekf_module.XPSI]), np.sin(xs[ekf_module.XPSI])
+    u, v = xs[ekf_module.XU], xs[ekf_module.XV]
+    expect = [u * c - v * s + xs[ekf_module.XCN], u * s + v * c + xs[ekf_module.XCE]]
+    np.testing.assert_allclose(nav.ground_velocity(Env(5.0, 5.0))[:, 0], expect, rtol=1e-12)
+
+
+PLAIN = {"gnss": {"sigma_m": 3.0, "gross_prob": 0.05, "gross_size_m": 80.0},
+         "compass": {"sigma_deg": 0.5}}
+OTHERS = [
+    {"gnss": {"sigma_m": 1.0, "antenna_x_m": 30.0, "dropout_rate_per_h": 200.0},
+     "compass": {"kind": "magnetic", "deviation_deg": [1, 2, 0, 0.5, 0]},
+     "waves": {"heading_sigma_deg": 1.0, "surge_sigma_m": 0.5}},
+    {"gnss": {"sigma_m": 2.0}, "gnss2": {"sigma_m": 2.0, "antenna_x_m": 20.0},
+     "actuators": {"rudder_sigma_deg": 0.5}, "compass": {"drift_sigma_deg": 1.0}},
+]
+
+
+def _estimates(configs, filters, col, enc, sie, steps=60):
+    """Estimate of ship ``col`` per step, fed the same truth whatever the batch."""
+    spec = load_ship("container")
+    n = len(configs)
+    x0 = _truth(n, 0, 0.003)
+    x0[:, col] = _truth(1, 0, 0.003)[:, 0]
+    nav = Navigation.build(configs, filters, x0, 9, enc, sie, 1.0, [spec] * n)
+    out = []
+    for k in range(steps):
+        x = _truth(n, k, 0.003)
+        x[:, col] = _truth(1, k, 0.003)[:, 0]
+        nav.update(x, Env())
+        out.append(nav.est[:, col].copy())
+    return np.array(out)
+
+
+@pytest.mark.parametrize("filt", ["none", "pv", "ekf"])
+def test_a_ships_estimate_does_not_depend_on_the_rest_of_the_batch(filt):
+    """Random streams are keyed by (seed, encounter, ship in encounter, purpose): the same
+    ship (encounter 7, ship 1) alone and as the third of four ships -- beside ships with wave
+    motion, lever arms, a magnetic compass with deviation, outages, a second receiver,
+    actuator sensors and other filters -- has the same estimate bit for bit."""
+    alone = _estimates([PLAIN], [filt], 0, [7], [1])
+    batch = _estimates([OTHERS[0], OTHERS[1], PLAIN, PLAIN], ["pv", "ekf", filt, "none"], 2,
+                       [0, 0, 7, 3], [0, 1, 1, 0])
+    np.testing.assert_array_equal(alone, batch)
+
+
+def test_an_ekf_ships_estimate_ignores_another_ships_speed_log():
+    """An ekf ship without a log alone, and beside a pv ship that has one: the log of the
+    other ship must not enter this ship's filter."""
+    alone = _estimates([PLAIN], ["ekf"], 0, [7], [1])
+    beside = _estimates([dict(PLAIN, log={"kind": "em"}), PLAIN], ["pv", "ekf"], 1, [0, 7],
+                        [0, 1])
+    np.testing.assert_array_equal(alone, beside)

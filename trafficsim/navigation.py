@@ -69,6 +69,7 @@ from trafficsim.jit import kernel
 from trafficsim.noise import NoiseBank, normal_from, uniform_from
 from trafficsim.sensors import (
     actuators,
+    column,
     compass,
     gnss,
     mod_2pi_scalar,
@@ -106,6 +107,14 @@ def merge_sensors(ship_defaults: Mapping[str, Any] | None,
     return out
 
 
+def _gate_params(configs: Sequence[Mapping[str, Any]]) -> gating.GateParams:
+    """The ships' gates (default: :data:`DEFAULT_GATE_SIGMA`), a bad one an input error."""
+    try:
+        return gating.build([c or {"gate_sigma": DEFAULT_GATE_SIGMA} for c in configs])
+    except (TypeError, ValueError) as err:
+        raise InputError(str(err), key="gate") from None
+
+
 def check_sensor_config(config: Mapping[str, Any]) -> None:
     """Raise :class:`InputError` (with the offending key) if a ship's sensor config is invalid."""
     for name in config:
@@ -115,6 +124,12 @@ def check_sensor_config(config: Mapping[str, Any]) -> None:
     # filter "none": every instrument and setting is built and checked; whether a setting suits
     # the ship's filter (adaptive R needs the ekf) is checked when the run starts
     Navigation.build([dict(config)], ["none"], np.zeros((8, 1)), 0, [0], [0], 1.0)
+    if config.get("ekf") is not None:  # (built for ekf ships only when a run starts)
+        try:
+            ekf.build([{"gnss_sigma_m": 1.0, "compass_sigma_deg": 1.0, "log_sigma_mps": 0.1,
+                        **dict(config["ekf"])}])
+        except (TypeError, ValueError) as err:
+            raise InputError(str(err), key="ekf") from None
     from trafficsim.estimation import tracker
     from trafficsim.sensors import ais, radar
 
@@ -175,6 +190,7 @@ class Navigation:
     ekf_qc: np.ndarray | None = None  # process noise density of the ekf ships (formed once)
     has_waves: bool = False
     has_log: bool = False
+    log_fitted: np.ndarray | None = None  # (n,) bool, the ship carries a speed log
     has_actuator_sensors: bool = False
     fix: gnss.GnssFix | None = None
     heading_meas: np.ndarray | None = None
@@ -248,14 +264,20 @@ class Navigation:
         if multi.idx.size:  # the filter starts converged for the fix of all receivers
             pv_sigma = pv_sigma.copy()
             pv_sigma[multi.idx] = np.sqrt(multi.var)
-        pv_p = pv.build([{"sigma_m": s, "sp_m2ps3": c.get("pv_sp_m2ps3", DEFAULT_PV_SP),
-                          "dt_s": dt} for s, c in zip(pv_sigma, nav_cfg, strict=True)])
+        # (a perfect receiver, sigma 0, is floored as the compass is for its gain below)
+        try:
+            pv_p = pv.build([{"sigma_m": max(float(s), 1e-6),
+                              "sp_m2ps3": c.get("pv_sp_m2ps3", DEFAULT_PV_SP), "dt_s": dt}
+                             for s, c in zip(pv_sigma, nav_cfg, strict=True)])
+        except InputError as err:
+            raise InputError(err.message, key="navigation.pv_sp_m2ps3") from None
         # filters start converged one step before the first fix, so the first update
         # predicts to the time of the first fix
         vel = _earth_velocity(x)
         pv_s = pv.init(pv_p, x[NORTH] - vel[0] * dt, x[EAST] - vel[1] * dt, vel[0], vel[1],
                        converged=True)
-        heading_sp = np.array([c.get("heading_sp_rad2ps3", DEFAULT_HEADING_SP) for c in nav_cfg])
+        heading_sp = column(nav_cfg, "heading_sp_rad2ps3", DEFAULT_HEADING_SP, "navigation",
+                            minimum=0.0, strictly=True)
         heading_gain = pv.steady_state_gain(np.maximum(compass_p.sigma_rad, 1e-6), heading_sp, dt)
         heading_gain = np.asarray(heading_gain).reshape(n, 2)
         est = x[:N_EST].copy()
@@ -298,14 +320,14 @@ class Navigation:
             log_p=speed_log.build(section("log")), act_p=actuators.build(section("actuators")),
             waves_p=waves_p, waves_s=waves.init(waves_p, init_draws[:, b:]),
             pv_p=pv_p, pv_s=pv_s, heading_gain=heading_gain,
-            gate_p=gating.build([c or {"gate_sigma": DEFAULT_GATE_SIGMA}
-                                 for c in section("gate")]),
+            gate_p=_gate_params(section("gate")),
             gate_rejections=gating.init_state(n),
             heading_est=np.stack([x[PSI] - x[R] * dt, x[R].copy()]), banks=banks, dt=dt,
             est=est, ekf_idx=ekf_idx, ekf_p=ekf_p, ekf_model=ekf_model, ekf_s=ekf_s,
             ekf_rejections=gating.init_state(ekf_idx.size),
             has_waves=any(c.get("waves") for c in configs),
             has_log=any(c.get("log") is not None for c in configs),
+            log_fitted=np.array([c.get("log") is not None for c in configs], dtype=bool),
             has_actuator_sensors=any(c.get("actuators") is not None for c in configs),
             extra=multi.extra, multi_idx=multi.idx, fusion_p=multi.params,
             fusion_sigma=multi.sigma, fusion_var=multi.var,
@@ -446,8 +468,9 @@ class Navigation:
         d = np.where(valid, gating.normalised_distance(innov, s_pos), np.nan)
         g = gating.gate(_take_gate(self.gate_p, i), d, self.ekf_rejections)
         self.ekf_rejections = g.rejections
-        mask = np.stack([g.accept, g.accept, np.ones(i.size, bool),
-                         np.full(i.size, self.log_meas is not None)], axis=1)
+        # the log only on the ships that carry one (another ship's log must not count)
+        with_log = self.log_fitted[i] if self.log_meas is not None else np.zeros(i.size, bool)
+        mask = np.stack([g.accept, g.accept, np.ones(i.size, bool), with_log], axis=1)
         state, self.ekf_innovation = ekf.update(self.ekf_p, pred, np.nan_to_num(z), mask, R_meas)
         if self.adapt_rows is not None:
             nu, hph, ok = adaptive.innovation_group(self.ekf_innovation.nu,
@@ -805,7 +828,7 @@ def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
         window = tab[i, _F_THRESHOLD]  # reopen_factor ** 0 = 1, also for an infinite factor
         if rejections0[i]:
             window = window * tab[i, _F_REOPEN] ** float(rejections0[i])
-        have = math.isfinite(d)
+        have = not math.isnan(d)  # (as gating.gate: only NaN means no fix)
         accept = have and d <= window
         reject = have and not accept
         count = 0 if accept else rejections0[i] + (1 if reject else 0)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.linalg import solve_discrete_are
 
 from trafficsim.estimation import ca
 from trafficsim.estimation.gating import chi2_quantile
@@ -147,3 +148,130 @@ def test_nis_chi_square_when_truth_follows_the_model() -> None:
     f = ca.run(p, z)
     e = f.x[:, -1] - truth[:, -1]
     np.testing.assert_allclose(e.var(axis=0), np.diagonal(f.p[0, -1]), rtol=0.15)
+
+
+# ---------------------------------------------------------------- textbook filter, edge cases
+
+
+def _textbook_run(params: ca.CAParams, z: np.ndarray) -> dict[str, np.ndarray]:
+    """Plain matrix Kalman filter per series (explicit inverse, Joseph update) from the printed
+    initial conditions; NaN measurements are skipped (prediction kept)."""
+    m, n = z.shape
+    out = {k: np.full((m, n, 3), np.nan) for k in ("x", "xp")}
+    out.update({k: np.full((m, n, 3, 3), np.nan) for k in ("p", "pp")})
+    out.update({k: np.full((m, n), np.nan) for k in ("nu", "s")})
+    H = np.array([[1.0, 0.0, 0.0]])
+    for i in range(m):
+        T, r = params.dt_s[i], params.sigma_meas[i] ** 2
+        qc = 2.0 * params.alpha_per_s[i] * params.sigma_acc[i] ** 2
+        F = np.array([[1.0, T, T * T / 2], [0.0, 1.0, T], [0.0, 0.0, 1.0]])
+        Q = qc * np.array([[T**5 / 20, T**4 / 8, T**3 / 6], [T**4 / 8, T**3 / 3, T**2 / 2],
+                           [T**3 / 6, T**2 / 2, T]])
+        x = np.array([z[i, 1], (z[i, 1] - z[i, 0]) / T, 0.0])
+        P = np.array([[r, r / T, 0.0], [r / T, 2 * r / T**2, 0.0], [0.0, 0.0, 0.0]])
+        out["x"][i, 1], out["p"][i, 1] = x, P
+        for k in range(2, n):
+            x, P = F @ x, F @ P @ F.T + Q
+            out["xp"][i, k], out["pp"][i, k] = x, P
+            S = float((H @ P @ H.T)[0, 0]) + r
+            nu = z[i, k] - x[0]
+            out["nu"][i, k], out["s"][i, k] = nu, S
+            if np.isfinite(nu):
+                K = P @ H.T / S
+                x = x + K[:, 0] * nu
+                A = np.eye(3) - K @ H
+                P = A @ P @ A.T + r * K @ K.T
+            out["x"][i, k], out["p"][i, k] = x, P
+    return out
+
+
+def test_run_equals_a_joseph_form_textbook_filter_with_gaps() -> None:
+    """Six series with different T, sigma_R, sigma_a and alpha, random measurements with 20 %
+    missing: filtered and predicted states and covariances, innovations and their variances
+    all equal the textbook filter (1e-9)."""
+    rng = np.random.default_rng(51)
+    m, n = 6, 40
+    p = ca.CAParams.of(m, rng.uniform(0.5, 3, m), rng.uniform(0.5, 5, m),
+                       rng.uniform(0.01, 0.3, m), rng.uniform(0.01, 0.2, m))
+    z = np.cumsum(rng.normal(0, 5, (m, n)), axis=1)
+    z[:, 2:][rng.random((m, n - 2)) < 0.2] = np.nan
+    f = ca.run(p, z)
+    ref = _textbook_run(p, z)
+    for got, key in ((f.x, "x"), (f.p, "p"), (f.x_pred, "xp"), (f.p_pred, "pp"),
+                     (f.innovation, "nu"), (f.innovation_var, "s")):
+        np.testing.assert_allclose(got, ref[key], rtol=1e-9, atol=1e-9, err_msg=key)
+    assert np.all(np.isnan(f.x_pred[:, :2])) and np.all(np.isnan(f.x[:, 0]))
+
+
+def test_gain_converges_to_the_discrete_riccati_solution() -> None:
+    """After 400 samples the CA filter's gain ``P(k|k-1) H^T / S`` equals the one from scipy's
+    DARE solver for the same F, H, Q, R (T = 2 s and 0.5 s)."""
+    p = ca.CAParams.of(2, [2.0, 0.5], [3.0, 1.0], [0.05, 0.2], [1 / 30, 0.1])
+    f = ca.run(p, np.zeros((2, 400)))
+    phi, q = ca.transition(p.dt_s), ca.process_noise(p)
+    H = np.array([[1.0, 0.0, 0.0]])
+    for i in range(2):
+        r = p.sigma_meas[i] ** 2
+        M = solve_discrete_are(phi[i].T, H.T, q[i], np.array([[r]]))
+        k_dare = M[:, 0] / (M[0, 0] + r)
+        k_run = f.p_pred[i, -1, :, 0] / f.innovation_var[i, -1]
+        np.testing.assert_allclose(k_run, k_dare, rtol=1e-6)
+
+
+def test_zero_process_noise_is_the_least_squares_straight_line() -> None:
+    """sigma_a = 0 (allowed: Q = 0) with the printed start, which is the exact posterior of a
+    line through the first two samples: the filter is then recursive least squares, so after
+    sample k its position and velocity are the straight line fitted to samples 0..k by
+    ``np.polyfit``, evaluated at sample k, and the acceleration stays 0."""
+    rng = np.random.default_rng(52)
+    n, T = 25, 2.0
+    t = np.arange(n) * T
+    z = 30.0 + 4.0 * t + rng.normal(0, 3.0, n)
+    p = ca.CAParams.of(1, T, 3.0, 0.0, 1 / 30)
+    f = ca.run(p, z[None])
+    for k in (1, 2, 7, n - 1):
+        slope, icpt = np.polyfit(t[:k + 1], z[:k + 1], 1)
+        np.testing.assert_allclose(f.x[0, k, :2], [icpt + slope * t[k], slope], rtol=1e-9)
+        assert f.x[0, k, 2] == 0.0
+        A = np.stack([np.ones(k + 1), t[:k + 1] - t[k]], axis=1)
+        np.testing.assert_allclose(f.p[0, k, :2, :2], 9.0 * np.linalg.inv(A.T @ A), rtol=1e-9)
+
+
+def test_two_samples_only_and_bad_starts() -> None:
+    """N = 2: the record is the initial conditions and nothing else; one sample, or a missing
+    first or second sample, cannot start the filter."""
+    p = ca.CAParams.of(1, T, 3.0, 0.05, 1 / 30)
+    f = ca.run(p, np.array([[10.0, 20.0]]))
+    np.testing.assert_allclose(f.x[0, 1], [20.0, 5.0, 0.0])
+    assert np.all(np.isnan(f.innovation))
+    for z in ([[1.0]], [[np.nan, 1.0, 2.0]], [[1.0, np.inf, 2.0]]):
+        with pytest.raises(ValueError, match="first two"):
+            ca.run(p, np.array(z))
+
+
+def test_restart_ignores_masked_series_without_a_measurement() -> None:
+    """A restart requested where the measurement is NaN keeps that series as it was."""
+    p = ca.CAParams.of(2, T, 3.0, 0.05, 1 / 30)
+    x = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    cov = np.tile(np.eye(3) + 0.5, (2, 1, 1))
+    x2, p2 = ca.restart(p, x, cov, np.array([np.nan, 9.0]), np.array([True, True]))
+    np.testing.assert_array_equal(x2[0], x[0])
+    np.testing.assert_array_equal(p2[0], cov[0])
+    assert x2[1, 0] == 9.0 and p2[1, 0, 0] == 9.0 and p2[1, 0, 1] == 0.0
+    assert x[1, 0] == 4.0  # inputs untouched
+
+
+def test_build_keeps_the_ship_order_and_accepts_zero_process_noise() -> None:
+    p = ca.build([{"sigma_acc_mps2": 0.0, "alpha_per_s": 0.0}, {"dt_s": 0.5}])
+    np.testing.assert_array_equal(p.sigma_acc, [0.0, 0.05])
+    np.testing.assert_array_equal(p.alpha_per_s, [0.0, 1 / 30])
+    np.testing.assert_array_equal(ca.process_noise(p)[0], 0.0)
+    for bad in ({"dt_s": 0.0}, {"sigma_acc_mps2": -0.1}, {"alpha_per_s": -1.0}):
+        with pytest.raises(ValueError):
+            ca.build([bad])
+
+
+@pytest.mark.parametrize("key", ["dt_s", "sigma_m", "sigma_acc_mps2", "alpha_per_s"])
+def test_build_rejects_nan(key: str) -> None:
+    with pytest.raises(ValueError):
+        ca.build([{key: float("nan")}])

@@ -255,3 +255,132 @@ def test_joint_covariance_is_positive_definite_and_structured() -> None:
     for i in range(k):
         np.testing.assert_allclose(S[:, 2 * i:2 * i + 2, 2 * i:2 * i + 2], cov[:, i], rtol=1e-12)
     np.testing.assert_allclose(S, S.transpose(0, 2, 1))
+
+
+def test_fused_position_and_weights_equal_the_gls_closed_form() -> None:
+    """With cross-covariances: x_f = (E^T S^-1 E)^-1 E^T S^-1 z by explicit inverses, weights
+    [A_1 .. A_k] = P_f E^T S^-1 summing to I; NaN fixes and NaN covariance entries of invalid
+    receivers change nothing (the result is the GLS of the valid ones)."""
+    rng = np.random.default_rng(81)
+    n, k = 40, 3
+    S = _random_spd(rng, n, 2 * k, 3.0)
+    z = rng.normal(0, 20, (n, k, 2))
+    valid = rng.random((n, k)) < 0.7
+    valid[:, 0] = True
+    zz = np.where(valid[:, :, None], z, np.nan)
+    v2 = np.repeat(valid, 2, axis=1)
+    SS = np.where(v2[:, :, None] & v2[:, None, :], S, np.nan)
+    out = fusion.fuse(zz, SS, valid)
+    for i in range(n):
+        sel = np.flatnonzero(v2[i])
+        Si = np.linalg.inv(S[i][np.ix_(sel, sel)])
+        E = np.tile(np.eye(2), (sel.size // 2, 1))
+        Pf = np.linalg.inv(E.T @ Si @ E)
+        W = Pf @ E.T @ Si
+        np.testing.assert_allclose(out.cov[i], Pf, rtol=1e-9)
+        np.testing.assert_allclose(out.position[i], W @ z[i][valid[i]].ravel(), rtol=1e-9,
+                                   atol=1e-9)
+        np.testing.assert_allclose(out.weights[i][valid[i]].transpose(1, 0, 2).reshape(2, -1),
+                                   W, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(out.weights.sum(axis=1), np.broadcast_to(np.eye(2), (n, 2, 2)),
+                               atol=1e-12)
+    assert np.all(np.isfinite(out.position)) and out.valid.all()
+
+
+def test_fuse_uncorrelated_ignores_nan_in_invalid_slots() -> None:
+    rng = np.random.default_rng(82)
+    n, k = 20, 3
+    cov = _random_spd(rng, n * k, 2, 4.0).reshape(n, k, 2, 2)
+    z = rng.normal(0, 10, (n, k, 2))
+    valid = np.ones((n, k), dtype=bool)
+    valid[:, 2] = False
+    cov_nan, z_nan = cov.copy(), z.copy()
+    cov_nan[:, 2], z_nan[:, 2] = np.nan, np.nan
+    a = fusion.fuse_uncorrelated(z_nan, cov_nan, valid)
+    b = fusion.fuse_uncorrelated(z[:, :2], cov[:, :2])
+    np.testing.assert_allclose(a.position, b.position, rtol=1e-12)
+    np.testing.assert_allclose(a.cov, b.cov, rtol=1e-12)
+    np.testing.assert_array_equal(a.weights[:, 2], 0.0)
+
+
+def test_eq_4_with_i_equal_j_plus_k_r_k_is_the_joseph_covariance() -> None:
+    """[seed 003, eq 4] for i = j plus K R K^T equals the textbook Joseph update of the
+    predicted covariance, for any gain (optimal or not): checked on random 4-state filters."""
+    rng = np.random.default_rng(83)
+    n = 10
+    P = _random_spd(rng, n, 4)
+    Phi = np.eye(4) + rng.normal(0, 0.2, (n, 4, 4))
+    Q = _random_spd(rng, n, 4, 0.1)
+    H = rng.normal(0, 1, (n, 2, 4))
+    R = _random_spd(rng, n, 2)
+    K = rng.normal(0, 0.3, (n, 4, 2))
+    got = fusion.cross_covariance_step(P, Phi, Q, K, H, K, H) + K @ R @ K.transpose(0, 2, 1)
+    for i in range(n):
+        M = Phi[i] @ P[i] @ Phi[i].T + Q[i]
+        A = np.eye(4) - K[i] @ H[i]
+        np.testing.assert_allclose(got[i], A @ M @ A.T + K[i] @ R[i] @ K[i].T, rtol=1e-10)
+    # with the optimal gain this is the covariance of the local filter
+    M = Phi @ P @ Phi.transpose(0, 2, 1) + Q
+    Kopt = M @ H.transpose(0, 2, 1) @ np.linalg.inv(H @ M @ H.transpose(0, 2, 1) + R)
+    joseph = fusion.cross_covariance_step(P, Phi, Q, Kopt, H, Kopt, H) + \
+        Kopt @ R @ Kopt.transpose(0, 2, 1)
+    np.testing.assert_allclose(joseph, M - Kopt @ H @ M, rtol=1e-8, atol=1e-10)
+
+
+def test_single_receiver_and_empty_batch() -> None:
+    """k = 1: the fused fix is the fix and P_f its covariance; n = 0 gives empty results."""
+    rng = np.random.default_rng(84)
+    S = _random_spd(rng, 5, 2)
+    z = rng.normal(0, 10, (5, 1, 2))
+    out = fusion.fuse(z, S)
+    np.testing.assert_allclose(out.position, z[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(out.cov, S, rtol=1e-12)
+    np.testing.assert_allclose(out.weights[:, 0], np.broadcast_to(np.eye(2), (5, 2, 2)),
+                               atol=1e-12)
+    empty = fusion.fuse(np.zeros((0, 2, 2)), np.zeros((0, 4, 4)))
+    assert empty.position.shape == (0, 2) and empty.valid.shape == (0,)
+
+
+def test_reference_point_round_trip_and_full_turn() -> None:
+    """Moving antenna -> reference with w and back with -w is the identity; a heading of
+    2 pi moves the fix exactly as 0 does; the move keeps the lever-arm length |w|."""
+    rng = np.random.default_rng(85)
+    n = 50
+    north, east = rng.normal(0, 1e3, n), rng.normal(0, 1e3, n)
+    psi = rng.uniform(0, 2 * np.pi, n)
+    wx, wy = rng.normal(0, 30, n), rng.normal(0, 5, n)
+    rn, re = fusion.to_reference_point(north, east, psi, wx, wy)
+    np.testing.assert_allclose(np.hypot(rn - north, re - east), np.hypot(wx, wy), rtol=1e-12)
+    bn, be = fusion.to_reference_point(rn, re, psi, -wx, -wy)
+    np.testing.assert_allclose(bn, north, atol=1e-9)
+    np.testing.assert_allclose(be, east, atol=1e-9)
+    a = fusion.to_reference_point(north, east, np.zeros(n), wx, wy)
+    b = fusion.to_reference_point(north, east, np.full(n, 2 * np.pi), wx, wy)
+    np.testing.assert_allclose(a, b, atol=1e-9)
+
+
+def test_joint_covariance_accepts_a_correlation_matrix() -> None:
+    """An (n, k, k) correlation matrix with equal off-diagonals equals the scalar form; an
+    unequal one puts rho_ij s_i s_j in block (i, j) for isotropic receivers."""
+    n, k = 2, 3
+    cov = np.zeros((n, k, 2, 2))
+    sig = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
+    cov[..., 0, 0] = cov[..., 1, 1] = sig**2
+    rho = np.full((n, k, k), 0.3)
+    rho[:, np.arange(k), np.arange(k)] = 1.0
+    np.testing.assert_allclose(fusion.joint_covariance(cov, rho),
+                               fusion.joint_covariance(cov, 0.3))
+    rho[:, 0, 2] = rho[:, 2, 0] = 0.7
+    S = fusion.joint_covariance(cov, rho)
+    np.testing.assert_allclose(S[:, 0:2, 4:6], 0.7 * (sig[:, 0] * sig[:, 2])[:, None, None]
+                               * np.eye(2))
+    np.testing.assert_allclose(S[:, 2:4, 4:6], 0.3 * (sig[:, 1] * sig[:, 2])[:, None, None]
+                               * np.eye(2))
+
+
+@pytest.mark.parametrize("cfg", [{"receivers": [{"sigma_m": float("nan")}]},
+                                 {"receivers": [{"error95_m": float("nan")}]},
+                                 {"correlation": float("nan")}])
+def test_build_rejects_nan(cfg) -> None:
+    with pytest.raises(ValueError):
+        fusion.build([cfg])

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
+from scipy import stats
 
-from trafficsim.estimation import ca, gating, linefit
+from trafficsim.estimation import ca, gating, linefit, tracker
 
 SIGMA_DECCA = 10.0 / np.sqrt(2.0)  # DRMS 10 m in Plymouth Sound [seed 002, 6.4], per axis
 
@@ -207,3 +210,125 @@ def test_ca_with_gate_on_normalised_innovation() -> None:
     err = np.abs(est - truth)[:, j + 2:]
     assert np.all(err < 5 * 3.0)
     assert np.all(np.sqrt(np.mean(err**2, axis=(0, 2))) < 3.5)  # raw fix noise 3 m at most
+
+
+# ---------------------------------------------------------------- rule against a loop, edges
+
+
+def _gate_reference(threshold: float, factor: float, max_rej: int, seq: list[float]
+                    ) -> list[tuple[bool, bool, int, float]]:
+    """The rule of the module docstring, one ship, written as plain if/else."""
+    c = 0
+    out = []
+    for d in seq:
+        window = threshold * (factor**c if c else 1.0)
+        if math.isnan(d):
+            out.append((False, False, c, window))
+            continue
+        if d <= window:
+            c = 0
+            out.append((True, False, c, window))
+        else:
+            c += 1
+            restart = c >= max_rej
+            if restart:
+                c = 0
+            out.append((False, restart, c, window))
+    return out
+
+
+def test_gate_vectorised_equals_the_rule_written_as_a_loop() -> None:
+    """200 ships with random thresholds, factors (1 to 3, and inf), counts (1 to 4) and random
+    statistics with 15 % NaN, 60 steps: accept, restart, state and window match the loop."""
+    rng = np.random.default_rng(91)
+    n, steps = 200, 60
+    thr = rng.uniform(1, 10, n)
+    fac = rng.choice([1.0, 1.5, 2.0, 3.0, np.inf], n)
+    cnt = rng.integers(1, 5, n)
+    cfg = [{"gate_sigma": t, "reopen_factor": f, "max_rejections": int(c)}
+           for t, f, c in zip(thr, fac, cnt, strict=True)]
+    p = gating.build(cfg)
+    d = rng.uniform(0, 4, (n, steps)) * thr[:, None]
+    d[rng.random((n, steps)) < 0.15] = np.nan
+    rej = gating.init_state(n)
+    got = []
+    for k in range(steps):
+        g = gating.gate(p, d[:, k], rej)
+        rej = g.rejections
+        got.append(g)
+    for i in range(n):
+        ref = _gate_reference(thr[i], fac[i], int(cnt[i]), list(d[i]))
+        for k, (acc, rst, c, win) in enumerate(ref):
+            g = got[k]
+            assert (bool(g.accept[i]), bool(g.restart[i]), int(g.rejections[i])) == \
+                (acc, rst, c), (i, k)
+            assert g.window[i] == pytest.approx(win, rel=1e-12)
+
+
+def test_gate_boundary_is_inclusive() -> None:
+    """d equal to the window is accepted, the next float above it rejected."""
+    p = gating.build([{"window_diameter_m": 100.0}] * 2)
+    g = gating.gate(p, np.array([50.0, np.nextafter(50.0, 100.0)]), gating.init_state(2))
+    np.testing.assert_array_equal(g.accept, [True, False])
+    np.testing.assert_array_equal(g.rejections, [0, 1])
+
+
+def test_reopen_factor_one_never_opens_and_empty_batch() -> None:
+    p = gating.build([{"window_diameter_m": 20.0, "reopen_factor": 1.0, "max_rejections": 5}])
+    out = run_gate(p, [15.0, 15.0, 15.0, 9.0])
+    assert [w for _, _, w in out] == [10.0, 10.0, 10.0, 10.0]
+    assert [a for a, _, _ in out] == [False, False, False, True]
+    empty = gating.gate(gating.build([]), np.zeros(0), gating.init_state(0))
+    assert empty.accept.shape == (0,) and empty.rejections.dtype == np.int64
+
+
+def test_infinite_distance_is_a_rejection() -> None:
+    """E.g. the normalised distance of a non-zero innovation with zero innovation variance."""
+    p = gating.build([{"window_diameter_m": 100.0, "max_rejections": 1}])
+    with np.errstate(divide="ignore"):
+        d = gating.normalised_distance(np.array([3.0]), np.array([0.0]))
+    assert d[0] == np.inf
+    g = gating.gate(p, d, gating.init_state(1))
+    assert not g.accept[0] and g.restart[0]
+
+
+@pytest.mark.parametrize("cfg", [{"window_diameter_m": float("nan")},
+                                 {"gate_sigma": float("nan")}, {"reopen_factor": float("nan")}])
+def test_build_rejects_nan(cfg) -> None:
+    with pytest.raises(ValueError):
+        gating.build([cfg])
+
+
+def test_normalised_distance_full_equals_diagonal_for_a_diagonal_s() -> None:
+    rng = np.random.default_rng(92)
+    nu = rng.normal(size=(30, 2))
+    diag = rng.uniform(0.1, 5, (30, 2))
+    full = np.zeros((30, 2, 2))
+    full[:, 0, 0], full[:, 1, 1] = diag[:, 0], diag[:, 1]
+    np.testing.assert_allclose(gating.normalised_distance(nu, full),
+                               gating.normalised_distance(nu, diag), rtol=1e-12)
+    with pytest.raises(ValueError):
+        gating.normalised_distance(rng.normal(size=(3, 3)), np.tile(np.eye(3), (3, 1, 1)))
+
+
+@pytest.mark.parametrize("dof", [1, 2, 3, 4, 5, 9, 10, 31, 100])
+def test_chi2_sf_against_scipy(dof: int) -> None:
+    """Closed form against scipy.stats over the bulk and the far upper tail (down to 1e-200)."""
+    x = np.concatenate([np.linspace(0.01, 3 * dof + 30, 60), [dof + 800.0]])
+    for xi in x:
+        ref = float(stats.chi2.sf(xi, dof))
+        assert gating.chi2_sf(float(xi), dof) == pytest.approx(ref, rel=1e-9, abs=1e-300)
+    assert gating.chi2_sf(0.0, dof) == 1.0 and gating.chi2_sf(-1.0, dof) == 1.0
+
+
+def test_chi2_quantile_agrees_with_scipy_and_the_trackers_even_quantile() -> None:
+    for p in (0.5, 0.9, 0.99, 0.9999):
+        for dof in (2, 4, 6):
+            assert gating.chi2_quantile(p, dof) == pytest.approx(
+                tracker.chi2_quantile_even(p, dof), rel=1e-9)
+        for dof in (1, 3, 7, 50):
+            assert gating.chi2_quantile(p, dof) == pytest.approx(stats.chi2.ppf(p, dof),
+                                                                 rel=1e-8)
+    for p, dof in ((0.0, 2), (1.0, 2), (0.5, 0)):
+        with pytest.raises(ValueError):
+            gating.chi2_quantile(p, dof)

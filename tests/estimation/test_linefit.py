@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trafficsim.estimation import linefit
+from trafficsim.estimation import gating, linefit
 
 # Table 6.1 "Variation in Gain with Number of Points" [seed 002, 6.4]
 TABLE_6_1 = [(2, 0.5556), (3, 0.4375), (4, 0.3600), (5, 0.3056), (6, 0.2653), (7, 0.2344),
@@ -156,3 +156,136 @@ def test_build_checks() -> None:
         linefit.build([{"extrapolation": "cubic"}])
     p = linefit.build([{}])
     assert p.n_points[0] == 4 and p.gain[0] == pytest.approx(0.36)
+
+
+# ---------------------------------------------------------------- against a per-ship loop
+
+
+def _regression_prediction(pts: np.ndarray, growth: float) -> np.ndarray:
+    """[seed 002, 6.2]: abscissa = coordinate of larger spread, y on x by np.polyfit, the
+    start point plus growth times the span along x, y from the line."""
+    spread = ((pts - pts.mean(axis=0)) ** 2).sum(axis=0)
+    ix = int(np.argmax(spread))
+    iy = 1 - ix
+    if spread[ix] > 0:
+        a, b = np.polyfit(pts[:, ix], pts[:, iy], 1)
+    else:
+        a, b = 0.0, pts[:, iy].mean()
+    out = np.empty(2)
+    out[ix] = pts[0, ix] + growth * (pts[-1, ix] - pts[0, ix])
+    out[iy] = a * out[ix] + b
+    return out
+
+
+def _reference_run(n_pts: int, growth: float, gain: float, z: np.ndarray,
+                   gate: tuple[float, float, int] | None) -> dict[str, np.ndarray]:
+    """The filter of the module docstring for one ship, as a plain loop with a list history."""
+    steps = z.shape[0]
+    out = {"estimate": np.full((steps, 2), np.nan), "prediction": np.full((steps, 2), np.nan),
+           "rejected": np.zeros(steps, bool), "restarted": np.zeros(steps, bool)}
+    hist: list[np.ndarray] = []
+    fails = 0
+    for k in range(steps):
+        have = bool(np.all(np.isfinite(z[k])))
+        pred = _regression_prediction(np.array(hist[-n_pts:]), growth) \
+            if len(hist) >= n_pts else None
+        use = have
+        if gate is not None and pred is not None and have:
+            thr, fac, max_rej = gate
+            if np.hypot(*(z[k] - pred)) <= thr * fac**fails:
+                fails = 0
+            else:
+                fails += 1
+                use = False
+                if fails >= max_rej:
+                    fails = 0
+                    hist, pred = [], None
+                    out["restarted"][k] = True
+                else:
+                    out["rejected"][k] = True
+        if pred is None:
+            if have:
+                out["estimate"][k] = z[k]
+                hist.append(z[k].copy())
+            continue
+        out["prediction"][k] = pred
+        est = pred + gain * (z[k] - pred) if use else pred
+        out["estimate"][k] = est
+        hist.append(est)
+    return out
+
+
+@pytest.mark.parametrize("gated", [False, True])
+def test_run_equals_a_per_ship_loop_with_brute_force_regression(gated: bool) -> None:
+    """Ships with n = 2..6, both growth rules, a gain override, noisy curving tracks with
+    missing fixes, gross errors and a persistent jump (restart): estimates, predictions and
+    the rejected / restarted flags equal a plain loop using np.polyfit."""
+    rng = np.random.default_rng(101)
+    cfgs = [{"n_points": 2}, {"n_points": 3, "extrapolation": "unbiased"}, {"n_points": 4},
+            {"n_points": 5, "gain": 0.5}, {"n_points": 6}, {"n_points": 4, "gain": 0.0}]
+    ns, steps = len(cfgs), 80
+    t = np.arange(steps, dtype=float)
+    head = rng.uniform(0, 2 * np.pi, ns)[:, None] + 0.01 * t
+    z = np.stack([np.cumsum(6.0 * np.cos(head), axis=1), np.cumsum(6.0 * np.sin(head), axis=1)],
+                 axis=-1) + rng.normal(0, 4.0, (ns, steps, 2))
+    z[rng.random((ns, steps)) < 0.1] = np.nan
+    gross = rng.random((ns, steps)) < 0.05
+    z[gross] += 150.0
+    z[:, 60:, 1] += 400.0
+    p = linefit.build(cfgs)
+    gp = gating.build([{"window_diameter_m": 80.0}] * ns) if gated else None
+    r = linefit.run(p, z, gp)
+    for i in range(ns):
+        ref = _reference_run(int(p.n_points[i]), float(p.growth[i]), float(p.gain[i]), z[i],
+                             (40.0, 2.0, 3) if gated else None)
+        np.testing.assert_allclose(r.estimate[i], ref["estimate"], rtol=1e-9, atol=1e-7)
+        np.testing.assert_allclose(r.prediction[i], ref["prediction"], rtol=1e-9, atol=1e-7)
+        np.testing.assert_array_equal(r.rejected[i], ref["rejected"])
+        np.testing.assert_array_equal(r.restarted[i], ref["restarted"])
+    if gated:
+        assert r.restarted.any() and r.rejected.any()
+        assert not (r.rejected & r.accepted).any()
+
+
+def test_stationary_ship_predicts_its_own_position() -> None:
+    """All regression points equal (no spread on either axis): the prediction is that point,
+    finite, and the filtered estimate stays on it."""
+    p = linefit.build([{"n_points": 4}])
+    z = np.tile([[[250.0, -40.0]]], (1, 10, 1))
+    r = linefit.run(p, z)
+    np.testing.assert_allclose(r.prediction[0, 4:], np.tile([250.0, -40.0], (6, 1)))
+    np.testing.assert_allclose(r.estimate[0], z[0])
+
+
+def test_start_takes_every_fix_and_waits_over_missing_ones() -> None:
+    """During the unfiltered start a refusal from the gate is ignored and a missing fix gives
+    no estimate and does not count towards the n points."""
+    p = linefit.build([{"n_points": 3}])
+    st = linefit.init_state(p)
+    out = linefit.step(p, st, np.array([[1.0, 2.0]]), accept=np.array([False]))
+    np.testing.assert_array_equal(out.estimate, [[1.0, 2.0]])
+    assert out.state.count[0] == 1
+    out = linefit.step(p, out.state, np.array([[np.nan, np.nan]]))
+    assert np.all(np.isnan(out.estimate)) and out.state.count[0] == 1
+    for z in ([2.0, 4.0], [3.0, 6.0]):
+        out = linefit.step(p, out.state, np.array([z]))
+    assert out.state.count[0] == 3
+    nxt = linefit.step(p, out.state, np.array([[10.0, 10.0]]), accept=np.array([False]))
+    a = float(linefit.growth_factor(3))
+    np.testing.assert_allclose(nxt.estimate, [[1.0 + 2.0 * a, 2.0 + 4.0 * a]])
+
+
+def test_restart_forgets_the_history() -> None:
+    p = linefit.build([{"n_points": 2}, {"n_points": 2}])
+    st = linefit.init_state(p)
+    for z in ([0.0, 0.0], [1.0, 0.0], [2.0, 0.0]):
+        st = linefit.step(p, st, np.array([z, z])).state
+    st = linefit.restart(st, np.array([True, False]))
+    out = linefit.step(p, st, np.array([[500.0, 500.0], [3.0, 0.0]]))
+    np.testing.assert_array_equal(out.estimate[0], [500.0, 500.0])
+    assert np.all(np.isnan(out.prediction[0])) and np.all(np.isfinite(out.prediction[1]))
+
+
+def test_build_rejects_nan_gain() -> None:
+    with pytest.raises(ValueError):
+        linefit.build([{"gain": float("nan")}])

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from scipy.linalg import solve_discrete_are
 
 from trafficsim.errors import InputError
 from trafficsim.estimation import pv
@@ -436,3 +437,178 @@ def test_nees_is_inside_chi_square_bounds_on_the_filters_own_model():
     bad, lo, hi = _nees_run(0.1)
     assert np.mean((bad >= lo) & (bad <= hi)) < 0.2
     assert bad[50:].mean() > 4.5
+
+
+# ---------------------------------------------------------------- textbook filter, edge cases
+
+
+def _textbook_ours(sigma: float, sp: float, dt: float) -> tuple[np.ndarray, ...]:
+    """F, H, R, Q of the module docstring in our state order [N, E, vN, vE]."""
+    F = np.eye(4) + dt * np.eye(4, k=2)
+    H = np.eye(4)[:2]
+    R = np.eye(2) * sigma**2
+    Q = sp * np.kron([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]], np.eye(2))
+    return F, H, R, Q
+
+
+def test_step_and_gain_equal_a_joseph_form_textbook_filter():
+    """Per ship, a plain 4x4 Kalman filter (predict ``F P F^T + Q``, gain with a matrix inverse,
+    Joseph update ``(I - K H) P (I - K H)^T + K R K^T``) on random fixes with drop-outs (NaN
+    fixes where not valid): ``gain``, ``x`` and the assembled covariance agree to 1e-10."""
+    rng = np.random.default_rng(41)
+    n = 5
+    sig, sp, dt = rng.uniform(0.5, 8, n), rng.uniform(1e-3, 1.0, n), rng.uniform(0.1, 3, n)
+    p = pv.PVParams(sigma_m=sig, sp=sp, dt_s=dt)
+    x0 = rng.normal(0, 100, (n, 4))
+    st = pv.init(p, x0[:, 0], x0[:, 1], x0[:, 2], x0[:, 3], sigma_pos_m=rng.uniform(5, 50, n),
+                 sigma_vel_mps=rng.uniform(1, 5, n))
+    ref_x = [x0[i].copy() for i in range(n)]
+    ref_p = [pv.full_covariance(st)[i] for i in range(n)]
+    for _ in range(30):
+        valid = rng.random(n) > 0.25
+        z = rng.normal(0, 200, (n, 2))
+        zn = np.where(valid, z[:, 0], np.nan)
+        ze = np.where(valid, z[:, 1], np.nan)
+        pred = pv.predict(p, st)
+        k_mod = pv.gain(p, pred)
+        st = pv.update(p, pred, zn, ze, valid)
+        for i in range(n):
+            F, H, R, Q = _textbook_ours(sig[i], sp[i], dt[i])
+            x, P = F @ ref_x[i], F @ ref_p[i] @ F.T + Q
+            K = P @ H.T @ np.linalg.inv(H @ P @ H.T + R)
+            np.testing.assert_allclose(k_mod[i, 0], K[[0, 2], 0], rtol=1e-10)
+            np.testing.assert_allclose(k_mod[i, 1], K[[1, 3], 1], rtol=1e-10)
+            if valid[i]:
+                x = x + K @ (z[i] - H @ x)
+                A = np.eye(4) - K @ H
+                P = A @ P @ A.T + K @ R @ K.T
+            ref_x[i], ref_p[i] = x, P
+        assert np.all(np.isfinite(st.x))
+    full = pv.full_covariance(st)
+    for i in range(n):
+        np.testing.assert_allclose(st.x[i], ref_x[i], rtol=1e-10, atol=1e-8)
+        np.testing.assert_allclose(full[i], ref_p[i], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("lam", [1e-7, 1e-4, 1e-2, 0.3, 1.0, 5.0, 100.0])
+def test_steady_state_gain_solves_the_discrete_riccati_equation(lam: float):
+    """K_inf and P_inf against scipy's DARE solver (an independent algorithm) for the per-axis
+    model, over tracking indices lambda = sqrt(S_p dt^3) / sigma from 1e-7 to 100: the
+    predicted covariance M solves ``M = F M F^T - F M H^T (H M H^T + R)^-1 H M F^T + Q``,
+    ``K = M H^T / (H M H^T + R)`` and ``P = (I - K H) M``."""
+    sigma, dt = 3.0, 2.0
+    sp = (lam * sigma) ** 2 / dt**3
+    F = np.array([[1.0, dt], [0.0, 1.0]])
+    H = np.array([[1.0, 0.0]])
+    Q = sp * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    M = solve_discrete_are(F.T, H.T, Q, np.array([[sigma**2]]))
+    K = (M @ H.T / (H @ M @ H.T + sigma**2))[:, 0]
+    P = (np.eye(2) - np.outer(K, H)) @ M
+    np.testing.assert_allclose(pv.steady_state_gain(sigma, sp, dt), K, rtol=1e-7)
+    np.testing.assert_allclose(pv.steady_state_covariance(sigma, sp, dt), P, rtol=1e-7)
+
+
+@pytest.mark.parametrize("lam", [1e-8, 1e-5, 1e-2, 1.0, 30.0, 1e3])
+def test_steady_state_covariance_is_a_fixed_point_of_one_cycle(lam: float):
+    """One predict + update from P_inf returns P_inf (rtol 1e-9), and the gain of that cycle is
+    K_inf: the defining property of the steady state, checked without iterating."""
+    sigma, dt = 2.0, 0.5
+    sp = (lam * sigma) ** 2 / dt**3
+    p = pv.PVParams(np.array([sigma]), np.array([sp]), np.array([dt]))
+    block = pv.steady_state_covariance(sigma, sp, dt)
+    st = pv.PVState(x=np.zeros((1, 4)), P=np.repeat(block[None, None], 2, axis=1))
+    pred = pv.predict(p, st)
+    np.testing.assert_allclose(pv.gain(p, pred)[0], np.tile(pv.steady_state_gain(sigma, sp, dt),
+                                                             (2, 1)), rtol=1e-9)
+    np.testing.assert_allclose(pv.update(p, pred, 0.0, 0.0).P[0, 0], block, rtol=1e-9)
+
+
+def test_nees_equals_the_quadratic_form_of_the_full_covariance():
+    rng = np.random.default_rng(42)
+    n = 20
+    p = pv.PVParams(rng.uniform(1, 5, n), rng.uniform(1e-3, 0.1, n), rng.uniform(0.5, 2, n))
+    st = pv.init(p, 0.0, 0.0, sigma_pos_m=rng.uniform(2, 30, n), sigma_vel_mps=2.0)
+    for _ in range(5):
+        st = pv.step(p, st, rng.normal(0, 10, n), rng.normal(0, 10, n))
+    truth = st.x + rng.normal(0, 3, (n, 4))
+    e = st.x - truth
+    ref = np.einsum("ni,nij,nj->n", e, np.linalg.inv(pv.full_covariance(st)), e)
+    np.testing.assert_allclose(pv.nees(st, truth), ref, rtol=1e-10)
+    np.testing.assert_array_equal(pv.nees(st, st.x), 0.0)
+
+
+def test_velocity_over_ground_by_hand():
+    """(vN, vE) = (3, 4): 5 m/s at atan2(4, 3); due east, south, west give pi/2, pi, 3 pi/2;
+    at rest the course is 0."""
+    p = pv.build([{}] * 5)
+    st = pv.init(p, 0.0, 0.0, [3.0, 0.0, -2.0, 0.0, 0.0], [4.0, 1.0, 0.0, -7.0, 0.0])
+    sog, cog = pv.velocity_over_ground(st)
+    np.testing.assert_allclose(sog, [5.0, 1.0, 2.0, 7.0, 0.0])
+    np.testing.assert_allclose(cog, [np.arctan2(4.0, 3.0), np.pi / 2, np.pi, 1.5 * np.pi, 0.0])
+
+
+def test_course_over_ground_is_below_two_pi_for_a_tiny_westward_velocity():
+    p = pv.build([{}])
+    st = pv.init(p, 0.0, 0.0, 5.0, -1e-18)
+    _, cog = pv.velocity_over_ground(st)
+    assert 0.0 <= cog[0] < 2.0 * np.pi
+
+
+@pytest.mark.parametrize("bad", ["two", None, [2.0]])
+def test_build_non_numeric_value_is_an_input_error_naming_the_key(bad):
+    with pytest.raises(InputError, match="sigma_m"):
+        pv.build([{"sigma_m": bad}])
+
+
+def test_build_rejects_infinite_values_naming_the_key():
+    for key in ("sigma_m", "sp_m2ps3", "dt_s"):
+        with pytest.raises(InputError, match=key):
+            pv.build([{}, {key: float("inf")}])
+
+
+def test_zero_interval_predict_is_the_identity_and_a_repeated_fix_halves_its_variance():
+    """dt = 0: F = I and Q = 0, so predict changes nothing. Two updates with the same fix of
+    variance sigma^2 carry the information of one fix of variance sigma^2 / 2."""
+    rng = np.random.default_rng(43)
+    n = 4
+    p0 = pv.PVParams(np.full(n, 3.0), np.full(n, 0.05), np.zeros(n))
+    st = pv.init(p0, rng.normal(0, 10, n), rng.normal(0, 10, n), 1.0, 2.0,
+                 sigma_pos_m=20.0, sigma_vel_mps=4.0)
+    same = pv.predict(p0, st)
+    np.testing.assert_array_equal(same.x, st.x)
+    np.testing.assert_array_equal(same.P, st.P)
+    zn, ze = rng.normal(0, 10, n), rng.normal(0, 10, n)
+    twice = pv.update(p0, pv.update(p0, st, zn, ze), zn, ze)
+    half = pv.PVParams(np.full(n, 3.0 / np.sqrt(2.0)), p0.sp, p0.dt_s)
+    once = pv.update(half, st, zn, ze)
+    np.testing.assert_allclose(twice.x, once.x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(twice.P, once.P, rtol=1e-12)
+
+
+def test_init_covariance_layout():
+    """Diagonal start: sigma_pos defaults to the fix sigma, sigma_vel to 10 m/s, no cross
+    terms, same on both axes; converged start: the steady-state block on both axes."""
+    p = pv.build([{"sigma_m": 1.5}, {"sigma_m": 4.0, "sp_m2ps3": 0.1, "dt_s": 2.0}])
+    st = pv.init(p, [1.0, 2.0], [3.0, 4.0])
+    np.testing.assert_array_equal(st.x, [[1.0, 3.0, 0.0, 0.0], [2.0, 4.0, 0.0, 0.0]])
+    np.testing.assert_allclose(st.P[:, :, pv.POS, pv.POS], [[2.25, 2.25], [16.0, 16.0]])
+    np.testing.assert_allclose(st.P[:, :, pv.VEL, pv.VEL], 100.0)
+    np.testing.assert_array_equal(st.P[:, :, pv.POS, pv.VEL], 0.0)
+    conv = pv.init(p, 0.0, 0.0, converged=True)
+    block = pv.steady_state_covariance(p.sigma_m, p.sp, p.dt_s)
+    for axis in range(2):
+        np.testing.assert_allclose(conv.P[:, axis], block)
+
+
+def test_single_ship_and_empty_batch():
+    """One ship behaves like a row of a batch; an empty batch runs and stays empty."""
+    cfg = [{"sigma_m": 2.0}, {"sigma_m": 3.0, "dt_s": 0.5}]
+    both = pv.step(pv.build(cfg), pv.init(pv.build(cfg), [0.0, 5.0], [1.0, 6.0]),
+                   [1.0, 7.0], [2.0, 8.0])
+    one = pv.step(pv.build(cfg[1:]), pv.init(pv.build(cfg[1:]), 5.0, 6.0), 7.0, 8.0)
+    np.testing.assert_array_equal(one.x[0], both.x[1])
+    np.testing.assert_array_equal(one.P[0], both.P[1])
+    empty = pv.build([])
+    st = pv.step(empty, pv.init(empty, np.zeros(0), np.zeros(0)), np.zeros(0), np.zeros(0))
+    assert st.x.shape == (0, 4) and st.P.shape == (0, 2, 2, 2)
+    assert pv.nees(st, np.zeros((0, 4))).shape == (0,)

@@ -191,3 +191,134 @@ def test_gaps_in_the_heading_are_bridged() -> None:
     np.testing.assert_allclose(out["r_radps"][3:-3], rate, atol=1e-6)
     assert np.all(np.isfinite(out["sigma_r_radps"]))
     assert out["sigma_psi_rad"][53] > out["sigma_psi_rad"][100]  # less certain in the gap
+
+
+def _batch_posterior_two_point_start(p: ca.CAParams, z: np.ndarray, i: int
+                                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian posterior of series ``i`` of the CA model as one least-squares problem.
+
+    Unknowns: position and velocity at sample 1 (acceleration 0 there, as the printed start
+    asserts) and the full state at samples 2..N-1. Measurements z(0) = s(1) - T u(1) + n (the
+    constant-velocity step behind the printed start) and z(k) = s(k) + n for k >= 1 (NaN
+    skipped); process equations x(k+1) - Phi x(k) ~ N(0, Q). Returns means ``(N, 3)`` and
+    covariances ``(N, 3, 3)`` for samples 1..N-1 (sample 0 NaN)."""
+    n = z.shape[1]
+    T, r = p.dt_s[i], p.sigma_meas[i] ** 2
+    phi, q = ca.transition(p.dt_s)[i], ca.process_noise(p)[i]
+    qi = np.linalg.inv(q)
+    dim = 2 + 3 * (n - 2)
+
+    def sel(k: int) -> np.ndarray:
+        s_k = np.zeros((3, dim))
+        if k == 1:
+            s_k[0, 0] = s_k[1, 1] = 1.0
+        else:
+            s_k[:, 2 + 3 * (k - 2):5 + 3 * (k - 2)] = np.eye(3)
+        return s_k
+
+    info = np.zeros((dim, dim))
+    rhs = np.zeros(dim)
+    h0 = np.zeros(dim)
+    h0[0], h0[1] = 1.0, -T
+    info += np.outer(h0, h0) / r
+    rhs += h0 * z[i, 0] / r
+    for k in range(1, n):
+        if np.isfinite(z[i, k]):
+            h = sel(k)[0]
+            info += np.outer(h, h) / r
+            rhs += h * z[i, k] / r
+        if k + 1 < n:
+            d = sel(k + 1) - phi @ sel(k)
+            info += d.T @ qi @ d
+    cov = np.linalg.inv(info)
+    mean = cov @ rhs
+    xs = np.full((n, 3), np.nan)
+    ps = np.full((n, 3, 3), np.nan)
+    for k in range(1, n):
+        xs[k] = sel(k) @ mean
+        ps[k] = sel(k) @ cov @ sel(k).T
+    return xs, ps
+
+
+def test_smooth_ca_equals_the_batch_posterior_with_gaps() -> None:
+    """``smooth_ca`` (printed start, RTS from sample 1) equals the whole-record posterior of the
+    same model solved as one least-squares problem, for three series with different settings
+    and missing samples (also the last one)."""
+    rng = np.random.default_rng(61)
+    m, n = 3, 12
+    p = ca.CAParams.of(m, [2.0, 1.0, 0.5], [3.0, 0.5, 1.0], [0.05, 0.2, 1.0], [1 / 30, 0.1, 0.3])
+    z = np.cumsum(rng.normal(0, 4, (m, n)), axis=1)
+    z[0, [4, 5, n - 1]] = np.nan
+    z[2, 6] = np.nan
+    s = smoother.smooth_ca(p, z)
+    for i in range(m):
+        xs, ps = _batch_posterior_two_point_start(p, z, i)
+        np.testing.assert_allclose(s.x[i, 1:], xs[1:], rtol=1e-7, atol=1e-8)
+        np.testing.assert_allclose(s.p[i, 1:], ps[1:], rtol=1e-6, atol=1e-10)
+
+
+def test_smooth_ca_with_zero_process_noise_is_the_least_squares_line() -> None:
+    """sigma_a = 0: the whole record is one straight line, so every smoothed sample from 1 on
+    is the least-squares line through all samples (np.polyfit) and the velocity its slope."""
+    rng = np.random.default_rng(62)
+    n, T = 15, 2.0
+    t = np.arange(n) * T
+    z = 5.0 + 3.0 * t + rng.normal(0, 2.0, n)
+    s = smoother.smooth_ca(ca.CAParams.of(1, T, 2.0, 0.0, 1 / 30), z[None])
+    slope, icpt = np.polyfit(t, z, 1)
+    np.testing.assert_allclose(s.x[0, 1:, 0], icpt + slope * t[1:], rtol=1e-9)
+    np.testing.assert_allclose(s.x[0, 1:, 1], slope, rtol=1e-9)
+
+
+def test_rts_leaves_samples_before_first_nan_and_keeps_the_last() -> None:
+    """``first = 3``: samples 0-2 stay NaN, the last sample is the filtered one."""
+    rng = np.random.default_rng(63)
+    p = ca.CAParams.of(2, T, 3.0, 0.05, 1 / 30)
+    f = ca.run(p, np.cumsum(rng.normal(0, 3, (2, 10)), axis=1))
+    out = smoother.rts(f.x, f.p, f.x_pred, f.p_pred, ca.transition(p.dt_s), first=3)
+    assert np.all(np.isnan(out.x[:, :3])) and np.all(np.isnan(out.p[:, :3]))
+    assert np.all(np.isfinite(out.x[:, 3:]))
+    np.testing.assert_array_equal(out.x[:, -1], f.x[:, -1])
+    np.testing.assert_array_equal(out.p[:, -1], f.p[:, -1])
+
+
+def test_unwrap_finite_edge_cases() -> None:
+    """Rows are independent; an all-NaN row stays NaN; one sample is unchanged; crossings of
+    north in both directions are unwrapped (350 -> 10 deg is +20, 10 -> 350 is -20)."""
+    a = np.radians(np.array([[350.0, 10.0, np.nan, 30.0],
+                             [10.0, 350.0, 330.0, np.nan],
+                             [np.nan] * 4]))
+    out = smoother.unwrap_finite(a)
+    np.testing.assert_allclose(np.degrees(out[0]), [350.0, 370.0, np.nan, 390.0])
+    np.testing.assert_allclose(np.degrees(out[1]), [10.0, -10.0, -30.0, np.nan])
+    assert np.all(np.isnan(out[2]))
+    np.testing.assert_array_equal(smoother.unwrap_finite(np.array([5.0])), [5.0])
+    assert np.isnan(a[0, 2]) and a[0, 1] == np.radians(10.0)  # input untouched
+
+
+def test_body_velocities_rows_equal_single_records_and_rotation_identities() -> None:
+    """A (2, N) call equals two (N,) calls; u^2 + v^2 is the squared water velocity
+    |ground velocity - current|^2 (a rotation); speed = hypot(vn, ve); drift = course - psi
+    wrapped to [-pi, pi)."""
+    rng = np.random.default_rng(64)
+    n = 40
+    t = np.arange(n) * T
+    north = np.stack([4.0 * t, -2.0 * t + 0.01 * t**2]) + rng.normal(0, 1, (2, n))
+    east = np.stack([1.0 * t, 3.0 * t]) + rng.normal(0, 1, (2, n))
+    psi = np.stack([np.full(n, 0.3), np.mod(2.0 + 0.01 * t, 2 * np.pi)])
+    cur = np.array([0.2, -0.4])
+    both = smoother.body_velocities(north, east, psi, T, current_north_mps=cur,
+                                    current_east_mps=cur[::-1])
+    for i in range(2):
+        one = smoother.body_velocities(north[i], east[i], psi[i], T,
+                                       current_north_mps=cur[i], current_east_mps=cur[1 - i])
+        for key, value in one.items():
+            np.testing.assert_allclose(both[key][i], value, rtol=1e-12, atol=1e-12, err_msg=key)
+    wn = both["vn_mps"] - cur[:, None]
+    we = both["ve_mps"] - cur[::-1, None]
+    np.testing.assert_allclose(both["u_mps"] ** 2 + both["v_mps"] ** 2, wn**2 + we**2,
+                               rtol=1e-12)
+    np.testing.assert_allclose(both["speed_mps"], np.hypot(both["vn_mps"], both["ve_mps"]))
+    d = np.mod(both["course_rad"] - both["psi_rad"] + np.pi, 2 * np.pi) - np.pi
+    np.testing.assert_allclose(np.angle(np.exp(1j * (both["drift_rad"] - d))), 0.0, atol=1e-12)
+    assert np.all(np.abs(both["drift_rad"]) <= np.pi)

@@ -11,6 +11,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from trafficsim.errors import InputError
 from trafficsim.estimation import tracker
 from trafficsim.geometry import cpa
 from trafficsim.noise import independent_streams
@@ -611,3 +612,369 @@ def test_late_reports_over_many_wraps_of_the_history_equal_time_order() -> None:
         assert state.t_s[k] == max(e[0] for e in meas)
         np.testing.assert_allclose(state.x[k], x, rtol=1e-9, atol=1e-8)
         np.testing.assert_allclose(state.P[k], P, rtol=1e-7, atol=1e-10)
+
+
+# ---------------------------------------------------------------- out of sequence, gating, edges
+
+
+def _F_Q(d: float, q: float) -> tuple[np.ndarray, np.ndarray]:
+    F = np.eye(4) + d * np.eye(4, k=2)
+    Q = q * np.kron([[d**3 / 3, d**2 / 2], [d**2 / 2, d]], np.eye(2))
+    return F, Q
+
+
+def _reports(m: int) -> ais.AisReports:
+    return ais.AisReports(np.zeros(m, dtype=bool), *(np.full(m, np.nan) for _ in range(6)))
+
+
+def _one_report(stamp: float, north: float, east: float, sog: float, cog: float
+                ) -> ais.AisReports:
+    return ais.AisReports(valid=np.array([True]), stamp_s=np.array([stamp]),
+                          north_m=np.array([north]), east_m=np.array([east]),
+                          sog_mps=np.array([sog]), cog_rad=np.array([cog]),
+                          heading_rad=np.array([cog]))
+
+
+def _plot_track(times, rng, speed=7.0, sigma=20.0, t_par=None):
+    t_par = t_par or tracker.build([{}])
+    obs = np.zeros(1, dtype=np.int64)
+    state = tracker.init(1)
+    meas = []
+    for t in times:
+        z = np.array([speed * t + sigma * rng.standard_normal(), sigma * rng.standard_normal()])
+        state = tracker.step(t_par, state, obs, t, _plot(1, t, z[0], z[1], sigma))
+        meas.append((t, z, np.eye(2) * sigma**2))
+    return state, meas
+
+
+@pytest.mark.parametrize("dim", [2, 4])
+def test_measurement_beyond_the_history_uses_the_retrodiction_formula(dim: int) -> None:
+    """A report (dim 4) or plot (dim 2) stamped before the four remembered measurements is used
+    at the track's time with H' = H F(-d), R' = R + H' Q(d) H'^T (module docstring): the state
+    and covariance equal that formula written with numpy matrices (explicit inverse of S)."""
+    t_par = tracker.build([{}])
+    q = float(t_par.q_m2ps3[0])
+    obs = np.zeros(1, dtype=np.int64)
+    rng = np.random.default_rng(111)
+    times = 2.5 * np.arange(10)
+    state, _ = _plot_track(times, rng, t_par=t_par)
+    stamp, now = 6.0, times[-1] + 1.0
+    d = state.t_s[0] - stamp
+    if dim == 4:
+        rep = _one_report(stamp, 7.0 * stamp + 4.0, -3.0, 7.2, 0.02)
+        z, R = tracker.ais_measurement(rep, t_par.ais_sigma_position_m,
+                                       t_par.ais_sigma_velocity_mps)
+        z, R = z[0], R[0]
+        new = tracker.step(t_par, state, obs, now, ais=rep)
+    else:
+        z, R = np.array([7.0 * stamp + 15.0, 12.0]), np.array([[400.0, 30.0], [30.0, 300.0]])
+        pl = _plot(1, stamp, z[0], z[1])
+        pl.cov[0] = R
+        new = tracker.step(t_par, state, obs, now, pl)
+    F, Q = _F_Q(d, q)
+    Hp = np.linalg.inv(F)[:dim]  # H F(-d)
+    Rp = R + Hp @ Q @ Hp.T
+    x, P = state.x[0], state.P[0]
+    S = Hp @ P @ Hp.T + Rp
+    K = P @ Hp.T @ np.linalg.inv(S)
+    np.testing.assert_allclose(new.x[0], x + K @ (z - Hp @ x), rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(new.P[0], P - K @ S @ K.T, rtol=1e-8, atol=1e-10)
+    assert new.t_s[0] == state.t_s[0] and new.n_updates[0] == state.n_updates[0] + 1
+    assert new.hist_n[0] == 0  # the history restarts after a forward-propagated measurement
+
+
+def _fuzz_out_of_order(seed: int, m: int, duration: float, cfg: dict | None = None):
+    """Radar plots (p = 0.6 per step) and AIS reports at random stamps arriving after random
+    latencies (at most one per pair and step, so reports may overtake one another); returns
+    the tracker state, the measurements per pair, and which pairs ever used a measurement
+    with more than HISTORY newer ones (the approximate case)."""
+    rng = np.random.default_rng(seed)
+    t_par = tracker.build([{"gate_probability": 1.0 - 1e-12, **(cfg or {})}])
+    sp, sv = t_par.ais_sigma_position_m[0], t_par.ais_sigma_velocity_mps[0]
+    obs = np.zeros(m, dtype=np.int64)
+    p0, v = rng.uniform(-3000, 3000, (m, 2)), rng.uniform(-8, 8, (m, 2))
+    cov = np.zeros((m, 2, 2))
+    cov[:, 0, 0], cov[:, 1, 1] = rng.uniform(200, 900, (2, m))
+    cov[:, 0, 1] = cov[:, 1, 0] = rng.uniform(-100, 100, m)
+    chol = np.linalg.cholesky(cov)
+    pending: list[list] = [[] for _ in range(m)]  # (arrival, stamp, z, R, fields)
+    next_stamp = rng.uniform(0, 5, m)
+    used: list[list] = [[] for _ in range(m)]
+    approx = np.zeros(m, dtype=bool)
+    state = tracker.init(m)
+    for step in range(int(duration) + 1):
+        t = float(step)
+        for k in range(m):
+            while next_stamp[k] <= t:
+                st = next_stamp[k]
+                pos = p0[k] + v[k] * st + rng.normal(0, 3, 2)
+                sog, cog = float(np.hypot(*v[k])), float(np.arctan2(v[k, 1], v[k, 0]))
+                z, R = _ais_z_r(*pos, sog, cog, sp, sv)
+                pending[k].append((st + rng.uniform(0, 3.5), st, z, R, (*pos, sog, cog)))
+                next_stamp[k] += rng.uniform(1.0, 6.0)
+        valid = rng.random(m) < 0.6
+        zr = p0 + v * t + np.einsum("kij,kj->ki", chol, rng.standard_normal((m, 2)))
+        plots = RadarPlots(valid=valid, t_s=t, north_m=zr[:, 0], east_m=zr[:, 1], cov=cov,
+                           range_m=np.full(m, np.nan), bearing_rad=np.full(m, np.nan))
+        rep = _reports(m)
+        for k in range(m):
+            arrived = [e for e in pending[k] if e[0] <= t]
+            if arrived:
+                e = min(arrived, key=lambda a: a[0])
+                pending[k].remove(e)
+                _, st, z, R, (north, east, sog, cog) = e
+                rep.valid[k], rep.stamp_s[k] = True, st
+                rep.north_m[k], rep.east_m[k], rep.sog_mps[k], rep.cog_rad[k] = (north, east,
+                                                                                  sog, cog)
+                if sum(u[0] > st for u in used[k]) > tracker.HISTORY:
+                    approx[k] = True
+                used[k].append((st, z, R))
+            if valid[k]:
+                used[k].append((t, zr[k], cov[k]))
+        state = tracker.step(t_par, state, obs, t, plots, rep)
+    return state, used, approx, t_par
+
+
+@pytest.mark.parametrize("cfg", [{}, {"accel_psd_m2ps3": 0.0}, {"accel_psd_m2ps3": 0.5}])
+def test_random_latencies_and_overtaking_reports_equal_time_order(cfg) -> None:
+    """Irregular AIS stamps (1-6 s apart), latencies 0-3.5 s, reports overtaking each other,
+    radar plots with missed detections: every pair whose late measurements never had more
+    than HISTORY newer ones equals the textbook filter run on all its measurements in time
+    order (the exactness promised by the module docstring); also without process noise
+    (q = 0, allowed) and with a large q."""
+    m = 24
+    state, used, approx, t_par = _fuzz_out_of_order(112, m, 150.0, cfg)
+    assert (state.gate_failures == 0).all() and state.active.all()
+    assert (~approx).sum() >= m // 2
+    overtaken = 0
+    for k in np.flatnonzero(~approx):
+        meas = sorted(used[k], key=lambda e: e[0])
+        overtaken += sum(a[0] > b[0] for a, b in zip(used[k], used[k][1:], strict=False))
+        x, P = _textbook(meas, t_par.q_m2ps3[0], t_par.init_speed_sigma_mps[0])
+        assert state.n_updates[k] == len(meas)
+        assert state.t_s[k] == meas[-1][0]
+        np.testing.assert_allclose(state.x[k], x, rtol=1e-9, atol=1e-8)
+        np.testing.assert_allclose(state.P[k], P, rtol=1e-7, atol=1e-10)
+    assert overtaken > 50  # out-of-sequence use is the common case here
+
+
+def test_reports_older_than_a_young_track_restart_it_exactly() -> None:
+    """Older than the measurement that started the track: restart from the report and reuse
+    the newer ones, also twice in a row and when the history is full (four plots; the report
+    itself is then not remembered): each equals the textbook filter in time order."""
+    t_par = tracker.build([{}])
+    q, sv0 = t_par.q_m2ps3[0], t_par.init_speed_sigma_mps[0]
+    sp, sv = t_par.ais_sigma_position_m[0], t_par.ais_sigma_velocity_mps[0]
+    obs = np.zeros(1, dtype=np.int64)
+    for n_plots in (3, 4):
+        rng = np.random.default_rng(113 + n_plots)
+        state, meas = _plot_track(10.0 + np.arange(n_plots), rng, t_par=t_par)
+        for stamp in (9.0, 8.5):
+            fields = (7.0 * stamp + rng.normal(0, 3), rng.normal(0, 3), 7.1, 0.01)
+            state = tracker.step(t_par, state, obs, 20.0, ais=_one_report(stamp, *fields))
+            z, R = _ais_z_r(*fields, sp, sv)
+            meas.append((stamp, z, R))
+            if n_plots == 4 and stamp == 8.5:
+                break  # the report at 9 s is not remembered: 8.5 s is forward-propagated
+            x, P = _textbook(sorted(meas, key=lambda e: e[0]), q, sv0)
+            np.testing.assert_allclose(state.x[0], x, rtol=1e-10, atol=1e-9)
+            np.testing.assert_allclose(state.P[0], P, rtol=1e-9, atol=1e-10)
+            assert state.t_s[0] == 9.0 + n_plots and state.n_updates[0] == len(meas)
+    assert state.hist_n[0] == 0  # the 8.5 s report went the forward way
+
+
+def _plot_at_nis(state, t_par, t: float, nis: float, direction=(0.6, 0.8)) -> RadarPlots:
+    """A plot at ``t`` whose innovation against the track predicted to ``t`` has the given
+    NIS (textbook prediction F P F^T + Q, R = 20^2 I)."""
+    F, Q = _F_Q(t - state.t_s[0], t_par.q_m2ps3[0])
+    x, P = F @ state.x[0], F @ state.P[0] @ F.T + Q
+    S = P[:2, :2] + 400.0 * np.eye(2)
+    u = np.asarray(direction)
+    a = math.sqrt(nis / (u @ np.linalg.solve(S, u)))
+    return _plot(1, t, x[0] + a * u[0], x[1] + a * u[1])
+
+
+def test_gate_window_opens_by_one_plus_the_failures() -> None:
+    """[seed 002, sec 6.6] as the module docstring gives it: NIS threshold g (chi-square 2 dof,
+    p = 0.9999), times 1 + failures after consecutive rejections. NIS 0.99 g accepted;
+    1.01 g rejected; then 1.9 g accepted (window 2 g); 1.01 g, 2.01 g rejected and 2.99 g
+    accepted (window 3 g); a rejected plot leaves the track as it was."""
+    t_par = tracker.build([{"max_gate_failures": 5}])
+    g = float(t_par.gate2[0])
+    assert g == pytest.approx(-2 * math.log(1e-4))
+    obs = np.zeros(1, dtype=np.int64)
+    state, _ = _plot_track(2.5 * np.arange(20), np.random.default_rng(114), t_par=t_par)
+    t = state.t_s[0]
+    for factor, accepted, failures in ((0.99, True, 0), (1.01, False, 1), (1.9, True, 0),
+                                       (1.01, False, 1), (2.01, False, 2), (2.99, True, 0)):
+        t += 2.5
+        new = tracker.step(t_par, state, obs, t, _plot_at_nis(state, t_par, t, factor * g))
+        assert new.gate_failures[0] == failures, (factor, failures)
+        assert (new.n_updates[0] == state.n_updates[0] + 1) == accepted
+        if not accepted:
+            np.testing.assert_array_equal(new.x, state.x)
+            np.testing.assert_array_equal(new.P, state.P)
+            assert new.t_s[0] == state.t_s[0]
+        state = new
+
+
+def test_one_allowed_failure_restarts_at_the_first_rejection() -> None:
+    t_par = tracker.build([{"max_gate_failures": 1, "init_speed_sigma_mps": 6.0}])
+    obs = np.zeros(1, dtype=np.int64)
+    state, _ = _plot_track(2.5 * np.arange(10), np.random.default_rng(115), t_par=t_par)
+    t = state.t_s[0] + 2.5
+    new = tracker.step(t_par, state, obs, t, _plot(1, t, -4000.0, 900.0))
+    assert new.active[0] and new.n_updates[0] == 1 and new.gate_failures[0] == 0
+    np.testing.assert_array_equal(new.x[0], [-4000.0, 900.0, 0.0, 0.0])
+    np.testing.assert_allclose(np.diag(new.P[0]), [400.0, 400.0, 36.0, 36.0])
+    assert new.t_s[0] == t and new.hist_n[0] == 1
+
+
+def test_same_stamp_report_and_plot_in_one_step() -> None:
+    """A report stamped now (no latency) and a plot at the same time: both are used, the
+    report first (older-or-equal stamp first) with a zero-length prediction between them;
+    equal to the textbook filter in that order."""
+    t_par = tracker.build([{}])
+    q, sv0 = t_par.q_m2ps3[0], t_par.init_speed_sigma_mps[0]
+    sp, sv = t_par.ais_sigma_position_m[0], t_par.ais_sigma_velocity_mps[0]
+    obs = np.zeros(1, dtype=np.int64)
+    rng = np.random.default_rng(116)
+    state, meas = _plot_track(np.arange(5.0), rng, t_par=t_par)
+    fields = (7.0 * 5.0 + 3.0, -2.0, 6.9, 0.02)
+    state = tracker.step(t_par, state, obs, 5.0, _plot(1, 5.0, 36.0, 4.0), _one_report(5.0,
+                                                                                        *fields))
+    z, R = _ais_z_r(*fields, sp, sv)
+    meas += [(5.0, z, R), (5.0, np.array([36.0, 4.0]), np.eye(2) * 400.0)]
+    x, P = _textbook(meas, q, sv0)
+    np.testing.assert_allclose(state.x[0], x, rtol=1e-10, atol=1e-9)
+    np.testing.assert_allclose(state.P[0], P, rtol=1e-9, atol=1e-10)
+    assert state.n_updates[0] == 7 and state.t_s[0] == 5.0
+
+
+def test_nan_plot_is_rejected_and_does_not_poison_the_track() -> None:
+    t_par = tracker.build([{}])
+    obs = np.zeros(1, dtype=np.int64)
+    state, _ = _plot_track(np.arange(5.0), np.random.default_rng(117), t_par=t_par)
+    new = tracker.step(t_par, state, obs, 5.0, _plot(1, 5.0, np.nan, 0.0))
+    assert np.all(np.isfinite(new.x)) and np.all(np.isfinite(new.P))
+    assert new.n_updates[0] == state.n_updates[0]
+
+
+def test_predict_is_f_p_ft_plus_q_and_nan_when_untracked() -> None:
+    t_par = tracker.build([{"accel_psd_m2ps3": 0.02}, {}])
+    obs = np.array([0, 1, 1], dtype=np.int64)
+    rng = np.random.default_rng(118)
+    state = tracker.init(3)
+    for t in (0.0, 2.0, 3.5):
+        valid = np.array([True, True, False])
+        state = tracker.step(t_par, state, obs, t,
+                             _plot(3, t, rng.normal(0, 20, 3), rng.normal(0, 20, 3),
+                                   valid=valid))
+    x, P = tracker.predict(t_par, state, obs, 10.0)
+    for k, q in ((0, 0.02), (1, tracker.DEFAULT_Q_M2PS3)):
+        F, Q = _F_Q(10.0 - state.t_s[k], q)
+        np.testing.assert_allclose(x[k], F @ state.x[k], rtol=1e-12)
+        np.testing.assert_allclose(P[k], F @ state.P[k] @ F.T + Q, rtol=1e-12)
+    assert np.isnan(x[2]).all() and np.isnan(P[2]).all()
+    np.testing.assert_array_equal(tracker.predict_state(state, 10.0), x)
+    x0, P0 = tracker.predict(t_par, state, obs, 3.5)  # zero interval: unchanged
+    np.testing.assert_array_equal(x0[:2], state.x[:2])
+    np.testing.assert_allclose(P0[:2], state.P[:2], rtol=1e-15)
+
+
+def test_cpa_from_tracks_by_hand() -> None:
+    """Target 1000 m north running south at 5 m/s, own ship at rest: DCPA 0 at 200 s.
+    Target 1000 m north and 300 m east running south: DCPA 300 m. Own ship moving with the
+    target: no relative motion."""
+    x = np.array([[1000.0, 0.0, -5.0, 0.0], [1000.0, 300.0, -5.0, 0.0]])
+    dcpa, tcpa = tracker.cpa_from_tracks(x, np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2))
+    np.testing.assert_allclose(dcpa, [0.0, 300.0], atol=1e-9)
+    np.testing.assert_allclose(tcpa, [200.0, 200.0])
+    d2, _ = tracker.cpa_from_tracks(x[:1], np.zeros(1), np.zeros(1), np.full(1, -5.0),
+                                    np.zeros(1))
+    np.testing.assert_allclose(d2, [1000.0])
+
+
+def test_latency_compensation_off_uses_the_arrival_time() -> None:
+    """Without compensation a report is taken as measured at the step time: a track started
+    from it sits at the report's position at the arrival time (no prediction)."""
+    t_par = tracker.build([{"latency_compensation": False}])
+    rep = _one_report(7.0, 100.0, 50.0, 5.0, math.pi / 2)
+    state = tracker.step(t_par, tracker.init(1), np.zeros(1, dtype=np.int64), 10.0, ais=rep)
+    assert state.t_s[0] == 10.0
+    np.testing.assert_allclose(state.x[0], [100.0, 50.0, 0.0, 5.0], atol=1e-12)
+
+
+def test_use_switches_ignore_a_sensor() -> None:
+    t_par = tracker.build([{"use_radar": False}, {"use_ais": False}])
+    obs = np.array([0, 1], dtype=np.int64)
+    rep = ais.AisReports(valid=np.array([True, True]), stamp_s=np.array([1.0, 1.0]),
+                         north_m=np.array([10.0, 10.0]), east_m=np.zeros(2),
+                         sog_mps=np.ones(2), cog_rad=np.zeros(2), heading_rad=np.zeros(2))
+    s = tracker.step(t_par, tracker.init(2), obs, 2.0, _plot(2, 2.0, 500.0, 0.0))
+    assert s.active.tolist() == [False, True]
+    s = tracker.step(t_par, tracker.init(2), obs, 2.0, ais=rep)
+    assert s.active.tolist() == [True, False]
+
+
+@pytest.mark.parametrize(("cfg", "key"), [
+    ({"gate_probability": 1.0}, "gate_probability"),
+    ({"gate_probability": 0.0}, "gate_probability"),
+    ({"max_gate_failures": 2.5}, "max_gate_failures"),
+    ({"max_gate_failures": 0}, "max_gate_failures"),
+    ({"coast_s": 0.0}, "coast_s"),
+    ({"accel_psd_m2ps3": float("nan")}, "accel_psd_m2ps3"),
+    ({"accel_psd_m2ps3": "fast"}, "accel_psd_m2ps3"),
+    ({"use_ais": "yes"}, "use_ais"),
+    ({"gate_prob": 0.99}, "tracker"),
+])
+def test_build_rejects_bad_values_naming_the_key(cfg, key) -> None:
+    with pytest.raises(InputError, match=key):
+        tracker.build([{}, cfg])
+
+
+def test_nees_with_irregular_overtaking_ais_reports_only() -> None:
+    """AIS only, truth from the tracker's model (q = 0.01, exact discrete steps of 0.5 s),
+    reports 2-10 s apart with latencies 0-12 s (so reports are often overtaken, sometimes by
+    more than HISTORY: forward propagation), measurement noise drawn from R: the mean NEES
+    over 400 pairs at four check times lies within generous bounds around 4 (3.3-5.0)."""
+    rng = np.random.default_rng(119)
+    m, q, h = 400, 0.01, 0.5
+    t_par = tracker.build([{"accel_psd_m2ps3": q, "gate_probability": 1.0 - 1e-9}])
+    sp, sv = t_par.ais_sigma_position_m[0], t_par.ais_sigma_velocity_mps[0]
+    obs = np.zeros(m, dtype=np.int64)
+    F, Q = _F_Q(h, q)
+    chol = np.linalg.cholesky(Q)
+    x = np.concatenate([rng.uniform(-1e3, 1e3, (m, 2)), rng.uniform(-6, 6, (m, 2))], axis=1)
+    pending: list[list] = [[] for _ in range(m)]
+    next_stamp = rng.uniform(0, 5, m)
+    state = tracker.init(m)
+    means = []
+    for step in range(1, 401):  # 200 s
+        t = step * h
+        x = x @ F.T + rng.standard_normal((m, 4)) @ chol.T
+        for k in np.flatnonzero(next_stamp <= t):
+            sog, cog = float(np.hypot(x[k, 2], x[k, 3])), float(np.arctan2(x[k, 3], x[k, 2]))
+            zk, R = _ais_z_r(x[k, 0], x[k, 1], sog, cog, sp, sv)
+            zk = zk + np.linalg.cholesky(R) @ rng.standard_normal(4)
+            fields = (zk[0], zk[1], float(np.hypot(zk[2], zk[3])),
+                      float(np.arctan2(zk[3], zk[2])))
+            pending[k].append((t + rng.uniform(0, 12), t, fields))
+            next_stamp[k] += rng.uniform(2, 10)
+        if step % 2:
+            continue
+        rep = _reports(m)
+        for k in range(m):
+            arrived = [e for e in pending[k] if e[0] <= t]
+            if arrived:
+                e = min(arrived, key=lambda a: a[0])
+                pending[k].remove(e)
+                rep.valid[k], rep.stamp_s[k] = True, e[1]
+                rep.north_m[k], rep.east_m[k], rep.sog_mps[k], rep.cog_rad[k] = e[2]
+        state = tracker.step(t_par, state, obs, t, ais=rep)
+        if step in (100, 200, 300, 400):
+            xp, P = tracker.predict(t_par, state, obs, t)
+            e = xp - x
+            means.append(float(np.mean(np.einsum("ki,kij,kj->k", e, np.linalg.inv(P), e))))
+    assert state.active.all()
+    assert all(3.3 < v < 5.0 for v in means), means

@@ -557,3 +557,177 @@ def test_safe_dump_round_trips(data: dict) -> None:
     assert doc.data == data
     for key in data:
         assert 1 <= doc.line_of((key,)) <= text.count("\n") + 1
+
+
+# ------------------------------------------------------------------------------------------
+# Nesting depth, anchors, tags, non-finite numbers, duplicate keys, size cap
+# ------------------------------------------------------------------------------------------
+
+def _nested(levels: int, inner: str) -> str:
+    """A top-level mapping holding ``levels - 1`` nested lists: ``levels`` containers."""
+    k = levels - 1
+    return "a: " + "[" * k + inner + "]" * k + "\n"
+
+
+@pytest.mark.parametrize("inner", ["", "1"])
+def test_nesting_below_the_limit_loads_and_above_is_refused(inner: str) -> None:
+    """63 mappings/lists deep load (with or without a value inside); 65 are refused at line 1
+    with the documented message."""
+    data = parse_yaml(_nested(yamlio.MAX_DEPTH - 1, inner)).data["a"]
+    depth = 1
+    while isinstance(data, list) and data and isinstance(data[0], list):
+        data, depth = data[0], depth + 1
+    assert depth == yamlio.MAX_DEPTH - 2  # the lists below the top-level mapping
+    err = _error(_nested(yamlio.MAX_DEPTH + 1, inner))
+    assert err.line == 1 and f"deeper than {yamlio.MAX_DEPTH} levels" in err.message
+
+
+def test_nesting_exactly_at_the_limit_loads_when_empty() -> None:
+    assert parse_yaml(_nested(yamlio.MAX_DEPTH, "")).data["a"] is not None
+
+
+def test_nesting_exactly_at_the_limit_loads_with_a_value_inside() -> None:
+    """MAX_DEPTH is 'the deepest nesting of mappings and lists accepted': 64 containers (the
+    top-level mapping and 63 lists) holding the number 1 must load."""
+    assert parse_yaml(_nested(yamlio.MAX_DEPTH, "1")).data["a"] is not None
+
+
+@pytest.mark.parametrize(("source", "line", "anchor"), [
+    ("&top\na: 1\n", 1, "&top"),                      # on the document's mapping
+    ("a: 1\n&k b: 2\n", 2, "&k"),                     # on a key
+    ("a:\n  - 1\n  - &i 2\n", 3, "&i"),               # on a list item
+    ("a: 1\nb: &m\n  c: 1\n", 2, "&m"),               # on a block mapping value
+    ("a: [1, {b: &f 2}]\n", 1, "&f"),                 # inside flow collections
+])
+def test_anchors_anywhere_are_refused_at_their_line(source: str, line: int, anchor: str) -> None:
+    err = _error(source)
+    assert err.line == line and f"anchors ('{anchor}') are not allowed" in err.message
+
+
+def test_alias_inside_a_flow_list_is_refused_at_its_line() -> None:
+    err = _error("a: 1\nb:\n  c: [1, *a]\n")
+    assert err.line == 3 and "aliases ('*a')" in err.message
+
+
+@pytest.mark.parametrize(("source", "value"), [
+    ("a: !!map {b: 1}\n", {"b": 1}), ("a: !!seq [1, 2]\n", [1, 2]), ("a: !!str 1.5\n", "1.5"),
+    ("a: !<tag:yaml.org,2002:str> 7\n", "7"), ("a: !!null ''\n", None),
+    ("a: !!bool 'On'\n", True), ("a: !!int '-0b11'\n", -3),
+])
+def test_plain_json_like_tags_are_accepted(source: str, value: object) -> None:
+    assert parse_yaml(source).data["a"] == value
+
+
+@pytest.mark.parametrize(("source", "line", "key", "tag"), [
+    ("a:\n  b: !!omap [{c: 1}]\n", 2, "a.b", "'!!omap'"),
+    ("a:\n  - !!pairs [{c: 1}]\n", 2, "a[0]", "'!!pairs'"),
+    ("a: !local {b: 1}\n", 1, "a", "'!local'"),
+    ("a: !local [1]\n", 1, "a", "'!local'"),
+    ("a:\n  b:\n    c: !!python/tuple [1, 2]\n", 3, "a.b.c", "'!!python/tuple'"),
+])
+def test_other_tags_are_refused_with_line_and_key(source: str, line: int, key: str,
+                                                  tag: str) -> None:
+    err = _error(source)
+    assert (err.line, err.key) == (line, key)
+    assert f"unsupported tag {tag}" in err.message
+
+
+@pytest.mark.parametrize(("text", "expected"), [
+    (".inf", math.inf), (".Inf", math.inf), (".INF", math.inf), ("+.inf", math.inf),
+    ("-.Inf", -math.inf), ("-.INF", -math.inf), ("1.0e+400", math.inf),
+    ("-1.0e+400", -math.inf),
+])
+def test_infinite_spellings_load_as_infinity_and_a_number_refuses_them(text: str,
+                                                                       expected: float) -> None:
+    """YAML 1.1 spells infinity several ways (and a literal too large for a double
+    overflows to it): each loads as the Python infinity, and a Number field refuses it."""
+    assert parse_yaml(f"a: {text}\n").data["a"] == expected
+    err = _validation_error(f"name: x\nvalue: {text}\n")
+    assert (err.line, err.key) == (2, "value")
+    assert err.message == f"expected a finite number, got {text}"
+
+
+@pytest.mark.parametrize("text", [".nan", ".NaN", ".NAN"])
+def test_nan_spellings_are_refused_by_every_numeric_field(text: str) -> None:
+    assert math.isnan(parse_yaml(f"a: {text}\n").data["a"])
+    for source, key in ((f"value: {text}", "value"), (f"plain: {text}", "plain"),
+                        (f"optional: {text}", "optional"), (f"table: {{q: {text}}}", "table.q"),
+                        (f"inner: {{speed_kn: {text}}}", "inner.speed_kn")):
+        err = _validation_error(f"name: x\n{source}\n")
+        assert (err.line, err.key) == (2, key)
+        assert err.message == f"expected a finite number, got {text}"
+
+
+class Nested(Strict):
+    pair: tuple[float, float] = (0.0, 0.0)
+    series: dict[str, list[float]] = Field(default_factory=dict)
+    bag: set[float] = Field(default_factory=set)
+
+
+@pytest.mark.parametrize(("source", "key", "message"), [
+    ("pair: [1, .inf]\n", "pair[1]", "expected a finite number, got .inf"),
+    ("pair: [yes, 1]\n", "pair[0]", "expected a number, got 'yes'"),
+    ("series: {a: [1, 2, -.inf]}\n", "series.a[2]", "expected a finite number, got -.inf"),
+    ("series: {a: [1, false]}\n", "series.a[1]", "expected a number, got false"),
+    ("series: {a: [1, '2']}\n", "series.a[1]", "expected a number, got '2'"),
+    ("bag: [1, true]\n", "bag[1]", "expected a number, got true"),
+])
+def test_nested_numbers_refuse_non_finite_bool_and_text(source: str, key: str,
+                                                        message: str) -> None:
+    """Nested number containers are screened like plain fields: pydantic's lax mode would
+    read ``true`` as 1 and ``'2'`` as 2, and inf/nan are not finite."""
+    with pytest.raises(ScenarioError) as info:
+        validate_document(parse_yaml("# n\n" + source, "n.yaml"), Nested)
+    err = info.value
+    assert (err.line, err.key) == (2, key)
+    assert message in err.message
+
+
+def test_literal_too_large_without_a_dot_stays_text_with_a_hint() -> None:
+    """``1e400`` is text in YAML 1.1 (no dot): a Number refuses it with the spelling to use."""
+    assert parse_yaml("a: 1e400\n").data["a"] == "1e400"
+    err = _validation_error("name: x\nvalue: 1e400\n")
+    assert "expected a number, got '1e400'" in err.message and "write 1.0e+400" in err.message
+
+
+@pytest.mark.parametrize(("source", "line", "key", "first"), [
+    ("a: 1\nb: 2\na: 3\n", 3, "a", 1),
+    ("ships:\n  - name: x\n    speed: 1\n    name: y\n", 4, "ships[0].name", 2),
+    ("a:\n  - {k: 1}\n  - {k: 2, j: 0, k: 3}\n", 3, "a[1].k", 3),
+])
+def test_duplicate_keys_name_both_lines_and_the_key_path(source: str, line: int, key: str,
+                                                         first: int) -> None:
+    err = _error(source)
+    assert (err.line, err.key) == (line, key)
+    name = key.rsplit(".", 1)[-1]
+    assert f"duplicate key '{name}' (first at line {first}, again at line {line})" in err.message
+
+
+def test_the_same_key_in_different_mappings_is_not_a_duplicate() -> None:
+    doc = parse_yaml("a: {k: 1}\nb: {k: 2}\nc:\n  - k: 3\n  - k: 4\n")
+    assert doc.data == {"a": {"k": 1}, "b": {"k": 2}, "c": [{"k": 3}, {"k": 4}]}
+    assert [doc.line_of(("c", i, "k")) for i in range(2)] == [4, 5]
+
+
+def test_size_cap_is_inclusive_in_text_bytes_and_files(tmp_path) -> None:
+    """The cap counts UTF-8 bytes (an 'e' with acute accent is 2): a document of exactly
+    ``max_bytes`` loads, one byte more is refused, from text and from a file alike."""
+    text = "a: '\u00e9\u00e9'\n"  # 4 + 2 * 2 + 2 = 10 bytes
+    assert len(text.encode()) == 10
+    assert parse_yaml(text, max_bytes=10).data == {"a": "\u00e9\u00e9"}
+    assert "limit of 9 bytes" in _error(text, max_bytes=9).message
+    path = tmp_path / "s.yaml"
+    path.write_text(text, encoding="utf-8")
+    assert load_yaml(path, max_bytes=10).data == {"a": "\u00e9\u00e9"}
+    with pytest.raises(ScenarioError, match="limit of 9 bytes") as info:
+        load_yaml(path, max_bytes=9)
+    assert info.value.path == str(path)
+
+
+def test_validation_lines_survive_bom_and_crlf() -> None:
+    """A validation error is located at the same line with or without a BOM and CRLF."""
+    src = "name: x\r\ninner:\r\n  speed_kn: 1\r\n  count: 2.5\r\n"
+    for data in (src.encode(), b"\xef\xbb\xbf" + src.encode(), src.replace("\r\n", "\n")):
+        with pytest.raises(ScenarioError) as info:
+            validate_document(parse_yaml(data, "m.yaml"), Model)
+        assert (info.value.line, info.value.key) == (4, "inner.count")

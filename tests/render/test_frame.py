@@ -115,3 +115,56 @@ def test_a_dpi_out_of_range_is_refused_before_drawing(synthetic_run, dpi):
     with pytest.raises(ValueError, match="dots per inch"):
         Renderer(run, FrameOptions(dpi=dpi))
     assert st.Style(1200.0).font_px(12) == 200
+
+
+def test_frames_outside_the_records_are_refused_and_shapes_follow_the_size(synthetic_run):
+    renderer = Renderer(load_run(synthetic_run([Ship("a", 0.0, 0.0, 0.0)], 4)),
+                        FrameOptions(size_px=(210, 130), legend=False, panel=False))
+    for k in (-1, 4):
+        with pytest.raises(IndexError, match=r"record .* outside 0 \.\. 3"):
+            renderer.draw(k)
+    frame = renderer.array(3)
+    assert frame.shape == (130, 210, 3) and frame.dtype == np.uint8
+    assert len(renderer.rgb(3)) == 210 * 130 * 3
+
+
+def test_fixed_view_fits_every_record_inside_the_chart_area(synthetic_run):
+    """With the panel and legend on, the fitted view keeps every true position of every record
+    inside the chart area left of the legend and below the panel: the view's centre is the
+    middle of that area, so it sits left of and below the middle of the frame."""
+    ships = [Ship("a", 0.0, 0.0, 45.0, speed_kn=15.0), Ship("b", 3000.0, 0.0, 135.0, 15.0)]
+    data = load_run(synthetic_run(ships, 30))
+    renderer = Renderer(data, FrameOptions(size_px=(480, 360)))
+    view = renderer.view
+    assert view.origin_x_px < 240.0 and view.origin_y_px > 180.0
+    left, top = 0.0, 2.0 * view.origin_y_px - 360.0
+    right = 2.0 * view.origin_x_px
+    x, y = view.to_px(data.north_m, data.east_m)
+    assert np.all((x >= left) & (x <= right) & (y >= top) & (y <= 360.0))
+
+
+def test_fit_to_overrides_the_points_a_fixed_view_shows(synthetic_run):
+    """``fit_to`` replaces the records' positions: a 10 km square centred on (5 km, 5 km) in a
+    frame without panel or legend gives the view ``fit`` makes of those points."""
+    data = load_run(synthetic_run([Ship("a", 0.0, 0.0, 0.0)], 3))
+    square = (np.array([0.0, 10000.0]), np.array([0.0, 10000.0]))
+    renderer = Renderer(data, BARE, fit_to=square)
+    assert renderer.view.m_per_px == pytest.approx(10000.0 / (0.88 * 300))
+    assert (renderer.view.centre_north_m, renderer.view.centre_east_m) == (5000.0, 5000.0)
+
+
+def test_followed_ship_is_drawn_at_the_chart_centre_with_panel_and_legend(synthetic_run):
+    """Following ship 'b' with the panel and legend on: 'b' sits on the view's origin (the
+    middle of the chart area, below the panel) at every frame, while the other ship moves
+    on the screen."""
+    ships = [Ship("a", 0.0, 0.0, 90.0, speed_kn=20.0, length_m=300.0, beam_m=50.0),
+             Ship("b", 1000.0, 500.0, 0.0, speed_kn=12.0, length_m=300.0, beam_m=50.0)]
+    data = load_run(synthetic_run(ships, 20))
+    renderer = Renderer(data, FrameOptions(size_px=(480, 360), follow="b", range_nm=1.0))
+    view = renderer.view
+    assert view.origin_y_px > 180.0  # the panel band pushes the chart down
+    assert view.m_per_px == pytest.approx(NM / (0.5 * min(2 * view.origin_x_px,
+                                                          2 * (360 - view.origin_y_px))))
+    for k in (0, 10, 19):
+        assert _pixel(renderer.array(k), view.origin_x_px, view.origin_y_px) == \
+            st.ship_colour(1)

@@ -140,3 +140,137 @@ def test_a_thousand_frames_do_not_grow_memory(synthetic_run, tmp_path, kind):
         assert len(iio.imread(tmp_path / "m.gif", index=None)) == 1000
     else:
         assert len(list((tmp_path / "png").glob("frame_*.png"))) == 1000
+
+
+def _parse_png(data: bytes) -> dict:
+    """Chunks of a PNG by tag, each checked against its CRC."""
+    import struct
+    import zlib
+
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    chunks, pos = {}, 8
+    while pos < len(data):
+        (length,) = struct.unpack(">I", data[pos:pos + 4])
+        tag, body = data[pos + 4:pos + 8], data[pos + 8:pos + 8 + length]
+        (crc,) = struct.unpack(">I", data[pos + 8 + length:pos + 12 + length])
+        assert crc == zlib.crc32(tag + body) & 0xFFFFFFFF
+        chunks.setdefault(tag, []).append(body)
+        pos += 12 + length
+    return chunks
+
+
+def test_encode_png_by_the_specification():
+    """IHDR 5 x 3, 8-bit truecolour; pHYs 96 DPI = 96 / 0.0254 = 3779.5 -> 3780 px/m, unit
+    metre; the IDAT inflates to each row's filter byte 0 followed by its RGB bytes; IEND
+    last and empty; a non-square picture so width and height cannot be swapped unseen."""
+    import struct
+    import zlib
+
+    from trafficsim.render.writers import encode_png
+
+    rgb = np.random.default_rng(1).integers(0, 256, (3, 5, 3), dtype=np.uint8)
+    chunks = _parse_png(encode_png(rgb.tobytes(), (5, 3), 96.0))
+    assert list(chunks) == [b"IHDR", b"pHYs", b"IDAT", b"IEND"]
+    assert struct.unpack(">IIBBBBB", chunks[b"IHDR"][0]) == (5, 3, 8, 2, 0, 0, 0)
+    assert struct.unpack(">IIB", chunks[b"pHYs"][0]) == (3780, 3780, 1)
+    raw = np.frombuffer(zlib.decompress(chunks[b"IDAT"][0]), dtype=np.uint8).reshape(3, 16)
+    assert raw[:, 0].tolist() == [0, 0, 0]
+    np.testing.assert_array_equal(raw[:, 1:].reshape(3, 5, 3), rgb)
+    assert chunks[b"IEND"] == [b""]
+
+
+def test_png_frames_are_numbered_complete_files(tmp_path):
+    """Frames k = 0, 1, 2 of a 7 x 4 picture land in frame_00000.png ... in order, decode to
+    their pixels, and no temporary file is left."""
+    size = (7, 4)
+    frames = [np.full((4, 7, 3), k * 40, dtype=np.uint8) for k in range(3)]
+    frames[1][2, 5] = (255, 0, 0)
+    writer = PngFrames(tmp_path / "out", size, 150.0)
+    for f in frames:
+        writer.write(f.tobytes())
+    paths = writer.close()
+    assert [p.name for p in paths] == ["frame_00000.png", "frame_00001.png", "frame_00002.png"]
+    for p, f in zip(paths, frames, strict=True):
+        with Image.open(p) as image:
+            assert image.size == size and image.mode == "RGB"
+            np.testing.assert_array_equal(np.asarray(image), f)
+            assert image.info["dpi"] == pytest.approx((150, 150), abs=0.05)
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [p.name for p in paths]
+
+
+@pytest.mark.parametrize(("fps", "delay_ms"), [(10.0, 100), (3.0, 330), (30.0, 30),
+                                               (200.0, 10)])
+def test_gif_frames_sizes_and_delays(tmp_path, fps, delay_ms):
+    """GIF delays count hundredths of a second: 1 / fps rounded to 10 ms, at least 10 ms;
+    every frame written comes back at the size given, the palette colours exact."""
+    size = (6, 4)
+    pal = st.gif_palette()
+    rng = np.random.default_rng(2)
+    frames = [pal[rng.integers(0, 256, size[0] * size[1])].reshape(4, 6, 3) for _ in range(3)]
+    writer = GifWriter(tmp_path / "a.gif", size, fps)
+    for f in frames:
+        writer.write(f.tobytes())
+    assert writer.close() == [tmp_path / "a.gif"]
+    back = iio.imread(tmp_path / "a.gif", index=None)
+    assert back.shape == (3, 4, 6, 3)
+    for k in range(3):
+        np.testing.assert_array_equal(back[k], frames[k])
+    with Image.open(tmp_path / "a.gif") as image:
+        assert image.n_frames == 3 and image.info["duration"] == delay_ms
+
+
+@pytest.mark.parametrize("kind", ["gif", "mp4"])
+def test_gif_and_mp4_appear_only_when_complete(tmp_path, kind):
+    """Until close, the final name does not exist (frames go to a hidden temporary file in
+    the same folder); after close only the final file is there, with the permissions a
+    plain open() would give (0666 less the umask), not mkstemp's 0600."""
+    size = (16, 8)
+    target = tmp_path / f"v.{kind}"
+    writer = (GifWriter(target, size, 5.0) if kind == "gif"
+              else Mp4Writer(target, size, 5.0))
+    for k in range(4):
+        writer.write(bytes([k * 60]) * (16 * 8 * 3))
+    assert not target.exists()
+    assert [p.name.startswith(".v.") for p in tmp_path.iterdir()] == [True]
+    writer.close()
+    assert list(tmp_path.iterdir()) == [target]
+    umask = os.umask(0)
+    os.umask(umask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~umask
+    if kind == "mp4":
+        video = _ffmpeg_frames(target, size)
+        assert len(video) == 4
+        means = [float(f.mean()) for f in video]
+        assert means == pytest.approx([0.0, 60.0, 120.0, 180.0], abs=3.0)
+
+
+def test_palette_map_agrees_with_brute_force():
+    """A palette colour maps to its first entry exactly; any other colour to the entry nearest
+    (squared RGB distance, first on ties) the centre of its 8 x 8 x 8 cell."""
+    from trafficsim.render.writers import PaletteMap
+
+    rng = np.random.default_rng(3)
+    pal = rng.integers(0, 256, (256, 3)).astype(np.uint8)
+    pal[200] = pal[10]  # a duplicate: the earlier entry wins
+    pmap = PaletteMap(pal)
+    assert pmap.indices(pal.tobytes()).tolist()[:12] == list(range(12))
+    assert pmap.indices(pal[200].tobytes()).tolist() == [10]
+    colours = rng.integers(0, 256, (500, 3)).astype(np.uint8)
+    centre = (colours.astype(int) // 8) * 8 + 4
+    d = ((centre[:, None, :] - pal[None, :, :].astype(int)) ** 2).sum(axis=2)
+    expected = np.argmin(d, axis=1)
+    exact = {tuple(c): i for i, c in reversed(list(enumerate(pal.tolist())))}
+    expected = [exact.get(tuple(c), e) for c, e in zip(colours.tolist(), expected, strict=True)]
+    assert pmap.indices(colours.tobytes()).tolist() == expected
+
+
+def test_open_writer_kinds(tmp_path):
+    from trafficsim.render.writers import open_writer
+
+    assert isinstance(open_writer("png", tmp_path / "p", "x", (4, 2), 96.0, 5.0), PngFrames)
+    gif = open_writer("gif", tmp_path, "x", (4, 2), 96.0, 5.0)
+    assert isinstance(gif, GifWriter) and gif.target.path == tmp_path / "x.gif"
+    gif.abort()
+    with pytest.raises(ValueError, match="unknown format 'bmp'"):
+        open_writer("bmp", tmp_path, "x", (4, 2), 96.0, 5.0)
+    assert list(tmp_path.iterdir()) == [tmp_path / "p"]

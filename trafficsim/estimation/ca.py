@@ -94,8 +94,8 @@ def build(configs: Sequence[Mapping[str, Any]], axes: int = 1) -> CAParams:
         return np.repeat(v, axes)
 
     p = CAParams(col("dt_s"), col("sigma_m"), col("sigma_acc_mps2"), col("alpha_per_s"))
-    if np.any(p.dt_s <= 0) or np.any(p.sigma_meas <= 0) or np.any(p.sigma_acc < 0) \
-            or np.any(p.alpha_per_s < 0):
+    if not (np.all(p.dt_s > 0) and np.all(p.sigma_meas > 0) and np.all(p.sigma_acc >= 0)
+            and np.all(p.alpha_per_s >= 0)):  # (NaN fails too)
         raise ValueError("CA filter needs dt_s > 0, sigma_m > 0, sigma_acc_mps2 >= 0, "
                          "alpha_per_s >= 0")
     return p

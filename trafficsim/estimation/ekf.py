@@ -92,6 +92,7 @@ from trafficsim.estimation.linalg import (  # noqa: F401  (expm_stack, van_loan:
     van_loan,
 )
 from trafficsim.jit import kernel
+from trafficsim.sensors import wrap_2pi
 from trafficsim.ships import base, kernels
 from trafficsim.ships.base import EAST, NORTH, PSI, RPS, RUDDER, R, U, V, gather_ship
 
@@ -187,7 +188,7 @@ def build(configs: Sequence[Mapping[str, Any]]) -> EkfParams:
 
     def get(key: str) -> np.ndarray:
         out = base.stack(configs, key, DEFAULTS[key])
-        if np.any(out < 0.0):
+        if not np.all(out >= 0.0):  # (NaN fails too)
             raise ValueError(f"EKF config {key!r} must be >= 0")
         return out
 
@@ -305,7 +306,7 @@ def initial_state(params: EkfParams, north_m: np.ndarray, east_m: np.ndarray,
     for k, value in enumerate((north_m, east_m, heading_rad, u_mps, v_mps, r_radps,
                                current_north_mps, current_east_mps)):
         x[:, k] = value
-    x[:, XPSI] %= _TWO_PI
+    x[:, XPSI] = wrap_2pi(x[:, XPSI])  # (np.mod alone can give 2 pi)
     P = np.zeros((n, N_X, N_X))
     diag = (params.init_position_var_m2, params.init_position_var_m2,
             params.init_heading_var_rad2, params.init_velocity_var_m2ps2,
@@ -788,7 +789,7 @@ def update(params: EkfParams, state: EkfState, z: np.ndarray, mask: np.ndarray,
     _update(x, P, np.ascontiguousarray(z, dtype=float),
             np.ascontiguousarray(mask, dtype=np.bool_), np.ascontiguousarray(R, dtype=float),
             _ZSTATE, _WRAP, nu, S, hph, nis, dof)
-    x[:, XPSI] %= _TWO_PI
+    x[:, XPSI] = wrap_2pi(x[:, XPSI])  # (np.mod alone can give 2 pi)
     return EkfState(x, P), Innovation(nu, S, hph, nis, dof)
 
 

@@ -98,11 +98,11 @@ def build(configs: Sequence[Mapping[str, Any]]) -> FusionParams:
             ox[i, j] = float(rc.get("offset_x_m", 0.0))
             oy[i, j] = float(rc.get("offset_y_m", 0.0))
             present[i, j] = True
-    if np.any(sigma[present] <= 0.0):
+    if not np.all(sigma[present] > 0.0):  # (NaN fails too)
         raise ValueError("receiver sigma_m must be > 0")
     sigma[~present] = 1.0  # unused slots: any positive number keeps the algebra finite
     rho = np.array([float(c.get("correlation", 0.0)) for c in configs])
-    if np.any((rho < 0.0) | (rho >= 1.0)):
+    if not np.all((rho >= 0.0) & (rho < 1.0)):
         raise ValueError("correlation must be in [0, 1)")
     return FusionParams(sigma, ox, oy, present, rho)
 

@@ -74,7 +74,7 @@ def build(configs: Sequence[Mapping[str, Any]]) -> GateParams:
     fac = np.array([float(c.get("reopen_factor", DEFAULT_REOPEN_FACTOR)) for c in configs])
     cnt = np.array([int(c.get("max_rejections", DEFAULT_MAX_REJECTIONS)) for c in configs],
                    dtype=np.int64)
-    if np.any(thr <= 0) or np.any(fac < 1) or np.any(cnt < 1):
+    if not (np.all(thr > 0) and np.all(fac >= 1) and np.all(cnt >= 1)):  # (NaN fails too)
         raise ValueError("gate needs a positive window, reopen_factor >= 1, max_rejections >= 1")
     return GateParams(thr, fac, cnt)
 
@@ -104,7 +104,7 @@ def gate(params: GateParams, d: np.ndarray, rejections: np.ndarray) -> GateResul
     d = np.asarray(d, dtype=float)
     with np.errstate(over="ignore"):  # reopen_factor = inf opens the window fully (inf ** 0 = 1)
         window = params.threshold * params.reopen_factor ** rejections
-    have = np.isfinite(d)
+    have = ~np.isnan(d)  # (an infinite distance is a measurement, and rejected)
     accept = have & (d <= window)
     reject = have & ~accept
     count = np.where(accept, 0, rejections + reject)

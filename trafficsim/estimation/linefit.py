@@ -133,7 +133,7 @@ def build(configs: Sequence[Mapping[str, Any]]) -> LineFitParams:
                        for ni, c in zip(n, configs, strict=True)])
     gain = np.array([float(c["gain"]) if "gain" in c else float(steady_gain(g))
                      for g, c in zip(growth, configs, strict=True)])
-    if np.any((gain < 0) | (gain > 1)):
+    if not np.all((gain >= 0) & (gain <= 1)):  # (NaN fails too)
         raise ValueError("gain must be within [0, 1]")
     return LineFitParams(n, growth, gain)
 
@@ -260,8 +260,8 @@ def run(params: LineFitParams, z: np.ndarray,
             g = gating.gate(gate_params, d, rej)
             rej = g.rejections
             state = restart(state, g.restart)
-            accept = g.accept | ~np.isfinite(d)  # no prediction yet: take the fix
-            bad[:, k], rst[:, k] = ~g.accept & np.isfinite(d) & ~g.restart, g.restart
+            accept = g.accept | np.isnan(d)  # no prediction yet: take the fix
+            bad[:, k], rst[:, k] = ~g.accept & ~np.isnan(d) & ~g.restart, g.restart
         out = step(params, state, z[:, k], accept)
         state = out.state
         est[:, k], pred[:, k] = out.estimate, out.prediction

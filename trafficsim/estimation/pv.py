@@ -44,6 +44,7 @@ import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.jit import kernel
+from trafficsim.sensors import wrap_2pi
 
 #: state layout of ``PVState.x``: north, east position (m), north, east velocity (m/s)
 N_STATE = 4
@@ -105,7 +106,16 @@ def build(configs: Sequence[Mapping[str, Any]]) -> PVParams:
         InputError: a value is not a finite positive number.
     """
     def column(key: str, default: float) -> np.ndarray:
-        values = np.array([float(c.get(key, default)) for c in configs], dtype=float)
+        values = np.empty(len(configs))
+        for i, c in enumerate(configs):
+            value = c.get(key, default)
+            try:
+                if isinstance(value, bool):
+                    raise TypeError
+                values[i] = float(value)
+            except (TypeError, ValueError, OverflowError):
+                raise InputError(f"ship {i}: expected a finite positive number, got {value!r}",
+                                 key=key) from None
         bad = ~(np.isfinite(values) & (values > 0.0))
         if bad.any():
             i = int(np.argmax(bad))
@@ -331,7 +341,7 @@ def velocity_over_ground(state: PVState) -> tuple[np.ndarray, np.ndarray]:
         ``(sog_mps, cog_rad)``, each ``(n,)``; course in [0, 2 pi), 0 = north, clockwise.
     """
     vn, ve = state.x[:, VEL_N], state.x[:, VEL_E]
-    return np.hypot(vn, ve), np.mod(np.arctan2(ve, vn), 2.0 * np.pi)
+    return np.hypot(vn, ve), wrap_2pi(np.arctan2(ve, vn))
 
 
 def full_covariance(state: PVState) -> np.ndarray:

@@ -58,8 +58,13 @@ def rts(x: np.ndarray, p: np.ndarray, x_pred: np.ndarray, p_pred: np.ndarray,
     ps = np.full_like(p, np.nan)
     xs[:, -1], ps[:, -1] = x[:, -1], p[:, -1]
     for j in range(n - 2, first - 1, -1):
-        # A^T = P(j+1|j)^-1 Phi P(j)  (both covariances symmetric)
-        a = np.swapaxes(np.linalg.solve(p_pred[:, j + 1], phi @ p[:, j]), -1, -2)
+        # A^T = P(j+1|j)^-1 Phi P(j)  (both covariances symmetric); a singular P(j+1|j) (no
+        # process noise on a state the start left exact) takes the pseudo-inverse
+        rhs = phi @ p[:, j]
+        try:
+            a = np.swapaxes(np.linalg.solve(p_pred[:, j + 1], rhs), -1, -2)
+        except np.linalg.LinAlgError:
+            a = np.swapaxes(np.linalg.pinv(p_pred[:, j + 1], hermitian=True) @ rhs, -1, -2)
         dx = xs[:, j + 1] - x_pred[:, j + 1]
         xs[:, j] = x[:, j] + np.einsum("mij,mj->mi", a, dx)
         pj = p[:, j] + a @ (ps[:, j + 1] - p_pred[:, j + 1]) @ np.swapaxes(a, -1, -2)

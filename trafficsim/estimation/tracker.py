@@ -554,7 +554,7 @@ def _update2(w: np.ndarray, lag: float, q: float, gate: float) -> bool:
     nu0 = w[W_Z] - (w[W_X] - lag * w[W_X + 2])
     nu1 = w[W_Z + 1] - (w[W_X + 1] - lag * w[W_X + 3])
     v0, v1 = i00 * nu0 + i01 * nu1, i01 * nu0 + i11 * nu1
-    if nu0 * v0 + nu1 * v1 > gate:
+    if not nu0 * v0 + nu1 * v1 <= gate:  # (a NaN measurement is rejected too)
         return False
     # gain rows K_r = S^-1 (h_r0, h_r1)
     k00, k01 = i00 * h00 + i01 * h01, i01 * h00 + i11 * h01
@@ -640,7 +640,7 @@ def _update4(w: np.ndarray, lag: float, q: float, gate: float) -> bool:
     nu2, nu3 = w[W_Z + 2] - w[W_X + 2], w[W_Z + 3] - w[W_X + 3]
     v0, v1, v2, v3 = _solve4(a00, a01, a11, e00, e01, e10, e11, g00, g01, g11, nu0, nu1, nu2,
                              nu3)
-    if nu0 * v0 + nu1 * v1 + nu2 * v2 + nu3 * v3 > gate:
+    if not nu0 * v0 + nu1 * v1 + nu2 * v2 + nu3 * v3 <= gate:  # (NaN: rejected)
         return False
     k00, k01, k02, k03 = _solve4(a00, a01, a11, e00, e01, e10, e11, g00, g01, g11, h00, h01,
                                  p02, p03)

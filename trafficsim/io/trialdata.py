@@ -154,9 +154,7 @@ class TrialData:
         """The same run restricted to ``index`` (a slice or an index/boolean array)."""
         changes: dict[str, Any] = {k: v[index] for k, v in self.arrays().items()}
         changes["extra"] = {k: v[index] for k, v in self.extra.items()}
-        changes["missing"] = {k: int(np.count_nonzero(np.isnan(v)))
-                              for k, v in changes.items() if k in SERIES}
-        return replace(self, **changes)
+        return _with_missing(replace(self, **changes))
 
     def with_series(self, **series: np.ndarray | None) -> TrialData:
         """A copy with some series replaced (same length)."""
@@ -165,9 +163,7 @@ class TrialData:
                 raise KeyError(key)
             if value is not None and np.shape(value) != (self.n,):
                 raise ValueError(f"{key}: expected shape ({self.n},), got {np.shape(value)}")
-        out = replace(self, **series)
-        missing = {k: int(np.count_nonzero(np.isnan(v))) for k, v in out.arrays().items()}
-        return replace(out, missing=missing)
+        return _with_missing(replace(self, **series))
 
     def nan_report(self) -> dict[str, Any]:
         """Samples, duration, and the NaN count of each column that has any."""
@@ -256,6 +252,19 @@ def from_arrays(name: str, columns: Mapping[str, Any]) -> TrialData:
                       path_text="")
 
 
+def _rows(reader: Any, path: Path) -> Any:
+    """The rows of ``reader``; a malformed one (a stray quote) is a located data error."""
+    while True:
+        try:
+            row = next(reader)
+        except StopIteration:
+            return
+        except csv.Error as err:
+            raise DataError(f"not a CSV row ({err})", path=str(path),
+                            line=reader.line_num) from None
+        yield row
+
+
 def _read_table(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Header, ``(N, k)`` float table (empty cell or 'nan' -> NaN) and each row's file line."""
     try:
@@ -272,17 +281,20 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
         raise DataError(f"not a text file ({err.reason})", path=str(path)) from None
     except OSError as err:
         raise DataError(f"cannot read ({err.strerror})", path=str(path)) from None
-    reader = csv.reader(io.StringIO(text))
+    # universal newlines: CR LF, LF and old Mac CR line ends alike
+    reader = csv.reader(io.StringIO(text, newline=None))
     try:
         header = [h.strip() for h in next(reader)]
     except StopIteration:
         raise DataError("empty file; expected a header row", path=str(path), line=1) from None
+    except csv.Error as err:
+        raise DataError(f"not a CSV table ({err})", path=str(path), line=1) from None
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise DataError(f"duplicate column(s) {', '.join(dup)}", path=str(path), line=1)
     values: list[list[float]] = []
     lines: list[int] = []
-    for row in reader:
+    for row in _rows(reader, path):
         line = reader.line_num
         if not row or all(not cell.strip() for cell in row):
             values.append([np.nan] * len(header))

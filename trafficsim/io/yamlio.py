@@ -60,6 +60,7 @@ __all__ = [
     "collect_errors",
     "format_loc",
     "load_yaml",
+    "number_hint",
     "parse_yaml",
     "raise_errors",
     "validate",
@@ -294,14 +295,15 @@ class _Loader(yaml.SafeLoader):
             raise _Refused(None, None,
                            f"anchors ('&{anchor}') are not allowed; write each value out in "
                            "full", event.start_mark)
-        self._depth += 1
+        nests = isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent))
+        self._depth += nests  # (a scalar is a value inside a level, not a level)
         try:
             if self._depth > MAX_DEPTH:
                 raise _Refused(None, None, f"nesting is deeper than {MAX_DEPTH} levels",
                                event.start_mark)
             node = super().compose_node(parent, index)
         finally:
-            self._depth -= 1
+            self._depth -= nests
         # The composer asks for a mapping key with index None (a value's index is its key).
         # A plain, untagged key that YAML 1.1 resolves to a boolean or null is meant as text:
         # ``yes:`` and ``no:`` are words, not true and false.
@@ -583,7 +585,7 @@ def _sexagesimal(digits: str) -> str:
     return _fmt(sign * value)
 
 
-def _number_hint(node: Node | None) -> str:
+def number_hint(node: Node | None) -> str:
     """Why a plain scalar that looks numeric was not read as a number."""
     if not isinstance(node, ScalarNode):
         return ""
@@ -682,9 +684,9 @@ def _message(err: Mapping[str, Any], loc: Loc, node: Node | None,
         listing = f"; allowed keys: {', '.join(allowed)}" if allowed else ""
         return f"unknown key '{_clip(key)}'{listing}"
     if kind in ("float_type", "float_parsing"):
-        return f"expected a number, got {got}{_number_hint(node)}"
+        return f"expected a number, got {got}{number_hint(node)}"
     if kind in ("int_type", "int_parsing", "int_from_float", "int_parsing_size"):
-        return f"expected a whole number, got {got}{_number_hint(node)}"
+        return f"expected a whole number, got {got}{number_hint(node)}"
     if kind == "finite_number":
         return f"expected a finite number, got {got}"
     if kind in ("bool_type", "bool_parsing"):

@@ -127,7 +127,7 @@ def transition(omega0: np.ndarray, zeta: np.ndarray,
     dc = np.where(under, decay * np.cos(arg), 0.5 * (slow + fast))
     # decay sin(x)/x t and decay sinh(x)/x t, -> decay t at x = 0 (critical damping)
     ds = np.where(under, decay * t * np.sinc(arg / math.pi),
-                  np.where(arg > 0.0, 0.5 * (slow - fast) / np.where(arg > 0.0, over, 1.0),
+                  np.where(over > 0.0, 0.5 * (slow - fast) / np.where(over > 0.0, over, 1.0),
                            decay * t))
     return dc + mu * ds, ds, -omega0 * omega0 * ds, dc - mu * ds
 
