@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, example, given, settings
+from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from trafficsim.colregs.arbitration import (
@@ -456,3 +456,107 @@ def test_vectorised_hand_cases_at_once():
     assert chosen.tolist() == [c["expect"] for c in cases]
     assert ok.tolist() == [True, True, True, True, False]
 
+
+
+# --------------------------------------------------------------------------------------------
+# Against a brute-force search written from the module docstring
+# --------------------------------------------------------------------------------------------
+
+def _brute(base_deg, speed, factor, threats, horizon_s):
+    """Per candidate: (offset deg, reduced, worst margin m, safe, alongside), from the closed
+    form of straight tracks: the range at the CPA when it lies within the look-ahead, at the
+    look-ahead's end when later; a pair whose range opens constrains nothing."""
+    out = []
+    for k in range(N_CANDIDATES):
+        off = (k % N_OFF) * 5.0 - 90.0
+        reduced = k >= N_OFF
+        c = math.radians(base_deg + off)
+        sp = speed * (factor if reduced else 1.0)
+        vn, ve = sp * math.cos(c), sp * math.sin(c)
+        worst, beside = math.inf, False
+        for pn, pe, ovn, ove, req in threats:
+            dvn, dve = ovn - vn, ove - ve
+            w2 = dvn * dvn + dve * dve
+            dot = pn * dvn + pe * dve
+            if w2 <= 1e-12:
+                closest = math.hypot(pn, pe)
+            elif dot >= 0.0:
+                closest = math.inf
+            else:
+                t = min(-dot / w2, horizon_s)
+                closest = math.hypot(pn + dvn * t, pe + dve * t)
+            worst = min(worst, closest - req)
+            beside |= req > 0 and w2 < 1.0 and math.hypot(pn, pe) < 2.0 * max(req, 1.0)
+        out.append((off, reduced, worst, worst >= 0.0, beside))
+    return out
+
+
+@st.composite
+def pictures(draw):
+    """One ship and up to four others, most of them on a collision course or near it (aimed at
+    a point near where the own ship will be after 5 to 25 min on her base course), each
+    starting outside the distance it must be kept at (inside it no candidate keeps it, and
+    which is least bad is a separate preference)."""
+    f = st.floats
+    base_deg, speed = draw(f(0.0, 360.0)), draw(f(3.0, 10.0))
+    c = math.radians(base_deg)
+    threats = []
+    for _ in range(draw(st.integers(1, 4))):
+        limit = draw(st.sampled_from([0.0, 500.0, 1000.0, 1852.0]))
+        b, r = math.radians(draw(f(0.0, 360.0))), draw(f(max(1500.0, limit + 200.0), 12000.0))
+        pn, pe = r * math.cos(b), r * math.sin(b)
+        if draw(st.booleans()) or draw(st.booleans()):
+            t = draw(f(300.0, 1500.0))
+            an = speed * t * math.cos(c) + draw(f(-1500.0, 1500.0))
+            ae = speed * t * math.sin(c) + draw(f(-1500.0, 1500.0))
+            ovn, ove = (an - pn) / t, (ae - pe) / t
+        else:
+            ovn, ove = draw(f(-8.0, 8.0)), draw(f(-8.0, 8.0))
+        threats.append((pn, pe, ovn, ove, limit))
+    return threats, base_deg, speed
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                                   HealthCheck.filter_too_much])
+@given(picture=pictures(), factor=st.floats(0.3, 0.8),
+       side=st.sampled_from([STARBOARD, PORT, EITHER]),
+       least_deg=st.sampled_from([0.0, 10.0, 30.0]), reduce=st.booleans(),
+       current=st.one_of(st.just(-1), st.just(-1), st.integers(0, N_CANDIDATES - 1)))
+def test_choice_agrees_with_brute_force_search(picture, factor, side, least_deg, reduce,
+                                               current):
+    """Every candidate judged by the closed form; then, from the docstring's preference order:
+    a running manoeuvre that still keeps every distance (and runs alongside nobody) is kept;
+    else, among the safe candidates on the asked side with at least the asked alteration, full
+    speed first unless a reduction is asked, then the smallest alteration, starboard first
+    among equals (and a reduced speed first among equals when it is asked); with no safe
+    candidate at all, the largest worst-case margin on the asked side."""
+    threats, base_deg, speed = picture
+    table = _brute(base_deg, speed, factor, threats, H)
+    # skip pictures where rounding decides (a margin within a millimetre of zero) and where
+    # running alongside would rank candidates (a separate preference, tested above)
+    assume(all(abs(m) > 1e-3 for _, _, m, _, _ in table if math.isfinite(m)))
+    assume(not any(b for *_, b in table))
+    chosen, ok = choose_one(threats, base_deg=base_deg, speed=speed, factor=factor, side=side,
+                            least_deg=least_deg, reduce=reduce, current=current)
+    off, _, worst, safe, _ = table[chosen]
+    assert ok == safe
+
+    def right_side(o):
+        return not ((side == STARBOARD and o < 0.0) or (side == PORT and o > 0.0))
+
+    if current >= 0 and table[current][3]:
+        assert chosen == current
+        return
+    adequate = [k for k, (o, _, _, s, _) in enumerate(table)
+                if s and right_side(o) and (least_deg == 0.0 or abs(o) >= least_deg)]
+    if adequate:
+        def key(k):
+            o, red = table[k][0], table[k][1]
+            return (abs(o), o < 0.0, not red) if reduce else (red, abs(o), o < 0.0)
+        assert chosen == min(adequate, key=key)
+    elif any(row[3] for row in table):
+        assert ok
+    else:
+        assert not ok and right_side(off)
+        best = max(m for o, _, m, _, _ in table if right_side(o))
+        assert worst >= best - 1e-6

@@ -619,7 +619,7 @@ def test_records_one_row_per_step_and_deciding_pair():
     assert cols["ship"] == ["own"] * 3 and cols["other"] == ["TS1"] * 3
     assert all(r == str(RULES_DIR / "colregs.yaml") for r in cols["rules"])
     assert cols["path"][0] == ("assess>risk>overtaking>overtaken>head_on>crossing_side>"
-                               "give_way_crossing>give_way_wait")
+                               "crossing_starboard>give_way_crossing>give_way_wait")
     assert cols["path"][1] == "give_way_still>give_way_wait>give_way_act"
     assert cols["path"][2].startswith("keep_clear")
     assert cols["decided_own_role"] == ["give_way"] * 3
@@ -768,3 +768,186 @@ def test_rogue_keep_course_stand_on_ship_acts(tmp_path):
     assert pair["collision"] is False
     assert summary["collisions"] == 0
     assert pair["min_range_m"] >= 0.5 * NM
+
+
+# --------------------------------------------------------------------------------------------
+# The classification of rules/colregs.yaml, seen from both ships of a pair
+# --------------------------------------------------------------------------------------------
+
+NAME = {v: k for k, v in ENC.items()}
+
+
+def roles(ships: list[Ship], visibility_nm: float = 10.0) -> list[tuple[str, str, str]]:
+    """(own_role, encounter, other_role) of ship 0 about ship 1 and of ship 1 about ship 0
+    after one decision of two ships running rules/colregs.yaml."""
+    dec = Decider.build(["colregs", "colregs"], np.array([0]), np.array([1]),
+                        visibility_nm=visibility_nm)
+    decide(dec, 0.0, ships)
+    return [tuple(NAME[float(mem(dec, k)[p])] for k in ("own_role", "encounter", "other_role"))
+            for p in (0, 1)]
+
+
+def at_bearing(range_nm: float, bearing_deg: float, course_deg: float,
+               speed: float = V) -> Ship:
+    """A ship ``range_nm`` from the origin on true bearing ``bearing_deg``."""
+    b = math.radians(bearing_deg)
+    return (range_nm * NM * math.cos(b), range_nm * NM * math.sin(b), course_deg, speed)
+
+
+OWN: Ship = (0.0, 0.0, 0.0, V)  # at the origin, north at 12 kn
+GW_CROSS = ("give_way", "crossing", "stand_on")
+SO_CROSS = ("stand_on", "crossing", "give_way")
+MUTUAL_HO = ("mutual_give_way", "head_on", "mutual_give_way")
+MUTUAL_CROSS = ("mutual_give_way", "crossing", "mutual_give_way")
+NONE = ("no_role", "no_encounter", "no_role")
+
+
+@pytest.mark.parametrize(("ships", "expected"), [
+    # Rule 14: reciprocal courses, dead ahead; and 5 deg on either bow (each sees the other
+    # 5 deg off: 3 sin 5 = 0.26 NM DCPA)
+    ([OWN, at_bearing(6.0, 0.0, 180.0)], [MUTUAL_HO, MUTUAL_HO]),
+    ([OWN, at_bearing(3.0, 5.0, 180.0)], [MUTUAL_HO, MUTUAL_HO]),
+    ([OWN, at_bearing(3.0, -5.0, 180.0)], [MUTUAL_HO, MUTUAL_HO]),
+    # Rule 15 (Imazu case 2 at TCPA 20 min): the other on the starboard bow steering west,
+    # both reaching (4 NM, 0) together; the mirror from port
+    ([OWN, at_bearing(4.0 * math.sqrt(2.0), 45.0, 270.0)], [GW_CROSS, SO_CROSS]),
+    ([OWN, at_bearing(4.0 * math.sqrt(2.0), -45.0, 90.0)], [SO_CROSS, GW_CROSS]),
+    # Rule 13: 12 kn coming up on a 6 kn ship 1 NM ahead, 0.2 NM to starboard (TCPA 10 min)
+    ([OWN, (NM, 0.2 * NM, 0.0, V / 2)], [("give_way", "overtaking", "stand_on"),
+                                         ("stand_on", "overtaken", "give_way")]),
+    ([(NM, 0.2 * NM, 0.0, V / 2), OWN], [("stand_on", "overtaken", "give_way"),
+                                         ("give_way", "overtaking", "stand_on")]),
+    # Rule 14(c) doubt: reciprocal courses, each 14 deg on the other's port bow
+    ([OWN, at_bearing(3.0, -14.0, 180.0)], [MUTUAL_CROSS, MUTUAL_CROSS]),
+    # no risk of collision (Rule 7): DCPA 3 sin 30 = 1.5 NM; TCPA 31 min; opening
+    ([OWN, at_bearing(3.0, 30.0, 180.0)], [NONE, NONE]),
+    ([OWN, at_bearing(2.0 * V * 60.0 * 31.0 / NM, 0.0, 180.0)], [NONE, NONE]),
+    ([OWN, at_bearing(3.0, 180.0, 180.0)], [NONE, NONE]),
+], ids=["head_on", "head_on_5_stbd", "head_on_5_port", "crossing_stbd", "crossing_port",
+        "overtaking", "overtaken", "port_port_doubt", "dcpa_1_5", "tcpa_31", "opening"])
+def test_textbook_encounters(ships, expected):
+    assert roles(ships) == expected
+
+
+def _overtaking_geometry(theta_deg: float) -> list[Ship]:
+    """Ship 1 at the origin steering north at 6 kn; ship 0 (12 kn) 1 NM from her on relative
+    bearing ``theta_deg`` from her bow, steering so that the relative motion points straight
+    at her (DCPA 0): own velocity = v1 + k u, u the unit vector from ship 0 to ship 1, with
+    |v1 + k u| = 12 kn, i.e. k = 6 cos(theta) + sqrt(36 cos^2(theta) + 108) kn."""
+    th = math.radians(theta_deg)
+    k = (6.0 * math.cos(th) + math.sqrt(36.0 * math.cos(th) ** 2 + 108.0)) * V / 12.0
+    ux, uy = -math.cos(th), -math.sin(th)
+    vn, ve = V / 2.0 + k * ux, k * uy
+    assert math.hypot(vn, ve) == pytest.approx(V)
+    return [(NM * math.cos(th), NM * math.sin(th), math.degrees(math.atan2(ve, vn)), V),
+            (0.0, 0.0, 0.0, V / 2.0)]
+
+
+@pytest.mark.parametrize(("theta", "expected"), [
+    # more than 22.5 deg abaft her beam: Rule 13, whatever the side
+    (112.6, [("give_way", "overtaking", "stand_on"), ("stand_on", "overtaken", "give_way")]),
+    (-112.6, [("give_way", "overtaking", "stand_on"), ("stand_on", "overtaken", "give_way")]),
+    (150.0, [("give_way", "overtaking", "stand_on"), ("stand_on", "overtaken", "give_way")]),
+    # just forward of that line: a crossing. At +112.4 ship 0 sees ship 1 27.5 deg on her port
+    # bow (ship 1 then has ship 0 on her starboard side and gives way); at -112.4 the mirror
+    (112.4, [SO_CROSS, GW_CROSS]),
+    (-112.4, [GW_CROSS, SO_CROSS]),
+])
+def test_overtaking_sector_boundary_at_112_5_degrees(theta, expected):
+    assert roles(_overtaking_geometry(theta)) == expected
+
+
+@pytest.mark.parametrize(("deviation", "expected"), [
+    (14.9, [MUTUAL_HO, MUTUAL_CROSS]), (-14.9, [MUTUAL_HO, GW_CROSS]),
+    (15.1, [MUTUAL_CROSS, MUTUAL_CROSS]), (-15.1, [SO_CROSS, GW_CROSS])])
+def test_head_on_reciprocal_course_boundary_at_165_degrees(deviation, expected):
+    """Ship 1 dead ahead of ship 0 at 3 NM on course 180 + deviation; ship 0 lies on her bow at
+    -deviation. Ship 0 (bearing 0) calls it head-on while the course difference is at least
+    165 deg. Beyond, ship 0 has her at bearing 0 (not to starboard) and goes by how she sees
+    ship 0: on her port bow (+15.1) both are in doubt (mutual), on her starboard bow (-15.1)
+    ship 1 gives way and ship 0 stands on. At +-14.9 ship 1 sees ship 0 14.9 deg off her bow,
+    beyond the 10 deg of head-on: a crossing, doubtful with ship 0 to port (mutual), giving way
+    with ship 0 to starboard; either way she alters to starboard as ship 0 does."""
+    assert roles([OWN, at_bearing(3.0, 0.0, 180.0 + deviation)]) == expected
+
+
+def test_each_on_the_others_starboard_bow_is_not_a_blind_spot():
+    """Reciprocal courses, each ship 14 deg on the other's starboard bow, 3 NM apart (DCPA
+    3 sin 14 = 0.73 NM, TCPA 7.5 min): Rule 14(c) doubt, the mirror of the port-to-port case
+    that crossing_port resolves as mutual_give_way. Rule 15 cannot make both ships the give-way
+    ship with the other standing on: the decision step reports it as a blind spot."""
+    ships = [OWN, at_bearing(3.0, 14.0, 180.0)]
+    got = roles(ships)
+    assert not (got[0][0] == got[1][0] == "give_way"), got
+    dec = build(["colregs", "colregs"])
+    decide(dec, 0.0, ships)
+    decide(dec, 10.0, ships)
+    assert dec.blind_spots == []
+
+
+def test_restricted_visibility_has_no_roles_and_turns_away():
+    """Rule 19 (visibility 1 NM < 2 NM): no stand-on ship. A ship forward of the beam asks for
+    a starboard alteration and reduced speed; one abaft the beam to starboard asks to turn to
+    port (away from her), one abaft to port to starboard."""
+    def request(ships):
+        dec = Decider.build(["colregs", "colregs"], np.array([0]), np.array([1]),
+                            visibility_nm=1.0)
+        decide(dec, 0.0, ships)
+        return (NAME[float(mem(dec, "own_role")[0])], NAME[float(mem(dec, "encounter")[0])],
+                NAME[float(dec.request[0, 0])], float(dec.request[2, 0]))
+    rv = "restricted_visibility"
+    assert request([OWN, at_bearing(6.0, 0.0, 180.0)]) == ("no_role", rv, "starboard", 0.5)
+    # a 14 kn ship coming up from 1 NM on the starboard quarter (bearing 135) on course 340
+    astern_stbd = at_bearing(1.0, 135.0, 340.0, 14.0 * NM / 3600.0)
+    got = request([OWN, astern_stbd])
+    assert got[:3] == ("no_role", rv, "port")
+    astern_port = at_bearing(1.0, -135.0, 20.0, 14.0 * NM / 3600.0)
+    assert request([OWN, astern_port])[:3] == ("no_role", rv, "starboard")
+
+
+def test_both_views_agree_over_many_random_pairs():
+    """500 disjoint pairs of ships steering where they head, both running the rules: a risk
+    of collision is seen by both or neither; Rule 13 labels come in overtaking / overtaken
+    pairs; never both stand-on; a stand-on ship's other ship is give-way or mutual give-way."""
+    rng = np.random.default_rng(21)
+    k = 600
+    ships = []
+    for _ in range(k):
+        course = rng.uniform(0.0, 360.0, 2)
+        speed = rng.uniform(3.0, 20.0, 2) * NM / 3600.0
+        rel = rng.uniform(-3.0, 3.0, 2) * NM
+        ships += [(0.0, 0.0, course[0], speed[0]), (rel[0], rel[1], course[1], speed[1])]
+    pi, pj = np.arange(0, 2 * k, 2), np.arange(1, 2 * k, 2)
+    dec = Decider.build(["colregs"] * (2 * k), pi, pj)
+    a = np.array(ships)
+    hdg = np.radians(a[:, 2])
+    own_state = np.stack([a[:, 0], a[:, 1], hdg])
+    own_vel = np.stack([a[:, 3] * np.cos(hdg), a[:, 3] * np.sin(hdg)])
+    other = np.concatenate([own_state[:2, dec.tgt], own_vel[:, dec.tgt]])
+    dec.decide(0.0, own_state, own_vel, np.full(2 * k, 150.0), other, hdg, a[:, 3])
+    role, enc = mem(dec, "own_role"), mem(dec, "encounter")
+    r_role, r_enc = role[dec.reverse], enc[dec.reverse]
+    assert ((role == NO_ROLE) == (r_role == NO_ROLE)).all()
+    engaged = int((role != NO_ROLE).sum())
+    assert engaged > 100  # the sample holds many encounters
+    assert ((enc == ENC["overtaking"]) == (r_enc == ENC["overtaken"])).all()
+    assert not ((role == STAND_ON) & (r_role == STAND_ON)).any()
+    so = role == STAND_ON
+    assert np.isin(r_role[so], [GIVE_WAY, MUTUAL_GIVE_WAY]).all()
+    assert ((enc == ENC["head_on"]) <= np.isin(r_enc, [ENC["head_on"], ENC["crossing"]])).all()
+
+
+def test_other_course_change_is_measured_the_short_way_across_north():
+    """Ship 0 east at 12 kn gives way to ship 1 on her starboard bow steering 350. When ship 1
+    then steers 010, she has changed course by 20 deg (not 340): the Rule 17(a)(ii) test
+    "course changed less than not_acting_deg" must see 20."""
+    d = 4.0 * NM
+    ships = [(0.0, 0.0, 90.0, V), (-d, d, 350.0, V)]
+    dec = build(["colregs", "colregs"])
+    decide(dec, 0.0, ships)
+    assert NAME[float(mem(dec, "own_role")[0])] == "give_way"
+    ships[1] = (-d + 10.0 * V, d, 10.0, V)
+    decide(dec, 10.0, ships)
+    assert feature(dec, "other_course_change_deg")[0] == pytest.approx(20.0)
+    assert feature(dec, "other_speed_change_ratio")[0] == pytest.approx(1.0)
+    assert feature(dec, "time_in_role_min")[0] == pytest.approx(10.0 / 60.0)

@@ -290,3 +290,166 @@ def test_time_to_entry_on_many_tracks_across_sectors_and_quadrants(kind):
                                overtaking[i], near)
         assert margin.min() <= 1e-6 * length[i]
 
+
+
+# ---------------------------------------------------------------------------------------------
+# Dimensions of shared/reference/colregs.md section 3, scaling and symmetry
+# ---------------------------------------------------------------------------------------------
+
+def _kijima_radii(v_kn: float) -> tuple[float, float, float, float]:
+    """(fore, aft, stbd, port) in ship lengths, straight from colregs.md section 3 (log10 and
+    powers of ten, not the module's exp / ln form)."""
+    if v_kn == 0.0:
+        k_ad = k_dt = 0.0
+    else:
+        k_ad = 10.0 ** (0.3591 * math.log10(v_kn) + 0.0952)
+        k_dt = 10.0 ** (0.5441 * math.log10(v_kn) - 0.0795)
+    s = math.sqrt(k_ad**2 + (k_dt / 2.0) ** 2)
+    return 1.0 + 1.34 * s, 1.0 + 0.67 * s, 0.2 + k_dt, 0.2 + 0.75 * k_dt
+
+
+@pytest.mark.parametrize("v_kn", [0.5, 1.0, 3.0, 7.5, 14.0, 22.0, 30.0])
+def test_kijima_radii_follow_the_reference_formulas(v_kn):
+    fore, aft, stbd, port = _kijima_radii(v_kn)
+    got = _boundary("kijima", [0, 90, 180, 270], length=180.0, speed=v_kn * KN) / 180.0
+    assert got == pytest.approx([fore, stbd, aft, port], rel=1e-12)
+    # at 1 kn: log10 V = 0, k_AD = 10^0.0952 = 1.24509, k_DT = 10^-0.0795 = 0.83272;
+    # sqrt(1.24509^2 + 0.41636^2) = 1.31286
+    if v_kn == 1.0:
+        assert stbd == pytest.approx(1.03272, abs=1e-5)
+        assert port == pytest.approx(0.2 + 0.75 * 0.83272, abs=1e-5)
+        assert fore == pytest.approx(1.0 + 1.34 * 1.31286, abs=1e-5)
+        assert aft == pytest.approx(1.0 + 0.67 * 1.31286, abs=1e-5)
+
+
+@pytest.mark.parametrize("bearing_deg", [30.0, 150.0, 210.0, 300.0])
+def test_kijima_quarter_ellipses_between_the_axes(bearing_deg):
+    """In each quadrant the boundary is the quarter-ellipse with that quadrant's radii:
+    r = (cos^2 / a^2 + sin^2 / b^2)^(-1/2)."""
+    fore, aft, stbd, port = _kijima_radii(10.0)
+    b = math.radians(bearing_deg)
+    a_ = fore if math.cos(b) > 0 else aft
+    b_ = stbd if math.sin(b) > 0 else port
+    want = (math.cos(b) ** 2 / a_**2 + math.sin(b) ** 2 / b_**2) ** -0.5
+    got = _boundary("kijima", [bearing_deg], speed=10.0 * KN)[0] / L
+    assert got == pytest.approx(want, rel=1e-12)
+
+
+def test_kijima_speed_sign_does_not_matter():
+    b = np.radians(np.arange(0.0, 360.0, 15.0))
+    n = b.size
+    fwd = boundary_distance_m("kijima", b, np.full(n, L), np.full(n, 6.0))
+    back = boundary_distance_m("kijima", b, np.full(n, L), np.full(n, -6.0))
+    np.testing.assert_array_equal(fwd, back)
+
+
+@pytest.mark.parametrize("kind", ["coldwell", "fujii", "kijima"])
+def test_length_scaled_domains_scale_with_length(kind):
+    """Coldwell, Fujii and Kijima are multiples of L: doubling L doubles every distance
+    (at a fixed speed); Coldwell and Fujii do not depend on speed at all."""
+    b = np.radians(np.arange(0.0, 360.0, 7.5))
+    n = b.size
+    for ov in (False, True):
+        one = boundary_distance_m(kind, b, np.full(n, 120.0), np.full(n, 5.0), np.full(n, ov))
+        two = boundary_distance_m(kind, b, np.full(n, 240.0), np.full(n, 5.0), np.full(n, ov))
+        np.testing.assert_allclose(two, 2.0 * one, rtol=1e-12)
+        if kind != "kijima":
+            other_speed = boundary_distance_m(kind, b, np.full(n, 120.0), np.full(n, 11.0),
+                                              np.full(n, ov))
+            np.testing.assert_allclose(other_speed, one, rtol=1e-12)
+
+
+def test_symmetries_of_the_shapes():
+    """Fujii and the Coldwell overtaking ellipse are centred: r(b) = r(-b) = r(180 - b). The
+    Coldwell crossing ellipse is offset to starboard and Kijima's starboard radius exceeds its
+    port one (0.2 + k_DT > 0.2 + 0.75 k_DT): both reach farther at b than at -b, 0 < b < 180."""
+    b = np.radians(np.arange(1.0, 180.0, 3.0))
+    n = b.size
+    Ls, v = np.full(n, L), np.full(n, 5.0)
+    for kind, ov in (("fujii", False), ("coldwell", True)):
+        r = boundary_distance_m(kind, b, Ls, v, np.full(n, ov))
+        np.testing.assert_allclose(boundary_distance_m(kind, -b, Ls, v, np.full(n, ov)), r,
+                                   rtol=1e-12)
+        np.testing.assert_allclose(boundary_distance_m(kind, np.pi - b, Ls, v, np.full(n, ov)),
+                                   r, rtol=1e-12)
+    stbd = boundary_distance_m("coldwell", b, Ls, v)
+    port = boundary_distance_m("coldwell", -b, Ls, v)
+    assert (stbd > port).all()
+    assert (boundary_distance_m("kijima", b, Ls, v) > boundary_distance_m("kijima", -b, Ls, v)
+            ).all()
+
+
+def test_bearings_wrap():
+    """A bearing and the same bearing plus whole turns give the same distance."""
+    b = np.radians(np.arange(0.0, 360.0, 10.0)) + 0.01
+    n = b.size
+    for kind in DOMAINS:
+        r = boundary_distance_m(kind, b, np.full(n, L), np.full(n, 5.0))
+        for k in (-2, 1, 3):
+            np.testing.assert_allclose(
+                boundary_distance_m(kind, b + 2 * np.pi * k, np.full(n, L), np.full(n, 5.0)), r,
+                rtol=1e-9)
+
+
+def test_goodwin_edges_belong_to_the_first_sector_clockwise_from_the_bow():
+    """The bow (0 deg) and the 112.5 deg edge are in the starboard sector (0.85 NM); the
+    247.5 deg edge is in the astern sector (0.45 NM)."""
+    got = _boundary("goodwin", [0.0, 112.5, 247.5]) / NM
+    assert got == pytest.approx([0.85, 0.85, 0.45], rel=1e-12)
+    c1, s1 = math.cos(math.radians(112.5)), math.sin(math.radians(112.5))
+    c2, s2 = math.cos(math.radians(247.5)), math.sin(math.radians(247.5))
+    # points on the edges (power-of-two multiples of the edge unit vectors: exactly on them)
+    assert bool(contains("goodwin", 1024.0 * c1, 1024.0 * s1, L, 0.0))  # 1024 m < 0.85 NM
+    assert not bool(contains("goodwin", 1024.0 * c2, 1024.0 * s2, L, 0.0))  # > 0.45 NM
+    assert bool(contains("goodwin", 512.0 * c2, 512.0 * s2, L, 0.0))
+    assert bool(contains("goodwin", 1500.0, 0.0, L, 0.0))  # dead ahead, 0.81 NM
+
+
+def test_goodwin_entry_time_on_the_247_5_edge_agrees_with_contains():
+    """A point 1024 m out exactly on the 247.5 deg edge, not moving relative to own ship: it is
+    outside (contains: the astern sector, 833 m), so it never enters: +inf, not 0."""
+    c2, s2 = math.cos(math.radians(247.5)), math.sin(math.radians(247.5))
+    x, y = 1024.0 * c2, 1024.0 * s2
+    assert not bool(contains("goodwin", x, y, L, 0.0))
+    assert float(time_to_entry_s("goodwin", x, y, 0.0, 0.0, L, 0.0, None, 600.0)) == math.inf
+
+
+def test_boundary_points_count_as_inside():
+    """The boundary is inside: Fujii's bow point (4 L, 0) and beam point (0, 1.6 L) exactly;
+    a relative 1e-9 beyond is outside."""
+    pts = np.array([[4.0 * L, 0.0], [0.0, 1.6 * L], [-4.0 * L, 0.0], [0.0, -1.6 * L]])
+    assert contains("fujii", pts[:, 0], pts[:, 1], L, 0.0).all()
+    out = pts * (1.0 + 1e-9)
+    assert not contains("fujii", out[:, 0], out[:, 1], L, 0.0).any()
+
+
+def test_entry_time_at_the_horizon_boundary():
+    """Closing from 2000 m dead ahead at 10 m/s on Fujii's 4 L = 400 m bow point: entry after
+    160 s. A horizon of 160.000001 s sees it, 159.999 s does not."""
+    assert _entry("fujii", 2000.0, 0.0, -10.0, 0.0, horizon=160.000001) == pytest.approx(160.0)
+    assert _entry("fujii", 2000.0, 0.0, -10.0, 0.0, horizon=159.999) == math.inf
+    assert _entry("fujii", 2000.0, 0.0, -10.0, 0.0, horizon=math.inf) == pytest.approx(160.0)
+    assert _entry("fujii", 2000.0, 0.0, -10.0, 0.0, horizon=math.nan) == math.inf
+
+
+def test_entry_through_the_side_of_an_ellipse():
+    """Fujii (4 L x 1.6 L semi-axes), a track parallel to the bow line 80 m to starboard
+    (y = 0.8 L), closing at 5 m/s from 1000 m ahead: enters where x = 4 L sqrt(1 - 0.5^2) =
+    346.41 m, i.e. after (1000 - 346.41) / 5 = 130.72 s; 200 m off (y = 2 L > 1.6 L) never."""
+    x_in = 4.0 * L * math.sqrt(1.0 - 0.25)
+    assert _entry("fujii", 1000.0, 80.0, -5.0, 0.0) == pytest.approx((1000.0 - x_in) / 5.0)
+    assert _entry("fujii", 1000.0, 200.0, -5.0, 0.0) == math.inf
+    # already past own ship and opening: never
+    assert _entry("fujii", -1000.0, 80.0, -5.0, 0.0) == math.inf
+
+
+def test_output_shapes_and_bad_shapes():
+    assert np.shape(boundary_distance_m("goodwin", 0.3, L, 1.0)) == ()
+    assert np.shape(time_to_entry_s("goodwin", 5000.0, 0.0, -5.0, 0.0, L, 1.0, False,
+                                    1000.0)) == ()
+    assert boundary_distance_m("fujii", np.zeros(0), np.zeros(0), np.zeros(0)).shape == (0,)
+    got = contains("fujii", np.array([0.0, 1e5]), 0.0, L, 0.0, np.array([True, False]))
+    assert got.tolist() == [True, False]
+    with pytest.raises(InputError) as err:
+        boundary_distance_m("fujii", np.zeros((2, 2)), L, 0.0)
+    assert err.value.key == "pairs"

@@ -394,3 +394,223 @@ def test_visibility_per_pair_and_empty_input():
     z = np.zeros(0)
     assert pair_features(z, z, z, z, z, z, z, z, z, z, z, "goodwin", 5.0, 60.0).values.shape == (
         len(NAMES), 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Conventions (NED: heading 0 = north, clockwise; body x forward, y starboard) by hand
+# ---------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("heading_deg", "other", "bearing"), [
+    # own heading east: north is on the port beam, south on the starboard beam, west astern
+    (90.0, (1.0, 0.0), -90.0),
+    (90.0, (0.0, 1.0), 0.0),
+    (90.0, (-1.0, 0.0), 90.0),
+    (90.0, (0.0, -1.0), 180.0),
+    # own heading 225 (south-west): a ship due south lies 45 deg on the port bow,
+    # one due west 45 deg on the starboard bow, one north-east dead astern
+    (225.0, (-1.0, 0.0), -45.0),
+    (225.0, (0.0, -1.0), 45.0),
+    (225.0, (1.0, 1.0), 180.0),
+    # heading 350: a ship due north is 10 deg on the starboard bow (across the 0/360 wrap)
+    (350.0, (1.0, 0.0), 10.0),
+])
+def test_relative_bearing_in_ned(heading_deg, other, bearing):
+    """Relative bearing = true bearing of the other minus own heading, folded to (-180, 180]."""
+    f = one(ship(course_deg=heading_deg), ship(north_nm=other[0], east_nm=other[1]))
+    assert angle_close(f["bearing_deg"], bearing, 1e-9)
+    assert -180.0 < f["bearing_deg"] <= 180.0
+    assert f["bearing_abs_deg"] == pytest.approx(abs(bearing), abs=1e-9)
+
+
+def test_aspect_is_measured_from_the_other_ships_course_over_ground():
+    """Other at the origin steering 045 at 10 kn; own ship 1 NM due south-east of her (true
+    bearing 135 from her) lies 90 deg on her starboard beam, 1 NM due north-west lies on her
+    port beam (-90), 1 NM north-east dead ahead (0); the other's heading is not an input."""
+    other = ship(course_deg=45.0, speed_kn=10.0)
+    d = 1.0 / math.sqrt(2.0)
+    for (n, e), want in (((-d, d), 90.0), ((d, -d), -90.0), ((d, d), 0.0), ((-d, -d), 180.0)):
+        f = one(ship(north_nm=n, east_nm=e, course_deg=200.0), other)
+        assert angle_close(f["aspect_deg"], want, 1e-9), (n, e)
+        assert f["aspect_abs_deg"] == pytest.approx(abs(want), abs=1e-9)
+
+
+def test_course_difference_sign_and_wrap():
+    """course_diff = other COG - own COG in (-180, 180]: 350 - 010 = -20, 010 - 350 = +20,
+    090 - 000 = +90 (other steers to own starboard), 270 - 000 = -90."""
+    for own_c, oth_c, want in ((10.0, 350.0, -20.0), (350.0, 10.0, 20.0), (0.0, 90.0, 90.0),
+                               (0.0, 270.0, -90.0), (30.0, 210.0, 180.0)):
+        f = one(ship(course_deg=own_c), ship(north_nm=3.0, course_deg=oth_c))
+        assert angle_close(f["course_diff_deg"], want, 1e-9), (own_c, oth_c)
+        assert -180.0 < f["course_diff_deg"] <= 180.0
+        assert f["course_diff_abs_deg"] == pytest.approx(abs(want), abs=1e-9)
+
+
+def test_bow_line_follows_the_heading_not_the_course_over_ground():
+    """Own heading north but drifting east at 5 m/s (no speed ahead); a stopped ship 1000 m
+    north and 3000 m east. Body frame = (north, east): y = 3000 m closing at 5 m/s, so it
+    crosses the bow line after 600 s = 10 min, 1000 m ahead (0.54 NM); a bow line along the
+    course over ground (east) would instead run through the target."""
+    own = dict(n=0.0, e=0.0, vn=0.0, ve=5.0, h=0.0, L=100.0)
+    other = dict(n=1000.0, e=3000.0, vn=0.0, ve=0.0, h=0.0, L=100.0)
+    f = one(own, other)
+    assert f["bct_min"] == pytest.approx(10.0)
+    assert f["bcr_nm"] == pytest.approx(1000.0 / NM)
+    assert f["bearing_deg"] == pytest.approx(math.degrees(math.atan2(3000.0, 1000.0)))
+    # courses over ground: own east (the velocity), the stopped other parallel to it
+    assert f["course_diff_deg"] == pytest.approx(0.0, abs=1e-12)
+    # p . v = 3000 * (-5) = -15000, |v|^2 = 25: TCPA 600 s; DCPA = |p x v| / |v| = 1000 m
+    assert f["tcpa_min"] == pytest.approx(10.0)
+    assert f["dcpa_nm"] == pytest.approx(1000.0 / NM)
+
+
+def test_course_fallbacks_at_the_speed_threshold():
+    """Below 0.1 m/s a velocity is not a course: own course = heading, other course = own
+    course; at 0.1 m/s and above the velocity direction counts."""
+    slow, fast = 0.0999, 0.1001
+    # own heading 090 but creeping north: below the threshold its course is 090
+    own = dict(n=0.0, e=0.0, vn=slow, ve=0.0, h=math.pi / 2, L=100.0)
+    other = dict(n=2000.0, e=0.0, vn=0.0, ve=-5.0, h=0.0, L=100.0)  # steering west
+    assert one(own, other)["course_diff_deg"] == pytest.approx(180.0)
+    own["vn"] = fast  # now its course over ground is north
+    assert one(own, other)["course_diff_deg"] == pytest.approx(-90.0)
+    # the other creeping south: taken parallel to own course (000) below, 180 above
+    own = dict(n=0.0, e=0.0, vn=5.0, ve=0.0, h=0.0, L=100.0)
+    other = dict(n=2000.0, e=0.0, vn=-slow, ve=0.0, h=0.0, L=100.0)
+    g = one(own, other)
+    assert g["course_diff_deg"] == pytest.approx(0.0, abs=1e-12)
+    assert g["aspect_deg"] == pytest.approx(180.0)  # own ship dead astern of a "parallel" ship
+    other["vn"] = -fast
+    g = one(own, other)
+    assert g["course_diff_deg"] == pytest.approx(180.0) and g["aspect_deg"] == pytest.approx(0.0)
+
+
+def test_speed_ratio_at_the_stopped_threshold():
+    """Stopped = below 1e-6 m/s: both stopped 1, only own stopped +inf, else the plain ratio."""
+    def ratio(own_v, oth_v):
+        return one(dict(n=0.0, e=0.0, vn=own_v, ve=0.0, h=0.0, L=100.0),
+                   dict(n=500.0, e=0.0, vn=oth_v, ve=0.0, h=0.0, L=100.0))["speed_ratio"]
+    assert ratio(0.0, 0.0) == 1.0
+    assert ratio(5e-7, 9e-7) == 1.0
+    assert ratio(5e-7, 2.0) == math.inf
+    assert ratio(4.0, 0.0) == 0.0
+    assert ratio(2e-6, 3e-6) == pytest.approx(1.5)
+    assert ratio(4.0, 6.0) == pytest.approx(1.5)
+
+
+def _scene(rng, n):
+    return (rng.uniform(-9000, 9000, n), rng.uniform(-9000, 9000, n), rng.uniform(-8, 8, n),
+            rng.uniform(-8, 8, n), rng.uniform(-7, 7, n), rng.uniform(50, 300, n),
+            rng.uniform(-9000, 9000, n), rng.uniform(-9000, 9000, n), rng.uniform(-8, 8, n),
+            rng.uniform(-8, 8, n))
+
+
+def _rotate(a, b, turn):
+    """(north, east) components turned clockwise by ``turn`` rad."""
+    c, s = math.cos(turn), math.sin(turn)
+    return c * a - s * b, s * a + c * b
+
+
+def _call(cols, domain="coldwell"):
+    on, oe, ovn, ove, h, L, tn, te, tvn, tve = cols
+    return pair_features(on, oe, ovn, ove, h, L, tn, te, tvn, tve, L, domain, 4.0, 1800.0)
+
+
+@pytest.mark.parametrize("domain", ["coldwell", "fujii", "goodwin", "kijima"])
+def test_rotating_and_shifting_the_whole_scene_changes_no_feature(domain):
+    """Every feature is relative: rotating every position, velocity and heading about a point
+    by the same angle, then shifting the scene, leaves them all unchanged (angles mod 360)."""
+    rng = np.random.default_rng(5)
+    n = 4000
+    cols = _scene(rng, n)
+    base = _call(cols, domain).values
+    on, oe, ovn, ove, h, L, tn, te, tvn, tve = cols
+    for turn, shift in ((0.7, (1.0e4, -3.0e3)), (-2.9, (-5.0e4, 2.0e4)), (math.pi, (0, 0))):
+        (on2, oe2), (tn2, te2) = _rotate(on, oe, turn), _rotate(tn, te, turn)
+        moved = (on2 + shift[0], oe2 + shift[1], *_rotate(ovn, ove, turn), h + turn, L,
+                 tn2 + shift[0], te2 + shift[1], *_rotate(tvn, tve, turn))
+        got = _call(moved, domain).values
+        angles = [INDEX[k] for k in ("bearing_deg", "aspect_deg", "course_diff_deg")]
+        for row, name in enumerate(NAMES):
+            a, b = base[row], got[row]
+            if row in angles:
+                diff = (a - b + 180.0) % 360.0 - 180.0
+                assert np.abs(diff).max() < 1e-6, name
+            elif name in ("time_to_domain_min", "bct_min", "tcpa_min", "bcr_nm"):
+                fin = np.isfinite(a)
+                assert (np.isfinite(b) == fin).mean() > 0.999, name
+                both = fin & np.isfinite(b)
+                np.testing.assert_allclose(b[both], a[both], rtol=1e-6, atol=1e-6, err_msg=name)
+            else:
+                np.testing.assert_allclose(b, a, rtol=1e-7, atol=1e-7, err_msg=name)
+
+
+def test_heading_wrapped_by_whole_turns_gives_the_same_features():
+    rng = np.random.default_rng(9)
+    cols = list(_scene(rng, 2000))
+    base = _call(cols).values
+    for k in (-3, 1, 5):
+        cols2 = list(cols)
+        cols2[4] = cols[4] + 2.0 * math.pi * k
+        np.testing.assert_allclose(_call(cols2).values, base, rtol=1e-9, atol=1e-9)
+
+
+def test_one_vectorised_call_equals_pair_by_pair_calls():
+    rng = np.random.default_rng(13)
+    cols = _scene(rng, 40)
+    allv = _call(cols).values
+    for i in range(40):
+        single = _call(tuple(c[i:i + 1] for c in cols)).values[:, 0]
+        np.testing.assert_array_equal(single, allv[:, i])
+
+
+def test_unknown_own_state_gives_nan_features_too():
+    """NaN own heading or own velocity: every feature but visibility is NaN (so every
+    comparison a rules file makes on them is false)."""
+    for key in ("h", "vn", "n"):
+        own = ship()
+        own[key] = math.nan
+        f = one(own, ship(north_nm=1.0), visibility_nm=0.7)
+        assert all(math.isnan(v) for k, v in f.items() if k != "visibility_nm"), key
+        assert f["visibility_nm"] == 0.7
+
+
+def test_time_to_domain_at_the_horizon():
+    """Head-on closing at 24 kn from 6 NM with a 200 m ship: the Coldwell domain dead ahead is
+    5.8697 L; entry after (6 NM - 5.8697 L) / 24 kn. A horizon a hair longer sees it, a hair
+    shorter does not."""
+    L = 200.0
+    t_entry = (6.0 * NM - (1.1 + 5.0 * math.sqrt(0.91)) * L) / (24.0 * KN)
+    pair = (ship(length_m=L), ship(north_nm=6.0, course_deg=180.0))
+    f = one(*pair, horizon_s=t_entry + 1e-6)
+    assert f["time_to_domain_min"] == pytest.approx(t_entry / 60.0, rel=1e-9)
+    assert f["predicted_domain_entry"] == 1.0
+    f = one(*pair, horizon_s=t_entry - 1e-6)
+    assert f["time_to_domain_min"] == math.inf and f["predicted_domain_entry"] == 0.0
+
+
+def test_time_to_domain_zero_only_inside_on_a_goodwin_sector_edge():
+    """Other ship 1024 m out exactly on the 247.5 deg edge (a power-of-two multiple of the edge's
+    unit vector, so it lies on the edge in floating point), no relative motion. The module
+    docstring: an edge belongs to the first sector clockwise from the bow, the astern one
+    (0.45 NM = 833 m): the ship is outside, so time_to_domain_min must be +inf, not 0."""
+    c, s = math.cos(math.radians(247.5)), math.sin(math.radians(247.5))
+    own = dict(n=0.0, e=0.0, vn=0.0, ve=5.0, h=0.0, L=100.0)
+    other = dict(n=1024.0 * c, e=1024.0 * s, vn=0.0, ve=5.0, h=0.0, L=100.0)
+    f = one(own, other, domain="goodwin", horizon_s=600.0)
+    assert f["domain_nm"] == pytest.approx(0.45)
+    assert f["range_to_domain_nm"] > 0.0
+    assert f["time_to_domain_min"] == math.inf
+
+
+def test_zero_range_measures_the_domain_along_the_bow():
+    """The other ship exactly at own position: range 0, the domain distance is taken dead
+    ahead (Coldwell crossing ellipse: 1.1 L + 5 L sqrt(1 - 0.3^2) = 5.8697 L), so the other is
+    inside (range_to_domain = -5.8697 L) and the entry time is 0."""
+    L = 120.0
+    f = one(ship(length_m=L), ship(course_deg=90.0))
+    ahead = (1.1 + 5.0 * math.sqrt(0.91)) * L
+    assert f["range_nm"] == 0.0
+    assert f["domain_nm"] == pytest.approx(ahead / NM)
+    assert f["range_to_domain_nm"] == pytest.approx(-ahead / NM)
+    assert f["time_to_domain_min"] == 0.0 and f["predicted_domain_entry"] == 1.0
+    assert f["bearing_deg"] == 0.0 and f["dcpa_nm"] == 0.0 and f["tcpa_min"] == 0.0

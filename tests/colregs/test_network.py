@@ -21,6 +21,8 @@ from trafficsim.colregs.network import (
     OP_ALL,
     OP_ANY,
     OP_BETWEEN,
+    OP_EQ,
+    OP_FALSE,
     OP_GT,
     OP_LE,
     OP_NOT,
@@ -506,3 +508,145 @@ def test_load_reuses_a_compiled_file_until_it_or_a_file_it_extends_changes(tmp_p
     base.unlink()
     with pytest.raises(ScenarioError):
         load(child, VOCAB)
+
+
+# ------------------------------------------------------------------------------------------
+# A tiny rule file written to disk, run exactly as written
+# ------------------------------------------------------------------------------------------
+
+TINY_VOCAB = Vocabulary(
+    features=("a", "b"),
+    enums={"low": -2.0, "high": 4.0},
+    actions={"level": ActionField(("low", "high")), "n": ActionField()})
+
+_PY_OPS = {"<": lambda x, c: x < c, "<=": lambda x, c: x <= c, ">": lambda x, c: x > c,
+           ">=": lambda x, c: x >= c, "==": lambda x, c: x == c, "!=": lambda x, c: x != c}
+_SAMPLES = [-math.inf, -3.0, -2.0, -0.0, 0.0, 1.0, 2.5, 4.0, 7.0, math.inf, NAN]
+
+
+def _tiny_file(tmp_path: Path, test: str) -> Path:
+    path = tmp_path / "tiny.yaml"
+    path.write_text("schema_version: 1\nname: tiny\nstart: t\n"
+                    "parameters: {lim: 2.5, lo_p: -2, hi_p: 4, lvl: high}\nnodes:\n"
+                    f"  t: {{test: {test}, yes: {{to: y, next: true}}, "
+                    "no: {to: n, next: true}}\n"
+                    "  y: {test: true, yes: {to: t, next: true}}\n"
+                    "  n: {test: true, yes: {to: t, next: true}}\n", encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("op", list(_PY_OPS))
+@pytest.mark.parametrize(("operand", "value"), [("2.5", 2.5), ("lim", 2.5), ("low", -2.0),
+                                                ("lvl", 4.0), ("0", 0.0), ("-0.0", 0.0)])
+def test_every_operator_on_every_operand_kind(tmp_path: Path, op: str, operand: str,
+                                              value: float) -> None:
+    """``[a, op, v]`` with v a number, a parameter, an enum constant or an enum-valued
+    parameter holds exactly where Python's operator does on the resolved float, infinities
+    included; NaN is false for every operator."""
+    net = load(_tiny_file(tmp_path, f"[a, '{op}', {operand}]"), TINY_VOCAB)
+    feats = np.array([_SAMPLES, np.zeros(len(_SAMPLES))])
+    d = evaluate(net, feats, net.initial_cursor(len(_SAMPLES)))
+    held = [bool(c == net.node_index("y")) for c in d.cursor]
+    want = [False if math.isnan(x) else _PY_OPS[op](x, value) for x in _SAMPLES]
+    assert held == want
+
+
+@pytest.mark.parametrize(("bounds", "lo", "hi"), [("[lo_p, hi_p]", -2.0, 4.0),
+                                                  ("[-2, lim]", -2.0, 2.5),
+                                                  ("[lim, lim]", 2.5, 2.5),
+                                                  ("[-.inf, 0]", None, None)])
+def test_between_is_inclusive_on_both_ends(tmp_path: Path, bounds: str, lo: float | None,
+                                           hi: float | None) -> None:
+    if lo is None:  # an infinite bound is refused at load, located
+        with pytest.raises(ScenarioError) as info:
+            load(_tiny_file(tmp_path, f"[a, between, {bounds}]"), TINY_VOCAB)
+        assert info.value.key == "nodes.t.test[2][0]" and info.value.line == 6
+        return
+    net = load(_tiny_file(tmp_path, f"[b, between, {bounds}]"), TINY_VOCAB)
+    feats = np.array([np.zeros(len(_SAMPLES)), _SAMPLES])
+    d = evaluate(net, feats, net.initial_cursor(len(_SAMPLES)))
+    held = [bool(c == net.node_index("y")) for c in d.cursor]
+    assert held == [(not math.isnan(x)) and lo <= x <= hi for x in _SAMPLES]
+
+
+def test_a_tiny_network_over_several_steps(tmp_path: Path) -> None:
+    """Hand trace of a watch / act / monitor network over three decision steps for three
+    pairs, with the cursors, paths and merged actions each step."""
+    path = tmp_path / "watch.yaml"
+    path.write_text(
+        "schema_version: 1\n"              # 1
+        "name: watch\n"                     # 2
+        "start: watch\n"                    # 3
+        "parameters: {near: 2, lvl: low}\n"  # 4
+        "nodes:\n"                          # 5
+        "  watch:\n"                        # 6
+        "    test: [a, '<', near]\n"        # 7
+        "    action: {level: high}\n"       # 8
+        "    yes: act\n"                    # 9
+        "    no: {to: watch, next: true}\n"  # 10
+        "  act:\n"                          # 11
+        "    test: {not: [b, '>', 0]}\n"    # 12
+        "    action: {level: lvl, n: 1}\n"  # 13
+        "    yes: {to: monitor, next: true}\n"  # 14
+        "    no: monitor\n"                 # 15
+        "  monitor:\n"                      # 16
+        "    test: {any: [[a, '>=', 5], [b, '==', high]]}\n"  # 17
+        "    action: {n: 2}\n"              # 18
+        "    yes: {to: watch, next: true}\n"  # 19
+        "    no: {to: monitor, next: true}\n",  # 20
+        encoding="utf-8")
+    net = load(path, TINY_VOCAB)
+    assert net.node_names == ("watch", "act", "monitor") and net.max_depth == 3
+    W, A, M = 0, 1, 2
+    cursor = net.initial_cursor(3)
+    # step 1: a = 1, 3, 1; b = 0, 0, 1
+    d = evaluate(net, np.array([[1.0, 3.0, 1.0], [0.0, 0.0, 1.0]]), cursor)
+    # pair 0: watch (a < 2) -> act: not(b > 0) holds -> next monitor; level: high then low
+    # pair 1: watch: a = 3 -> next watch; level high
+    # pair 2: watch -> act: b > 0, so not fails -> monitor now (n = 2, later wins) -> any:
+    #         a >= 5 no, b == 4 no -> next monitor
+    assert d.path.tolist() == [[W, A, -1], [W, -1, -1], [W, A, M]]
+    assert d.cursor.tolist() == [M, W, M]
+    assert d.action("level").tolist() == [-2.0, 4.0, -2.0]
+    np.testing.assert_array_equal(d.action("n"), [1.0, NAN, 2.0])
+    # step 2: the monitors see a = 6 (pair 0) and b = high (pair 2); pair 1 closes in
+    d = evaluate(net, np.array([[6.0, 1.5, 0.0], [0.0, 7.0, 4.0]]), d.cursor)
+    assert d.path.tolist() == [[M, -1, -1], [W, A, M], [M, -1, -1]]
+    assert d.cursor.tolist() == [W, M, W]
+    np.testing.assert_array_equal(d.action("level"), [NAN, -2.0, NAN])
+    assert d.action("n").tolist() == [2.0, 2.0, 2.0]
+    # explanation of pair 1 names the file and the lines written above
+    lines = explain(net, d.path[1], np.array([1.5, 7.0])).splitlines()
+    assert lines[0] == f"1. watch ({path}:6)"
+    assert lines[1] == "   test [a, <, near]: a = 1.5, near = 2 -> yes"
+    assert lines[2] == "   action: level = high"
+    assert lines[3] == "   yes -> act (now)"
+    assert lines[4] == f"2. act ({path}:11)"
+    assert "   action: level = lvl (low), n = 1" in lines
+    assert lines[-1] == "   no -> monitor (next step)"
+    # step 3, same features, from an int32 cursor and a Fortran-ordered array:
+    # pair 0 watch: a = 6 -> next watch; pair 1 monitor: neither holds -> next monitor;
+    # pair 2 watch -> act (b = 4 > 0: not fails) -> monitor now: b == high -> next watch
+    feats = np.asfortranarray(np.array([[6.0, 1.5, 0.0], [0.0, 7.0, 4.0]]))
+    before = feats.copy()
+    d3 = evaluate(net, feats, d.cursor.astype(np.int32))
+    np.testing.assert_array_equal(feats, before)
+    assert d3.cursor.tolist() == [W, M, W]
+    assert d3.path.tolist() == [[W, -1, -1], [M, -1, -1], [W, A, M]]
+
+
+def test_compiled_tables_of_a_tiny_file(tmp_path: Path) -> None:
+    """The postfix program of ``{all: [[a, >, 1], {not: [b, ==, high]}, {any: [false, true]}]}``
+    written out by hand, and the stack it needs: 4 (the all's first two results wait while the
+    any's two items are on the stack)."""
+    net = load(_tiny_file(tmp_path, "{all: [[a, '>', 1], {not: [b, '==', high]}, "
+                                    "{any: [false, true]}]}"), TINY_VOCAB)
+    got = list(zip(net.code.tolist(), net.arg.tolist(), net.lo.tolist(), net.hi.tolist(),
+                   strict=True))
+    assert got[:7] == [(OP_GT, 0, 1.0, 1.0), (OP_EQ, 1, 4.0, 4.0), (OP_NOT, 1, 0.0, 0.0),
+                       (OP_FALSE, 0, 0.0, 0.0), (OP_TRUE, 0, 0.0, 0.0), (OP_ANY, 2, 0.0, 0.0),
+                       (OP_ALL, 3, 0.0, 0.0)]
+    assert net.max_stack == 4
+    feats = np.array([[2.0, 2.0, 0.0, NAN], [0.0, 4.0, 0.0, 0.0]])
+    d = evaluate(net, feats, net.initial_cursor(4))
+    assert [net.node_names[c] for c in d.cursor] == ["y", "n", "n", "n"]

@@ -640,3 +640,171 @@ def test_arbitrary_text_fails_only_with_located_errors(text: str) -> None:
         parse(text, VOCAB, "x.yaml")
     except ScenarioError as err:
         assert err.path == "x.yaml"
+
+
+# ------------------------------------------------------------------------------------------
+# Bad values written in a file: located errors, never a crash
+# ------------------------------------------------------------------------------------------
+
+TINY = """\
+schema_version: 1
+name: tiny
+start: a
+parameters:
+  p: 2.5
+  side: port
+nodes:
+  a:
+    test: {test}
+    action: {action}
+    yes: {{to: a, next: true}}
+    no: {{to: a, next: true}}
+"""
+
+
+def _tiny_error(tmp_path: Path, test: str = "true", action: str = "{speed_factor: 1}"
+                ) -> ScenarioError:
+    path = tmp_path / "tiny.yaml"
+    path.write_text(TINY.format(test=test, action=action), encoding="utf-8")
+    with pytest.raises(ScenarioError) as info:
+        parse_file(path, VOCAB)
+    return info.value
+
+
+@pytest.mark.parametrize(("test", "action", "line", "key", "message"), [
+    ("[range_nm, '<', .inf]", "{speed_factor: 1}", 9, "nodes.a.test[2]",
+     "expected a finite number, got inf"),
+    ("[range_nm, '<', true]", "{speed_factor: 1}", 9, "nodes.a.test[2]",
+     "expected a number, a parameter name or an enum constant, got true"),
+    ("[[range_nm], '<', 1]", "{speed_factor: 1}", 9, "nodes.a.test[0]",
+     "expected a feature name, got a list"),
+    ("[range_nm, between, [port, 3]]", "{speed_factor: 1}", 9, "nodes.a.test[2][0]",
+     "'port' is an enum constant; expected a number or a parameter name"),
+    ("[range_nm, between, [3, p]]", "{speed_factor: 1}", 9, "nodes.a.test[2]",
+     "between needs lo <= hi, got [3, p] = [3, 2.5]"),
+    ("{not: null}", "{speed_factor: 1}", 9, "nodes.a.test.not",
+     "expected a test: a comparison [feature, op, value], {all: [...]}, {any: [...]}, "
+     "{not: test}, true or false; got nothing (an empty value)"),
+    ("true", "{speed_factor: [1]}", 10, "nodes.a.action.speed_factor",
+     "expected a number, got a list"),
+    ("true", "{direction: starbord}", 10, "nodes.a.action.direction",
+     "unknown value 'starbord' for action field 'direction' (did you mean 'starboard'?); "
+     "expected one of: port, starboard"),
+    ("true", "{speed_factor: side}", 10, "nodes.a.action.speed_factor",
+     "parameter 'side' holds the enum constant 'port', but action field 'speed_factor' "
+     "takes a number or a parameter holding a number"),
+    ("true", "{speed_factor: stand_on}", 10, "nodes.a.action.speed_factor",
+     "'stand_on' is an enum constant, but action field 'speed_factor' takes a number or a "
+     "parameter name"),
+    ("[range_nm, 'lt', 1]", "{speed_factor: 1}", 9, "nodes.a.test[1]",
+     "unknown operator 'lt' (did you mean '<'?); expected one of <, <=, >, >=, ==, !=, "
+     "between (quote '>', '>=' and '!=' in YAML)"),
+])
+def test_bad_values_in_a_file_are_located(tmp_path: Path, test: str, action: str, line: int,
+                                          key: str, message: str) -> None:
+    err = _tiny_error(tmp_path, test, action)
+    path = tmp_path / "tiny.yaml"
+    assert [str(e) for e in err.errors] == [f"{path}:{line}: {key}: {message}"]
+    assert (err.path, err.line, err.key) == (str(path), line, key)
+
+
+_BIG = "1" + "0" * 400  # a YAML integer beyond the float range
+
+
+@pytest.mark.parametrize(("test", "action", "line", "key"), [
+    (f"[range_nm, '<', {_BIG}]", "{speed_factor: 1}", 9, "nodes.a.test[2]"),
+    (f"[range_nm, between, [0, {_BIG}]]", "{speed_factor: 1}", 9, "nodes.a.test[2][1]"),
+    ("true", f"{{speed_factor: -{_BIG}}}", 10, "nodes.a.action.speed_factor"),
+])
+def test_integer_beyond_the_float_range_is_a_located_error(tmp_path: Path, test: str,
+                                                            action: str, line: int,
+                                                            key: str) -> None:
+    err = _tiny_error(tmp_path, test, action)
+    assert (err.line, err.key) == (line, key)
+    assert "finite" in err.message or "too large" in err.message
+
+
+@pytest.mark.parametrize("written", ["1e5", "010"])
+def test_plain_numbers_read_as_text_get_no_quote_hint(tmp_path: Path, written: str) -> None:
+    """``1e5`` and ``010`` are written without quotes; YAML 1.1 reads them as text. Telling the
+    user to remove quotes that are not there is wrong (quoted text does get that hint)."""
+    err = _tiny_error(tmp_path, f"[range_nm, '<', {written}]")
+    assert err.key == "nodes.a.test[2]"
+    assert "remove the quotes" not in err.message
+    quoted = _tiny_error(tmp_path, "[range_nm, '<', '15']")
+    assert quoted.message.endswith("(remove the quotes)")
+
+
+def test_errors_of_one_file_come_in_line_order_with_one_line_each(tmp_path: Path) -> None:
+    path = tmp_path / "many.yaml"
+    path.write_text(
+        "schema_version: 1\nname: many\nstart: a\nparameters:\n  p: 'x'\nnodes:\n"
+        "  c: {test: [bearing_dg, '<', 1], yes: a, no: {to: a, next: true}}\n"
+        "  a: {test: [range_nm, '=<', 1], yes: c, no: {to: a, next: true}}\n"
+        "  b: {test: true, yes: {to: a, next: maybe}}\n", encoding="utf-8")
+    with pytest.raises(ScenarioError) as info:
+        parse_file(path, VOCAB)
+    errs = info.value.errors
+    assert [(e.line, e.key) for e in errs] == [
+        (5, "parameters.p"), (7, "nodes.c.test[0]"), (8, "nodes.a.test[1]"),
+        (9, "nodes.b.yes.next")]
+    assert "did you mean 'bearing_deg'" in errs[1].message
+    assert "did you mean '<='" in errs[2].message
+    assert str(info.value).splitlines() == [str(e) for e in errs]
+    assert all(str(e).startswith(f"{path}:{e.line}: {e.key}: ") for e in errs)
+
+
+# ------------------------------------------------------------------------------------------
+# The bundled rules files
+# ------------------------------------------------------------------------------------------
+
+RULES = HERE.parents[1] / "rules"
+
+
+def _line_of(path: Path, text: str) -> list[int]:
+    return [k + 1 for k, line in enumerate(path.read_text().splitlines()) if text in line]
+
+
+def test_bundled_variants_change_only_what_they_say() -> None:
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    base = parse_file(RULES / "colregs.yaml", VOCABULARY)
+    port = parse_file(RULES / "turn_port.yaml", VOCABULARY)
+    late = parse_file(RULES / "late_action.yaml", VOCABULARY)
+    assert port.parameters == {**base.parameters,
+                               "alteration_side": VOCABULARY.enums["port"]}
+    assert late.parameters == {**base.parameters, "action_time_min": 3.0,
+                               "stand_on_act_min": 3.0}
+    for rules in (port, late):
+        assert [(n.name, n.line, n.path) for n in rules.nodes] == [
+            (n.name, n.line, n.path) for n in base.nodes]
+        assert rules.start == base.start == "assess"
+    # the port variant: every node that used alteration_side now turns to port
+    turned = [n.name for n in port.nodes if "direction" in n.action
+              and n.action["direction"].written == "alteration_side"]
+    assert turned == ["give_way_crossing", "head_on_role", "mutual_crossing"]
+    assert all(port.node(n).action["direction"].value == VOCABULARY.enums["port"]
+               for n in turned)
+    assert all(base.node(n).action["direction"].value == VOCABULARY.enums["starboard"]
+               for n in turned)
+
+
+def test_override_breaking_the_bundled_look_ahead_names_every_use(tmp_path: Path) -> None:
+    """A child of rules/colregs.yaml with a negative look-ahead: one error per use of the
+    parameter, each at the override and naming the line of the use in the parent."""
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    parent = RULES / "colregs.yaml"
+    child = tmp_path / "late.yaml"
+    child.write_text(f"schema_version: 1\nname: late\nextends: {parent}\nparameters:\n"
+                     "  look_ahead_min: -3\n", encoding="utf-8")
+    with pytest.raises(ScenarioError) as info:
+        parse_file(child, VOCABULARY)
+    uses = _line_of(parent, "[tcpa_min, between, [0, look_ahead_min]]")
+    assert len(uses) == 3
+    keys = ["nodes.risk.test.all[1][2]", "nodes.give_way_still.test.all[1][2]",
+            "nodes.rv_risk.test.all[1][2]"]
+    assert [str(e) for e in info.value.errors] == [
+        f"{child}:5: parameters.look_ahead_min: between needs lo <= hi, got "
+        f"[0, look_ahead_min] = [0, -3]; the value of 'look_ahead_min' set here is used at "
+        f"{parent}:{line} ({key})" for line, key in zip(uses, keys, strict=True)]

@@ -301,7 +301,8 @@ def entry_time(kind: int, prm: tuple[float, float, float, float], x: float, y: f
     if kind == KIJIMA:
         return _kijima_entry(prm, x, y, vx, vy, horizon_s)
     best = math.inf
-    for k in range(n_pieces(kind)):
+    last = n_pieces(kind) - 1
+    for k in range(last + 1):
         cx, cy, ia, ib, e1x, e1y, e2x, e2y, whole = piece(kind, k, prm)
         lo, hi = _ellipse_times(x, y, vx, vy, cx, cy, ia, ib)
         lo, hi = max(lo, 0.0), min(hi, horizon_s)
@@ -312,11 +313,14 @@ def entry_time(kind: int, prm: tuple[float, float, float, float], x: float, y: f
                     g0, g1 = e1x * y - e1y * x, e1x * vy - e1y * vx
                 else:
                     g0, g1 = x * e2y - y * e2x, vx * e2y - vy * e2x
+                # an edge belongs to the first sector clockwise from the bow (as in
+                # covering): a point that stays on it is not in the piece after it
+                shared = (e == 0 and k > 0) or (e == 1 and k == last and k > 0)
                 if g1 > 0.0:
                     lo = max(lo, -g0 / g1)
                 elif g1 < 0.0:
                     hi = min(hi, -g0 / g1)
-                elif g0 < 0.0:
+                elif g0 < 0.0 or (shared and g0 == 0.0):
                     lo = math.inf
         if lo <= hi and lo < best:
             best = lo

@@ -30,6 +30,7 @@ from trafficsim.errors import ScenarioError
 from trafficsim.io.yamlio import (
     Document,
     format_loc,
+    number_hint,
     parse_yaml,
     read_bytes,
     read_file,
@@ -382,16 +383,6 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
 
 
-def _unquote_hint(value: Any) -> str:
-    if isinstance(value, str):
-        try:
-            float(value)
-        except ValueError:
-            return ""
-        return " (remove the quotes)"
-    return ""
-
-
 class _Checker:
     """Walks the loaded files once, collecting every error with its location.
 
@@ -620,7 +611,7 @@ class _Checker:
                                 f"{_close(value, list(self.vocab.enums))}; {expected}")
             return None
         self.error(loc, f"expected a number or an enum constant, got {shown(value)}"
-                        f"{_unquote_hint(value)}")
+                        f"{self.hint(loc)}")
         return None
 
     def same_kind(self, name: str, constant: str | None, loc: tuple[str | int, ...]) -> bool:
@@ -654,14 +645,23 @@ class _Checker:
                        "that extends another may override the parameters it inherits, or add "
                        "parameters for its own nodes")
 
+    def hint(self, loc: Sequence[str | int]) -> str:
+        """Why the text at ``loc`` of the current file was not read as a number, if it looks
+        like one (quotes, a leading zero, an exponent without a dot, ...)."""
+        return number_hint(self.doc.node_at(loc))
+
     def number(self, value: Any, loc: tuple[str | int, ...]) -> float | None:
         """A finite number written as a number (not text, not a boolean)."""
         if _is_number(value):
-            if math.isfinite(value):
-                return float(value)
+            try:
+                number = float(value)
+            except OverflowError:  # an integer beyond the float range
+                number = math.inf
+            if math.isfinite(number):
+                return number
             self.error(loc, f"expected a finite number, got {shown(value)}")
             return None
-        self.error(loc, f"expected a number, got {shown(value)}{_unquote_hint(value)}")
+        self.error(loc, f"expected a number, got {shown(value)}{self.hint(loc)}")
         return None
 
     def parameter(self, name: str) -> Operand:
@@ -957,7 +957,7 @@ class _Checker:
         if _is_number(value):
             number = self.number(value, loc)
             return None if number is None else Operand(value, number)
-        self.error(loc, f"expected {expected}, got {shown(value)}{_unquote_hint(value)}")
+        self.error(loc, f"expected {expected}, got {shown(value)}{self.hint(loc)}")
         return None
 
     # ---- graph ------------------------------------------------------------------------------
