@@ -627,6 +627,17 @@ def _reports(m: int) -> ais.AisReports:
     return ais.AisReports(np.zeros(m, dtype=bool), *(np.full(m, np.nan) for _ in range(6)))
 
 
+def _pop_first_arrival(pending: list, t: float) -> tuple | None:
+    """The report of ``pending`` (entries starting with their arrival time) that arrived first
+    by ``t``, removed from the list; None if none has arrived."""
+    arrived = [e for e in pending if e[0] <= t]
+    if not arrived:
+        return None
+    first = min(arrived, key=lambda a: a[0])
+    pending.remove(first)
+    return first
+
+
 def _one_report(stamp: float, north: float, east: float, sog: float, cog: float
                 ) -> ais.AisReports:
     return ais.AisReports(valid=np.array([True]), stamp_s=np.array([stamp]),
@@ -718,10 +729,8 @@ def _fuzz_out_of_order(seed: int, m: int, duration: float, cfg: dict | None = No
                            range_m=np.full(m, np.nan), bearing_rad=np.full(m, np.nan))
         rep = _reports(m)
         for k in range(m):
-            arrived = [e for e in pending[k] if e[0] <= t]
-            if arrived:
-                e = min(arrived, key=lambda a: a[0])
-                pending[k].remove(e)
+            e = _pop_first_arrival(pending[k], t)
+            if e is not None:
                 _, st, z, R, (north, east, sog, cog) = e
                 rep.valid[k], rep.stamp_s[k] = True, st
                 rep.north_m[k], rep.east_m[k], rep.sog_mps[k], rep.cog_rad[k] = (north, east,
@@ -965,10 +974,8 @@ def test_nees_with_irregular_overtaking_ais_reports_only() -> None:
             continue
         rep = _reports(m)
         for k in range(m):
-            arrived = [e for e in pending[k] if e[0] <= t]
-            if arrived:
-                e = min(arrived, key=lambda a: a[0])
-                pending[k].remove(e)
+            e = _pop_first_arrival(pending[k], t)
+            if e is not None:
                 rep.valid[k], rep.stamp_s[k] = True, e[1]
                 rep.north_m[k], rep.east_m[k], rep.sog_mps[k], rep.cog_rad[k] = e[2]
         state = tracker.step(t_par, state, obs, t, ais=rep)
