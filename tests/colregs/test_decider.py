@@ -858,17 +858,25 @@ def test_overtaking_sector_boundary_at_112_5_degrees(theta, expected):
 
 
 @pytest.mark.parametrize(("deviation", "expected"), [
-    (14.9, [MUTUAL_HO, MUTUAL_CROSS]), (-14.9, [MUTUAL_HO, GW_CROSS]),
-    (15.1, [MUTUAL_CROSS, MUTUAL_CROSS]), (-15.1, [SO_CROSS, GW_CROSS])])
-def test_head_on_reciprocal_course_boundary_at_165_degrees(deviation, expected):
+    (14.9, [MUTUAL_CROSS, MUTUAL_CROSS]), (-14.9, [SO_CROSS, GW_CROSS]),
+    (15.1, [MUTUAL_CROSS, MUTUAL_CROSS]), (-15.1, [SO_CROSS, GW_CROSS]),
+    (9.9, [MUTUAL_HO, MUTUAL_HO]), (-9.9, [MUTUAL_HO, MUTUAL_HO])])
+def test_head_on_needs_each_ship_ahead_of_the_other(deviation, expected):
     """Ship 1 dead ahead of ship 0 at 3 NM on course 180 + deviation; ship 0 lies on her bow at
-    -deviation. Ship 0 (bearing 0) calls it head-on while the course difference is at least
-    165 deg. Beyond, ship 0 has her at bearing 0 (not to starboard) and goes by how she sees
-    ship 0: on her port bow (+15.1) both are in doubt (mutual), on her starboard bow (-15.1)
-    ship 1 gives way and ship 0 stands on. At +-14.9 ship 1 sees ship 0 14.9 deg off her bow,
-    beyond the 10 deg of head-on: a crossing, doubtful with ship 0 to port (mutual), giving way
-    with ship 0 to starboard; either way she alters to starboard as ship 0 does."""
+    -deviation. Within 10 deg both see head-on. Beyond, ship 1 sees ship 0 off her bow, so
+    neither calls it head-on (both ships see the same situation): ship 0 has her at bearing 0
+    (not to starboard) and goes by how ship 1 sees her: on ship 1's port bow (+) both are in
+    doubt (mutual), on her starboard bow (-) ship 1 gives way and ship 0 stands on."""
     assert roles([OWN, at_bearing(3.0, 0.0, 180.0 + deviation)]) == expected
+
+
+@pytest.mark.parametrize(("course", "expected"), [
+    (194.9, [MUTUAL_HO, MUTUAL_HO]), (195.1, [GW_CROSS, SO_CROSS])])
+def test_head_on_reciprocal_course_boundary_at_165_degrees(course, expected):
+    """Ship 1 8 deg on ship 0's starboard bow at 3 NM; ship 0 about 7 deg on her port bow (both
+    within the 10 deg of head-on). Course difference 165.1 deg: head-on for both; 164.9 deg:
+    a crossing, ship 0 (the other to starboard) gives way and ship 1 stands on."""
+    assert roles([OWN, at_bearing(3.0, 8.0, course)]) == expected
 
 
 def test_each_on_the_others_starboard_bow_is_not_a_blind_spot():

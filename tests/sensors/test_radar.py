@@ -436,3 +436,13 @@ def test_config_errors_name_the_ship_and_key(cfg, key) -> None:
     with pytest.raises(InputError) as err:
         radar.build([{}, cfg])
     assert err.value.key == key
+
+
+def test_a_minimum_range_beyond_the_maximum_is_refused():
+    """``min_range_m`` 30,000 m with ``max_range_nm`` 12 (22,224 m) would detect nothing ever:
+    refused under the ship's key; equal limits are allowed (one range detects)."""
+    with pytest.raises(InputError, match="must not exceed max_range_nm") as err:
+        radar.build([{}, {"min_range_m": 30000.0}])
+    assert err.value.key == "radar[1].min_range_m"
+    p = radar.build([{"min_range_m": 1852.0, "max_range_nm": 1.0}])
+    assert p.min_range_m[0] == p.max_range_m[0] == 1852.0

@@ -164,12 +164,20 @@ def build(configs: Sequence[Mapping]) -> RadarParams:
     p_detect = column(configs, "p_detect", 0.8, what, minimum=0.0)
     if np.any(p_detect > 1.0):
         raise InputError(f"p_detect must be <= 1, got {p_detect.max()}", key=f"{what}.p_detect")
+    max_range_m = column(configs, "max_range_nm", 12.0, what, scale=NM, minimum=0.0)
+    min_range_m = column(configs, "min_range_m", 40.0, what, minimum=0.0)
+    beyond = np.flatnonzero(min_range_m > max_range_m)
+    if beyond.size:  # (a radar that can never detect anything)
+        i = int(beyond[0])
+        raise InputError(f"min_range_m ({min_range_m[i]:g} m) must not exceed max_range_nm "
+                         f"({max_range_m[i] / NM:g} NM = {max_range_m[i]:g} m)",
+                         key=f"{what}[{i}].min_range_m")
     return RadarParams(
         sigma_range_m=column(configs, "sigma_range_m", DEFAULT_SIGMA_RANGE_M, what, minimum=0.0),
         sigma_bearing_rad=column(configs, "sigma_bearing_deg", DEFAULT_SIGMA_BEARING_DEG, what,
                                  scale=math.pi / 180.0, minimum=0.0),
-        max_range_m=column(configs, "max_range_nm", 12.0, what, scale=NM, minimum=0.0),
-        min_range_m=column(configs, "min_range_m", 40.0, what, minimum=0.0),
+        max_range_m=max_range_m,
+        min_range_m=min_range_m,
         p_detect=p_detect,
         z_detect=probit(p_detect),
         scan_period_s=column(configs, "scan_period_s", 2.5, what, minimum=0.0, strictly=True),
