@@ -68,6 +68,7 @@ from typing import Any
 import numpy as np
 
 from trafficsim.errors import InputError
+from trafficsim.io.yamlio import finite_number, shown
 
 #: at most this many fixed-point steps to undo a compass deviation (each gains a digit or so)
 _DEVIATION_ITERATIONS = 60
@@ -174,27 +175,14 @@ def check(effects: Mapping[str, Any] | None, where: str = "effects") -> dict[str
                 hint = f" (did you mean '{close[0]}'?)" if close else ""
                 raise InputError(f"unknown key '{key}' of effect '{name}'{hint}; expected "
                                  f"some of {', '.join(eff.keys)}", key=f"{where}.{name}.{key}")
-            number = _finite(value)
+            number = finite_number(value)
             if number is None:
-                shown = repr(value) if len(repr(value)) <= 40 else f"{repr(value)[:37]}..."
-                raise InputError(f"expected a finite number, got {shown}",
+                raise InputError(f"expected a finite number, got {shown(value)}",
                                  key=f"{where}.{name}.{key}")
             full[key] = number
         _check_range(name, full, f"{where}.{name}")
         out[str(name)] = full
     return out
-
-
-def _finite(value: Any) -> float | None:
-    """``value`` as a finite float, or None (booleans, text, NaN, inf and integers beyond the
-    float range are not numbers here)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    try:
-        number = float(value)
-    except OverflowError:
-        return None
-    return number if math.isfinite(number) else None
 
 
 def _check_range(name: str, v: Mapping[str, float], where: str) -> None:
@@ -419,10 +407,10 @@ def true_start(x0: np.ndarray, effects: Mapping[str, Mapping[str, float]],
         e = compass_error(measured, effects["compass_bias"])
         for _ in range(_DEVIATION_ITERATIONS):
             e_next = compass_error(measured - e, effects["compass_bias"])
-            if np.all(np.abs(e_next - e) <= 1e-13):
-                e = e_next
-                break
+            settled = np.all(np.abs(e_next - e) <= 1e-13)
             e = e_next
+            if settled:
+                break
         x[2] = measured - e
         c, s = np.cos(e), np.sin(e)
         x[3], x[4] = x[3] * c - x[4] * s, x[3] * s + x[4] * c

@@ -313,6 +313,7 @@ class Navigation:
             adapt_s = adaptive.start(adapt_p, np.eye(2)[None] * ekf_p.gnss_var_m2[adapt_rows,
                                                                                 None, None])
         ekf_multi = np.flatnonzero(np.isin(ekf_idx, multi.idx))
+        log_fitted = np.array([c.get("log") is not None for c in configs], dtype=bool)
         return cls(
             filter_pv=np.array([f == "pv" for f in filters]),
             gnss_p=gnss_p, gnss_s=gnss.init(gnss_p, init_draws[:, :a]),
@@ -326,8 +327,7 @@ class Navigation:
             est=est, ekf_idx=ekf_idx, ekf_p=ekf_p, ekf_model=ekf_model, ekf_s=ekf_s,
             ekf_rejections=gating.init_state(ekf_idx.size),
             has_waves=any(c.get("waves") for c in configs),
-            has_log=any(c.get("log") is not None for c in configs),
-            log_fitted=np.array([c.get("log") is not None for c in configs], dtype=bool),
+            has_log=bool(log_fitted.any()), log_fitted=log_fitted,
             has_actuator_sensors=any(c.get("actuators") is not None for c in configs),
             extra=multi.extra, multi_idx=multi.idx, fusion_p=multi.params,
             fusion_sigma=multi.sigma, fusion_var=multi.var,

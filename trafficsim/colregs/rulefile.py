@@ -29,6 +29,7 @@ from typing import Any, NoReturn
 from trafficsim.errors import ScenarioError
 from trafficsim.io.yamlio import (
     Document,
+    finite_number,
     format_loc,
     number_hint,
     parse_yaml,
@@ -653,11 +654,8 @@ class _Checker:
     def number(self, value: Any, loc: tuple[str | int, ...]) -> float | None:
         """A finite number written as a number (not text, not a boolean)."""
         if _is_number(value):
-            try:
-                number = float(value)
-            except OverflowError:  # an integer beyond the float range
-                number = math.inf
-            if math.isfinite(number):
+            number = finite_number(value)
+            if number is not None:
                 return number
             self.error(loc, f"expected a finite number, got {shown(value)}")
             return None

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from trafficsim.errors import InputError
+from trafficsim.io.yamlio import finite_number, shown
 from trafficsim.jit import kernel
 from trafficsim.sensors import wrap_2pi
 
@@ -108,19 +109,11 @@ def build(configs: Sequence[Mapping[str, Any]]) -> PVParams:
     def column(key: str, default: float) -> np.ndarray:
         values = np.empty(len(configs))
         for i, c in enumerate(configs):
-            value = c.get(key, default)
-            try:
-                if isinstance(value, bool):
-                    raise TypeError
-                values[i] = float(value)
-            except (TypeError, ValueError, OverflowError):
-                raise InputError(f"ship {i}: expected a finite positive number, got {value!r}",
-                                 key=key) from None
-        bad = ~(np.isfinite(values) & (values > 0.0))
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise InputError(f"ship {i}: expected a finite positive number, got {values[i]}",
-                             key=key)
+            value = finite_number(c.get(key, default))
+            if value is None or not value > 0.0:
+                raise InputError(f"ship {i}: expected a finite positive number, got "
+                                 f"{shown(c.get(key, default))}", key=key)
+            values[i] = value
         return values
 
     return PVParams(sigma_m=column("sigma_m", DEFAULT_SIGMA_M),

@@ -31,6 +31,8 @@ mean 'speed_kn'?)", "missing required key 'name'"). The exception raised carries
 from __future__ import annotations
 
 import difflib
+import math
+import numbers
 import os
 import re
 import types
@@ -58,6 +60,7 @@ __all__ = [
     "Strict",
     "Text",
     "collect_errors",
+    "finite_number",
     "format_loc",
     "load_yaml",
     "number_hint",
@@ -546,6 +549,18 @@ def _fmt(value: Any) -> str:
     if isinstance(value, float) and value.is_integer() and abs(value) < 1e15:
         return str(int(value))
     return str(value)
+
+
+def finite_number(value: Any) -> float | None:
+    """``value`` as a finite float; None for booleans, text and other non-numbers, NaN,
+    infinity and integers beyond the float range (which ``float`` refuses with OverflowError)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 def shown(value: Any, node: Node | None = None) -> str:

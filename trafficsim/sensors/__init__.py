@@ -32,6 +32,7 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 
 from trafficsim.errors import InputError
+from trafficsim.io.yamlio import finite_number, shown
 from trafficsim.jit import inline_kernel
 
 TWO_PI = 2.0 * math.pi
@@ -72,23 +73,20 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
         try:
             out = np.array(values, dtype=float)
         except OverflowError:  # an integer beyond the float range: reported below
-            out = np.array([math.nan])
-        if np.isfinite(out).all() and (minimum is None or not np.any(
+            out = None
+        if out is not None and np.isfinite(out).all() and (minimum is None or not np.any(
                 out <= minimum if strictly else out < minimum)):
             return out * scale
     out = np.empty(n)
     for i, cfg in enumerate(configs):  # build time only, never on the step path
         raw = cfg.get(key, None)
         value = defaults[i] if raw is None else raw
-        shown = repr(raw) if len(repr(raw)) <= 40 else f"{repr(raw)[:37]}..."
         if isinstance(value, bool) or not isinstance(value, numbers.Real):
-            raise InputError(f"expected a number, got {shown}", key=f"{what}[{i}].{key}")
-        try:
-            value = float(value)
-        except OverflowError:
-            value = math.inf  # (an integer beyond the float range)
-        if not math.isfinite(value):
-            raise InputError(f"expected a finite number, got {shown}", key=f"{what}[{i}].{key}")
+            raise InputError(f"expected a number, got {shown(raw)}", key=f"{what}[{i}].{key}")
+        value = finite_number(value)
+        if value is None:
+            raise InputError(f"expected a finite number, got {shown(raw)}",
+                             key=f"{what}[{i}].{key}")
         if minimum is not None and (value < minimum or (strictly and value == minimum)):
             rel = ">" if strictly else ">="
             raise InputError(f"must be {rel} {minimum}, got {value}", key=f"{what}[{i}].{key}")
