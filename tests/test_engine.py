@@ -137,3 +137,15 @@ def test_isolated_divergence_freezes_that_encounter_and_leaves_the_others_alone(
     sim.run(5)
     np.testing.assert_array_equal(sim.batch.x[:, :2], frozen)  # it stands where it stopped
     assert sim.diverged_at_s[0] == t[0]
+
+
+def test_ships_overlapping_at_the_start_count_as_collided_and_inside_the_domain_at_zero():
+    """The metrics take the state at t = 0 too: two hulls 10 m apart abeam overlap (beams
+    of tens of metres) before any step, so collision and domain violation date from 0 s."""
+    ships = [_setup("a", "container"), _setup("b", "container", east=10.0)]
+    sim = Simulation.start(build_batch(ships, [EncounterEnv()]), 1.0)
+    m = sim.metrics
+    assert m.collision[0] and m.t_collision_s[0] == 0.0
+    assert m.domain_violation[0] and m.t_domain_violation_s[0] == 0.0
+    sim.run(5)
+    assert m.t_collision_s[0] == 0.0 and m.t_domain_violation_s[0] == 0.0

@@ -97,6 +97,7 @@ class Simulation:
         if observes(batch.sensors):
             sim.obs = Observation.build(batch.sensors, batch.pair_i, batch.pair_j, seed,
                                         batch.stream_encounter, batch.ship_in_encounter)
+        sim.metrics.accumulate(x, batch.length_m, batch.beam_m, batch.pair_i, batch.pair_j, 0.0)
         sim.decider = decider
         sim.decision_steps = max(1, round(decision_period_s / dt))
         sim.route_speed_mps = speed.copy()

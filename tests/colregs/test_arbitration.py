@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from trafficsim.colregs.arbitration import (
     N_CANDIDATES,
     OFFSETS_RAD,
+    _cost,
     candidate_offset_rad,
     candidate_reduced,
     choose,
@@ -275,6 +276,19 @@ def test_speed_reduction_when_no_alteration_works():
     assert chosen == cand(30.0, True)
     assert choose_one(threats, reduce=False, least_deg=0.0, side=EITHER) == \
         (cand(0.0, True), True)
+
+
+def test_a_speed_reduction_comes_before_an_alteration_smaller_than_asked():
+    """The docstring's order where the asked alteration is not safe: slacken speed on the base
+    course (Rule 8(e)) before any too-small alteration at full or reduced speed (Rule 8(b)),
+    and either before the wrong side."""
+    def cost(offset, reduced):
+        return _cost(float(offset), reduced, STARBOARD, 30.0, False, False)
+
+    bare = cost(0.0, True)
+    assert all(bare < cost(d, r) for d in (5.0, 10.0, 25.0) for r in (False, True))
+    assert all(cost(d, r) < cost(-5.0, False) for d in (5.0, 25.0) for r in (False, True))
+    assert cost(30.0, False) < bare  # the asked alteration first of all
 
 
 def test_no_solution_returns_best_margin_and_not_ok():

@@ -225,3 +225,41 @@ def test_ships_in_one_call_equal_ships_alone():
             assert c[0] == c_all[i]
             assert alone[i].wp_index[0] == r_all.wp_index[i]
     assert list(r_all.wp_index) != [0, 0, 0, 0]
+
+
+def test_a_repeated_waypoint_is_passed_over_and_the_route_course_held():
+    """A route ending in the same point twice holds the course of the leg that reaches it
+    (90 deg), as the route without the repeat does; atan2(0, 0) = 0 deg is no course."""
+    L = np.array([100.0])
+    courses = {}
+    for name, wps in (("once", [[0.0, 5000.0]]), ("twice", [[0.0, 5000.0], [0.0, 5000.0]])):
+        wp, n = _route(wps)
+        r = RouteState.start(np.zeros(1), np.zeros(1), np.array([np.pi / 2]))
+        courses[name] = [desired_course(r, wp, n, np.zeros(1), np.array([e]), L)[0]
+                         for e in (4000.0, 4990.0, 5000.0, 5010.0, 6000.0)]
+        assert r.wp_index[0] == n[0]
+    np.testing.assert_allclose(courses["twice"], courses["once"])
+    np.testing.assert_allclose(courses["once"], np.pi / 2)
+
+
+def test_a_repeat_inside_a_route_does_not_change_the_wheel_over():
+    """[a, b, b, c] steers like [a, b, c]: the turn at b is towards c (90 deg: wheel-over
+    3 L tan 45 deg = 300 m before b), not towards the repeat of b."""
+    L = np.array([100.0])
+    track = [(650.0, 0.0), (710.0, 0.0), (1000.0, 400.0), (1000.0, 2000.0)]
+    out = {}
+    for name, wps in (("plain", [[1000.0, 0.0], [1000.0, 1000.0]]),
+                      ("repeat", [[1000.0, 0.0], [1000.0, 0.0], [1000.0, 1000.0]])):
+        wp, n = _route(wps)
+        r = RouteState.start(np.zeros(1), np.zeros(1), np.zeros(1))
+        out[name] = [(desired_course(r, wp, n, np.array([p]), np.array([q]), L)[0],
+                      wps[min(r.wp_index[0], len(wps) - 1)]) for p, q in track]
+    assert [c for c, _ in out["repeat"]] == pytest.approx([c for c, _ in out["plain"]])
+    assert [w for _, w in out["repeat"]] == [w for _, w in out["plain"]]
+
+
+def test_a_route_of_only_the_start_point_holds_the_start_heading():
+    wp, n = _route([[100.0, 200.0], [100.0, 200.0]])
+    r = RouteState.start(np.array([100.0]), np.array([200.0]), np.array([2.0]))
+    c = desired_course(r, wp, n, np.array([100.0]), np.array([200.0]), np.array([100.0]))
+    assert c[0] == 2.0 and r.wp_index[0] == 2

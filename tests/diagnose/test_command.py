@@ -61,6 +61,8 @@ def test_refit_names() -> None:
     assert command._refit(kv, "default") == DEFAULT_FIT["mmg"]
     assert command._refit(kv, " N_r, Y_v ,") == ("N_r", "Y_v")
     assert command._refit(kv, ["R0"]) == ("R0",)
+    with pytest.raises(InputError, match="expected coefficient names separated by commas"):
+        command._refit(kv, " , ")  # commas but no name: a slip, not 'refit nothing'
     with pytest.raises(InputError) as err:
         command._refit(kv, "N_rr")
     assert err.value.key == "--refit" and "unknown coefficient 'N_rr'" in str(err.value)

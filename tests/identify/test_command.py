@@ -46,6 +46,10 @@ def test_expand_paths(tmp_path: Path) -> None:
     single.write_text("x")
     got = command.expand_paths([single, runs], "--data")
     assert got == [single, runs / "a.csv", runs / "b.csv"]
+    (runs / "C.CSV").write_text("x")  # an upper-case suffix is a trial file too
+    (runs / "d.csv").mkdir()  # a folder named like one is not
+    assert command.expand_paths([runs], "--data") == [runs / "C.CSV", runs / "a.csv",
+                                                      runs / "b.csv"]
     empty = tmp_path / "empty"
     empty.mkdir()
     with pytest.raises(DataError, match=rf"^{empty}: folder has no .csv trial files \(given "

@@ -102,6 +102,9 @@ def test_format_loc() -> None:
     assert format_loc(("ships", 1, "route", 0, 1)) == "ships[1].route[0][1]"
     assert format_loc(("a", "b")) == "a.b"
     assert format_loc(()) == ""
+    # an empty key stays visible; the validator's key marker is kept
+    assert format_loc(("encounter_types", "", "[key]")) == "encounter_types[''][key]"
+    assert format_loc(("types", "cargo", "[key]")) == "types.cargo[key]"
 
 
 def test_crlf_and_bom_keep_lines() -> None:

@@ -150,6 +150,15 @@ def test_collisions_keep_a_collision_at_time_zero(synthetic_run):
     assert c.t_s[0] == 0.0 and np.isnan(c.t_s[1]) and np.isnan(c.t_s[2])
 
 
+def test_a_pair_naming_an_unknown_ship_is_refused(synthetic_run):
+    """A pair whose ship is not in summary.json's ships would otherwise be drawn on ship 0."""
+    run = synthetic_run([Ship("a", 0.0, 0.0, 0.0), Ship("b", 10.0, 0.0, 0.0)], 3)
+    _edit_summary(run, lambda s: s["pairs"][0].update(ship_b="z"))
+    with pytest.raises(InputError, match="pairs: ship_b 'z' is not one of the ships") as err:
+        load_run(run)
+    assert err.value.path == str(run / "summary.json")
+
+
 def test_summary_missing_or_damaged_names_the_file(synthetic_run, tmp_path):
     run = synthetic_run([Ship("a", 0.0, 0.0, 0.0)], 3)
     (run / "summary.json").write_text("{not json")

@@ -14,8 +14,11 @@ allowed), the smallest alteration at or above the requested least one (a large, 
 alteration rather than a succession of small ones, Rule 8(b)), full speed before reduced speed
 (a speed reduction only where it is asked for or the alteration alone does not suffice,
 Rule 8(e)), and a reduced speed before running alongside a near ship at little relative speed
-(which leaves the encounter unresolved). A ship already manoeuvring keeps its manoeuvre while it
-still satisfies every pair and does not run alongside a ship.
+(which leaves the encounter unresolved). Where no alteration as large as asked is safe, a speed
+reduction on the base course comes before a smaller alteration (Rule 8(e) has a ship slacken
+her speed where necessary; Rule 8(b) advises against small alterations). A ship already
+manoeuvring keeps its manoeuvre while it still satisfies every pair and does not run alongside
+a ship.
 
 Prediction: straight lines, own velocity = factor x route speed along the candidate course, the
 other ship's estimated velocity held (the DCPA of [colregs.md section 4]), closest approach

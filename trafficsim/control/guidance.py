@@ -6,7 +6,8 @@ chi_d = chi_leg - atan(e / Delta), e the cross-track error (positive to starboar
 Delta the look-ahead distance (Fossen 2011, eq. 10.73). The ship moves to the next leg at the
 wheel-over point, when the distance to go along the leg falls below R tan(|dchi| / 2), R the
 turning radius and dchi the course change at the waypoint (the geometry of a circular turn
-tangent to both legs). After the last waypoint the ship holds the last leg's course.
+tangent to both legs). After the last waypoint the ship holds the last leg's course. A
+waypoint that repeats the point before it (or the start) has no leg and is passed over.
 
 One compiled loop over ships (:func:`_desired_course`); no Python loop per ship. The constants of
 a ship's current leg (course, direction, length, wheel-over distance) are worked out when it
@@ -75,16 +76,33 @@ def _wrap(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+#: a waypoint closer than this to the point before it (m) repeats it and has no leg of its own
+SAME_POINT_M = 1e-6
+
+
+@kernel
+def _next_distinct(i: int, k: int, n_north: float, n_east: float, waypoints: np.ndarray,
+                   n_waypoints: np.ndarray) -> int:
+    """Index of ship ``i``'s first waypoint from ``k`` on that is not the point (``n_north``,
+    ``n_east``) (``n_waypoints[i]`` if none is)."""
+    while k < n_waypoints[i] and math.hypot(waypoints[i, k, 0] - n_north,
+                                            waypoints[i, k, 1] - n_east) <= SAME_POINT_M:
+        k += 1
+    return k
+
+
 @kernel
 def _leg(i: int, k: int, leg_start: np.ndarray, waypoints: np.ndarray, n_waypoints: np.ndarray,
          length: np.ndarray, leg: np.ndarray, leg_index: np.ndarray) -> None:
-    """Constants of ship ``i``'s leg to waypoint ``k`` (:class:`RouteState`)."""
+    """Constants of ship ``i``'s leg to waypoint ``k`` (:class:`RouteState`), a waypoint apart
+    from the leg's start; the turn at its end is towards the next waypoint apart from it."""
     tn, te = waypoints[i, k, 0], waypoints[i, k, 1]
     ln, le = tn - leg_start[i, 0], te - leg_start[i, 1]
     course = math.atan2(le, ln)
     turn = 0.0
-    if k + 1 < n_waypoints[i]:
-        nn, ne = waypoints[i, k + 1, 0] - tn, waypoints[i, k + 1, 1] - te
+    j = _next_distinct(i, k + 1, tn, te, waypoints, n_waypoints)
+    if j < n_waypoints[i]:
+        nn, ne = waypoints[i, j, 0] - tn, waypoints[i, j, 1] - te
         turn = abs(_wrap(math.atan2(ne, nn) - course))
     wheel_over = TURN_RADIUS_L * length[i] * math.tan(min(turn, _MAX_TURN) / 2.0)
     leg[i, 0], leg[i, 1], leg[i, 2] = course, ln, le
@@ -94,24 +112,35 @@ def _leg(i: int, k: int, leg_start: np.ndarray, waypoints: np.ndarray, n_waypoin
 
 
 @kernel
+def _enter(i: int, k: int, leg_start: np.ndarray, wp_index: np.ndarray,
+           waypoints: np.ndarray, n_waypoints: np.ndarray, length: np.ndarray, leg: np.ndarray,
+           leg_index: np.ndarray) -> int:
+    """Start ship ``i``'s leg to waypoint ``k``, skipping waypoints that repeat the leg's start
+    (a leg of no length has no course); returns the waypoint steered to."""
+    k = _next_distinct(i, k, leg_start[i, 0], leg_start[i, 1], waypoints, n_waypoints)
+    wp_index[i] = k
+    if k < n_waypoints[i]:
+        _leg(i, k, leg_start, waypoints, n_waypoints, length, leg, leg_index)
+    return k
+
+
+@kernel
 def _desired_course(leg_start: np.ndarray, wp_index: np.ndarray, hold: np.ndarray,
                     leg: np.ndarray, leg_index: np.ndarray, waypoints: np.ndarray,
                     n_waypoints: np.ndarray, north: np.ndarray, east: np.ndarray,
                     length: np.ndarray, out: np.ndarray) -> None:
     for i in range(north.shape[0]):
         k = wp_index[i]
+        if k < n_waypoints[i] and leg_index[i] != k:
+            k = _enter(i, k, leg_start, wp_index, waypoints, n_waypoints, length, leg, leg_index)
         if k < n_waypoints[i]:
-            if leg_index[i] != k:
-                _leg(i, k, leg_start, waypoints, n_waypoints, length, leg, leg_index)
             rn, re = north[i] - leg_start[i, 0], east[i] - leg_start[i, 1]
             to_go = leg[i, 3] - (rn * leg[i, 1] + re * leg[i, 2]) / leg[i, 3]
-            if to_go <= leg[i, 4]:  # wheel over: next leg
-                if k + 1 >= n_waypoints[i]:
-                    hold[i] = leg[i, 0]
+            if to_go <= leg[i, 4]:  # wheel over: next leg (held as the course if the last)
+                hold[i] = leg[i, 0]
                 leg_start[i, 0], leg_start[i, 1] = waypoints[i, k, 0], waypoints[i, k, 1]
-                wp_index[i] = k = k + 1
-                if k < n_waypoints[i]:
-                    _leg(i, k, leg_start, waypoints, n_waypoints, length, leg, leg_index)
+                k = _enter(i, k + 1, leg_start, wp_index, waypoints, n_waypoints, length, leg,
+                           leg_index)
         if k < n_waypoints[i]:
             rn, re = north[i] - leg_start[i, 0], east[i] - leg_start[i, 1]
             cross = (-rn * leg[i, 2] + re * leg[i, 1]) / leg[i, 3]  # + = starboard of the leg

@@ -53,11 +53,14 @@ def _refit(spec: dict[str, Any], refit: str | Sequence[str] | None) -> tuple[str
     """Names of the base coefficients refitted with every candidate (checked)."""
     from trafficsim.identify.parameters import DEFAULT_FIT, Parametrisation
 
-    if not refit:
+    if not refit or (isinstance(refit, str) and not refit.strip()):
         return ()
     if isinstance(refit, str):
         names = DEFAULT_FIT.get(spec["model"], ()) if refit == "default" else tuple(
             n.strip() for n in refit.split(",") if n.strip())
+        if not names and refit != "default":
+            raise InputError(f"expected coefficient names separated by commas, got {refit!r}",
+                             key="--refit")
     else:
         names = tuple(refit)
     try:

@@ -54,11 +54,12 @@ KNOT = 1852.0 / 3600.0
 
 
 def expand_paths(paths: Sequence[Path], flag: str) -> list[Path]:
-    """Files as given; a folder stands for the ``*.csv`` files in it (sorted)."""
+    """Files as given; a folder stands for the ``.csv`` files in it (sorted; the suffix in any
+    case, ``RUN1.CSV`` too)."""
     out: list[Path] = []
     for p in paths:
         if p.is_dir():
-            found = sorted(p.glob("*.csv"))
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() == ".csv" and q.is_file())
             if not found:
                 raise DataError(f"folder has no .csv trial files (given with {flag})", path=str(p))
             out.extend(found)

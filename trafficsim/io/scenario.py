@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -306,11 +307,18 @@ def validate_sensors(sensors: dict[str, dict[str, Any]]) -> None:
     try:
         check_sensor_config(sensors)
     except InputError as err:
-        key = err.key or ""
-        # sensors' own messages name "<sensor>[0]" for the ship; point at the sensor instead
-        head = key.split("[", 1)[0]
-        loc = (head,) if head in sensors else ()
-        raise FieldError(err.message, loc=loc) from None
+        # sensors' own keys read "<sensor>[0].<setting>" (ship 0 of a batch of one) or
+        # "<sensor>.<setting>": point at the deepest part of that path the file holds
+        loc: list[str] = []
+        node: Any = sensors
+        for part in re.split(r"\[\d+\]|\.", err.key or ""):
+            if not part:
+                continue
+            if not isinstance(node, dict) or part not in node:
+                break
+            loc.append(part)
+            node = node[part]
+        raise FieldError(err.message, loc=tuple(loc)) from None
 
 
 def _find_ship_files(doc: Document, base_dir: Path

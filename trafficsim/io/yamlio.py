@@ -202,11 +202,15 @@ class FieldError(ValueError):
 # --------------------------------------------------------------------------------------------
 
 def format_loc(loc: Sequence[str | int]) -> str:
-    """Dotted key of a location: ``("ships", 1, "speed_kn")`` -> ``"ships[1].speed_kn"``."""
+    """Dotted key of a location: ``("ships", 1, "speed_kn")`` -> ``"ships[1].speed_kn"``; an
+    empty key is quoted in brackets (``types['']``), and the validator's ``[key]`` marker (the
+    mapping key itself is wrong) is appended as it is."""
     out = ""
     for part in loc:
         if isinstance(part, int) and not isinstance(part, bool):
             out += f"[{part}]"
+        elif part == "[key]" or (out and part == ""):
+            out += part if part == "[key]" else f"[{str(part)!r}]"
         else:
             out += f".{part}" if out else str(part)
     return out

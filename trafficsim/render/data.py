@@ -166,9 +166,17 @@ def load_run(run_dir: str | Path) -> RunData:
         every = float(t_s[1] - t_s[0]) if t_s.shape[0] > 1 else 1.0
     pairs = summary.get("pairs", [])
     index = {name: k for k, name in enumerate(names)}
+
+    def ship_of(pair: object, key: str) -> int:
+        name = pair.get(key) if isinstance(pair, dict) else None
+        if name not in index:
+            raise DataError(f"pairs: {key} {name!r} is not one of the ships "
+                            f"({', '.join(names)})", path=str(run_dir / "summary.json"))
+        return index[name]
+
     collisions = Collisions(
-        np.array([index.get(p.get("ship_a"), 0) for p in pairs], dtype=np.int64),
-        np.array([index.get(p.get("ship_b"), 0) for p in pairs], dtype=np.int64),
+        np.array([ship_of(p, "ship_a") for p in pairs], dtype=np.int64),
+        np.array([ship_of(p, "ship_b") for p in pairs], dtype=np.int64),
         np.array([p["t_collision_s"] if p.get("collision") and p.get("t_collision_s")
                   is not None else np.nan for p in pairs], dtype=float))
     data = RunData(

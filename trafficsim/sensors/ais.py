@@ -180,7 +180,7 @@ def build(configs: Sequence[Mapping]) -> AisParams:
     check_keys(configs, KEYS, what)
     p_receive = column(configs, "p_receive", 1.0, what, minimum=0.0)
     if np.any(p_receive > 1.0):
-        raise InputError(f"p_receive must be <= 1, got {p_receive.max()}", key=f"{what}.p_receive")
+        raise InputError(f"must be <= 1, got {p_receive.max()}", key=f"{what}.p_receive")
     latency = column(configs, "latency_s", 2.0, what, minimum=0.0)
     if np.any(latency > MAX_LATENCY_S):
         raise InputError(f"latency_s must be <= {MAX_LATENCY_S:g} s, got {latency.max():g}",
