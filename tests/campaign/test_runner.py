@@ -216,3 +216,42 @@ def test_rules_are_found_relative_to_the_spec(tmp_path):
     spec = _rows_spec(sub, extra="rules: ../rules.yaml")
     assert _rules_path(spec) == sub / "../rules.yaml"
     assert _rules_path(_rows_spec(sub, name="n.yaml")) is None
+
+
+def test_columns_and_ship_steps_with_a_two_second_step(tmp_path):
+    """With 2 s steps a 300 s run is 150 steps: ship-steps are the drawn ships times 150; every
+    column has one entry per pair, n (n - 1) / 2 for n ships, and no time of closest approach
+    lies outside 0 .. 300 s or off the 2 s grid."""
+    spec = _rows_spec(tmp_path, duration=300, extra="dt_s: 2\nencounter_types: {multi: 1, "
+                      "head_on: 1}\nmulti_ships: [3, 4]")
+    rows = run_chunk(spec, 0, 4)
+    sizes = [len(draw(spec, i).ships) for i in range(4)]
+    assert rows["_ship_steps"] == sum(sizes) * 150
+    n_pairs = sum(n * (n - 1) // 2 for n in sizes)
+    for key, value in rows.items():
+        if not key.startswith("_"):
+            assert len(value) == n_pairs, key
+    t = np.asarray(rows["t_cpa_s"])
+    assert np.all((t >= 0) & (t <= 300)) and np.all(t % 2.0 == 0.0)
+
+
+def test_blind_spot_flags_roles_and_pair_types_agree(tmp_path):
+    """A blind spot is flagged exactly where a role is named; an encounter of one other ship
+    has its type as the type of its one pair; a pair's start range is at least its start DCPA
+    (the DCPA is the smallest range ahead)."""
+    spec = _rows_spec(tmp_path, duration=200, extra="sensors: {gnss_sigma_m: [3, 5]}\n"
+                      "rogue_fraction: 0.3\nencounter_types: {crossing_give_way: 1, "
+                      "head_on: 1, overtaking: 1, multi: 1}")
+    rows = run_chunk(spec, 0, 8)
+    blind = np.asarray(rows["blind_spot"])
+    role = np.asarray(rows["blind_spot_role"], dtype=object)
+    np.testing.assert_array_equal(blind, role != "")
+    assert set(role[blind]) <= {"give_way", "stand_on", "head_on", "overtaking", "overtaken"}
+    enc = np.asarray(rows["encounter"])
+    for e in np.unique(enc):
+        mine = np.flatnonzero(enc == e)
+        kind = rows["encounter_type"][mine[0]]
+        assert {rows["encounter_type"][i] for i in mine} == {kind}
+        if kind != "multi":
+            assert mine.size == 1 and rows["pair_type"][mine[0]] == kind
+    assert np.all(np.asarray(rows["range0_nm"]) >= np.asarray(rows["dcpa0_nm"]) - 1e-12)

@@ -8,6 +8,7 @@ code with the engine.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -650,3 +651,672 @@ def test_compiled_tables_of_a_tiny_file(tmp_path: Path) -> None:
     feats = np.array([[2.0, 2.0, 0.0, NAN], [0.0, 4.0, 0.0, 0.0]])
     d = evaluate(net, feats, net.initial_cursor(4))
     assert [net.node_names[c] for c in d.cursor] == ["y", "n", "n", "n"]
+
+
+# ------------------------------------------------------------------------------------------
+# The documented example, verbatim
+# ------------------------------------------------------------------------------------------
+
+DOCS = HERE.parents[1] / "docs" / "rules.md"
+
+
+def _docs_block(after: str) -> str:
+    """The first fenced block of docs/rules.md after the line containing ``after``."""
+    lines = DOCS.read_text(encoding="utf-8").splitlines()
+    k = next(i for i, line in enumerate(lines) if after in line)
+    start = next(i for i in range(k, len(lines)) if lines[i].startswith("```")) + 1
+    end = next(i for i in range(start, len(lines)) if lines[i].startswith("```"))
+    return "\n".join(lines[start:end])
+
+
+def test_explanation_of_the_docs_example_is_the_documented_text() -> None:
+    """docs/rules.md prints the explanation of pair 0 of its worked example; ``explain`` gives
+    that text, with the file named as it was loaded."""
+    net = load(EXAMPLE, VOCAB)
+    feats = _features(tcpa_min=[10.0, 30.0, 10.0], bearing_deg=[3.0, 3.0, 12.0],
+                      speed_ratio=[0.5, 0.5, 0.5], own_role=[0.0, 0.0, 0.0])
+    d = evaluate(net, feats, net.initial_cursor(3))
+    expected = _docs_block("The explanation of pair 0").replace("(example.yaml:",
+                                                                 f"({EXAMPLE}:")
+    assert explain(net, d.path[0], feats[:, 0]) == expected
+    assert d.cursor.tolist() == [3, 0, 0]
+    assert [d.path[i, :d.path_len[i]].tolist() for i in range(3)] == [[0, 1, 2], [0], [0, 1]]
+
+
+def test_example_network_on_a_grid_against_a_hand_evaluation() -> None:
+    """example.yaml from ``assess``, every combination of boundary values: ``assess`` holds on
+    0 <= tcpa <= 20 (inclusive), ``classify`` on bearing <= 6 (6 included) and (speed_ratio
+    > 1 or own_role != give_way (1)), NaN making each comparison false (so NaN own_role makes
+    the ``not`` hold)."""
+    import itertools
+
+    tcpa = [-1e-9, 0.0, 20.0, 20.000001, NAN]
+    bearing = [-180.0, 5.999999, 6.0, 6.000001, NAN]
+    ratio = [0.5, 1.0, 1.000001, math.inf, NAN]
+    role = [0.0, 1.0, 2.0, NAN]
+    combos = list(itertools.product(tcpa, bearing, ratio, role))
+    cols = list(zip(*combos, strict=True))
+    feats = _features(tcpa_min=list(cols[0]), bearing_deg=list(cols[1]),
+                      speed_ratio=list(cols[2]), own_role=list(cols[3]))
+    net = load(EXAMPLE, VOCAB)
+    d = evaluate(net, feats, net.initial_cursor(len(combos)))
+    for i, (t, b, r, o) in enumerate(combos):
+        hazard = 0.0 <= t <= 20.0
+        classify = hazard and b <= 6.0 and (r > 1.0 or o != 1.0)
+        path = [0] + ([1] if hazard else []) + ([2] if classify else [])
+        assert d.path[i, :d.path_len[i]].tolist() == path, combos[i]
+        assert d.cursor[i] == (3 if classify else 0)
+        turn = d.action("course_change_deg")[i]
+        assert turn == 30.0 if classify else math.isnan(turn)
+
+
+# ------------------------------------------------------------------------------------------
+# Content-free: the engine attaches no meaning to any name
+# ------------------------------------------------------------------------------------------
+
+_RENAME = {
+    # features
+    "tcpa_min": "zorp", "dcpa_nm": "quux_q", "range_nm": "blit", "bearing_deg": "wimble",
+    "aspect_deg": "frob", "speed_ratio": "gnarl", "own_role": "mood",
+    # enum constants and action fields
+    "undecided": "meh", "give_way": "blorp", "stand_on": "snark", "port": "lefty",
+    "starboard": "righty", "keep_course": "plain", "alter_course": "twist",
+    "reduce_speed": "creep", "role": "stance", "manoeuvre": "move", "direction": "side_x",
+    "course_change_deg": "amount", "speed_factor": "slowness",
+    # nodes and parameters of example.yaml
+    "assess": "n_one", "classify": "n_two", "monitor": "n_four", "look_ahead_min": "p_far",
+    "turn_deg": "p_turn", "head_on_deg": "p_cone", "example": "toy",
+}
+#: the features in another order than VOCAB's
+_TOY_FEATURES = ("mood", "gnarl", "frob", "wimble", "blit", "quux_q", "zorp")
+
+
+def _toy_vocab() -> Vocabulary:
+    return Vocabulary(
+        features=_TOY_FEATURES,
+        enums={_RENAME[k]: v + 0.0 for k, v in VOCAB.enums.items()},
+        actions={_RENAME[k]: ActionField(tuple(_RENAME[c] for c in f.constants))
+                 for k, f in VOCAB.actions.items()})
+
+
+def _renamed(text: str) -> str:
+    # the node give_way shares its name with the enum constant; rename the node separately
+    text = re.sub(r"^  give_way:", "  n_three:", text, flags=re.MULTILINE)
+    text = text.replace("yes: give_way\n", "yes: n_three\n")
+    return re.sub(r"\b(" + "|".join(sorted(_RENAME, key=len, reverse=True)) + r")\b",
+                  lambda m: _RENAME[m.group(1)], text)
+
+
+def test_engine_is_content_free_under_a_renaming_of_every_name(tmp_path: Path) -> None:
+    """example.yaml with every node, parameter, feature, constant and field renamed to
+    invented words, run with a vocabulary of those words (features in another order): the same
+    node indices, paths, cursors and actions as the original on random features, and the
+    explanation differs only by the renaming."""
+    toy_path = tmp_path / "toy.yaml"
+    toy_path.write_text(_renamed(EXAMPLE.read_text(encoding="utf-8")), encoding="utf-8")
+    for word in ("tcpa_min", "assess", "give_way", "starboard", "course_change_deg"):
+        assert word not in toy_path.read_text()
+    toy = load(toy_path, _toy_vocab())
+    net = load(EXAMPLE, VOCAB)
+    assert toy.node_names == ("n_one", "n_two", "n_three", "n_four")
+    rng = np.random.default_rng(7)
+    m = 400
+    feats = _features(tcpa_min=list(rng.choice([-1.0, 0.0, 10.0, 20.0, 25.0, NAN], m)),
+                      bearing_deg=list(rng.choice([0.0, 6.0, 7.0, NAN], m)),
+                      speed_ratio=list(rng.choice([0.5, 1.0, 2.0], m)),
+                      own_role=list(rng.choice([0.0, 1.0, 2.0], m)),
+                      dcpa_nm=list(rng.random(m)), range_nm=list(rng.random(m)),
+                      aspect_deg=list(rng.random(m)))
+    toy_feats = np.array([feats[VOCAB.features.index(next(k for k, v in _RENAME.items()
+                                                          if v == name))]
+                          for name in _TOY_FEATURES])
+    cursor = rng.integers(0, 4, m)
+    a, b = evaluate(net, feats, cursor), evaluate(toy, toy_feats, cursor)
+    np.testing.assert_array_equal(a.cursor, b.cursor)
+    np.testing.assert_array_equal(a.path, b.path)
+    for field, value in zip(VOCAB.actions, a.actions, strict=True):
+        np.testing.assert_array_equal(b.action(_RENAME[field]), value)
+    for i in range(12):
+        text = explain(net, a.path[i], feats[:, i]).replace(str(EXAMPLE), "@PATH@")
+        text = re.sub(r"(\d\. |-> )give_way \(", r"\1n_three (", text)
+        assert explain(toy, b.path[i], toy_feats[:, i]) == _renamed(text).replace(
+            "@PATH@", str(toy_path))
+    assert (a.path_len == 3).any() and (a.path_len == 1).any()
+
+
+def test_a_toy_network_of_invented_words_by_hand(tmp_path: Path) -> None:
+    """A three-node file about nothing in particular, traced by hand."""
+    vocab = Vocabulary(features=("hunger", "ripeness"), enums={"apple": 7.0, "pear": 9.0},
+                       actions={"pick": ActionField(("apple", "pear")), "bites": ActionField()})
+    path = tmp_path / "orchard.yaml"
+    path.write_text(
+        "schema_version: 1\nname: orchard\nstart: hungry\nparameters: {fav: pear}\nnodes:\n"
+        "  hungry: {test: [hunger, '>=', 3], yes: ripe, no: {to: hungry, next: true}}\n"
+        "  ripe:\n    test: {any: [[ripeness, '==', apple], [ripeness, '==', fav]]}\n"
+        "    action: {pick: fav, bites: 2}\n    yes: eat\n    no: {to: hungry, next: true}\n"
+        "  eat: {test: true, action: {bites: 5}, yes: {to: hungry, next: true}}\n",
+        encoding="utf-8")
+    net = load(path, vocab)
+    # pair 0: hunger 3 >= 3, ripeness 9 == pear: ripe sets pick pear, bites 2; eat bites 5
+    # pair 1: hunger 3, ripeness 8 matches neither: pick pear, bites 2, back to hungry
+    # pair 2: hunger 2.9 < 3: nothing
+    d = evaluate(net, np.array([[3.0, 3.0, 2.9], [9.0, 8.0, 9.0]]), net.initial_cursor(3))
+    assert [d.path[i, :d.path_len[i]].tolist() for i in range(3)] == [[0, 1, 2], [0, 1], [0]]
+    np.testing.assert_array_equal(d.action("pick"), [9.0, 9.0, NAN])
+    np.testing.assert_array_equal(d.action("bites"), [5.0, 2.0, NAN])
+    assert d.cursor.tolist() == [0, 0, 0]
+    assert "pick = fav (pear)" in explain(net, d.path[0], [3.0, 9.0])
+
+
+# ------------------------------------------------------------------------------------------
+# Input checks of evaluate
+# ------------------------------------------------------------------------------------------
+
+def test_a_cursor_that_is_not_a_node_index_is_refused() -> None:
+    """``evaluate``'s docstring: ValueError for "a cursor that is not a node index"; 2.7 is
+    none, and silently running from node 2 hides a caller's mistake."""
+    net = load(EXAMPLE, VOCAB)
+    feats = _features(tcpa_min=[10.0], bearing_deg=[3.0], speed_ratio=[0.5], own_role=[0.0])
+    with pytest.raises(ValueError):
+        evaluate(net, feats, np.array([2.7]))
+
+
+def test_integer_cursors_of_any_integer_dtype_are_the_same() -> None:
+    """int8 / int32 / uint16 / int64 cursors give one decision."""
+    net = load(EXAMPLE, VOCAB)
+    feats = _features(tcpa_min=[10.0, 1.0, -1.0, 10.0], bearing_deg=[3.0] * 4,
+                      speed_ratio=[0.5] * 4, own_role=[0.0] * 4)
+    base = evaluate(net, feats, np.array([0, 3, 3, 1]))
+    for dtype in (np.int8, np.int32, np.uint16):
+        d = evaluate(net, feats, np.array([0, 3, 3, 1], dtype=dtype))
+        np.testing.assert_array_equal(d.cursor, base.cursor)
+        np.testing.assert_array_equal(d.path, base.path)
+
+
+# ------------------------------------------------------------------------------------------
+# The bundled COLREGS network (rules/colregs.yaml) with the COLREGS vocabulary
+# ------------------------------------------------------------------------------------------
+
+RULES = HERE.parents[1] / "rules"
+REFERENCE = HERE.parents[2] / "shared" / "reference" / "imazu.yaml"
+
+#: feature values of a pair at its first step (memory at its start values, docs/rules.md)
+_START = {"range_nm": 5.0, "bearing_deg": 0.0, "aspect_deg": 0.0, "course_diff_deg": 0.0,
+          "dcpa_nm": 0.0, "tcpa_min": 20.0, "bcr_nm": math.inf, "bct_min": math.inf,
+          "speed_ratio": 1.0, "own_speed_kn": 12.0, "other_speed_kn": 12.0, "domain_nm": 0.5,
+          "time_to_domain_min": math.inf, "predicted_domain_entry": 0.0,
+          "visibility_nm": 10.0, "own_role": 0.0, "encounter": 10.0, "other_role": 0.0,
+          "own_manoeuvre": 20.0, "time_in_role_min": 0.0, "other_course_change_deg": 0.0,
+          "other_speed_change_ratio": 1.0, "own_course_change_deg": 0.0}
+
+
+def _colregs_feats(rows: list[dict[str, float]]) -> np.ndarray:
+    """``(n_features, m)`` in VOCABULARY order; the *_abs_deg and range_to_domain_nm features
+    follow from the signed ones as the vocabulary defines them."""
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    out = np.empty((len(VOCABULARY.features), len(rows)))
+    for i, row in enumerate(rows):
+        f = {**_START, **row}
+        f["bearing_abs_deg"] = abs(f["bearing_deg"])
+        f["aspect_abs_deg"] = abs(f["aspect_deg"])
+        f["course_diff_abs_deg"] = abs(f["course_diff_deg"])
+        f["range_to_domain_nm"] = f["range_nm"] - f["domain_nm"]
+        out[:, i] = [f[name] for name in VOCABULARY.features]
+    return out
+
+
+def _colregs_net():
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    return load(RULES / "colregs.yaml", VOCABULARY)
+
+
+def _step(net, rows: list[dict[str, float]], start: str | list[str] = "assess"):
+    """(path names, {field: value or enum name}, cursor name) of each pair after one step."""
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    starts = [start] * len(rows) if isinstance(start, str) else start
+    d = evaluate(net, _colregs_feats(rows), np.array([net.node_index(s) for s in starts]))
+    numeric = {k for k, f in VOCABULARY.actions.items() if f.numeric}
+    out = []
+    for i in range(len(rows)):
+        acts = {}
+        for field in VOCABULARY.actions:
+            v = d.action(field)[i]
+            if not math.isnan(v):
+                acts[field] = float(v) if field in numeric else next(
+                    c for c in VOCABULARY.actions[field].constants if VOCABULARY.enums[c] == v)
+        out.append(([net.node_names[k] for k in d.path[i, :d.path_len[i]]], acts,
+                    net.node_names[d.cursor[i]]))
+    return out
+
+
+# documented defaults (docs/rules.md, table of rules/colregs.yaml parameters)
+_LOOK, _CPA, _ACT, _TURN, _HEAD, _RECIP, _ABAFT, _RV, _SLOW = (
+    30.0, 1.0, 15.0, 30.0, 10.0, 165.0, 112.5, 2.0, 0.5)
+
+
+def _hand_first_step(f: dict[str, float]) -> tuple[list[str], dict, str]:
+    """One decision step from ``assess`` with the memory at its start values, written from the
+    diagram and parameter table of docs/rules.md (Rules 7, 13, 14, 15, 16, 19)."""
+    path, act = ["assess"], {}
+    b, a, cd, sr = f["bearing_deg"], f["aspect_deg"], abs(f["course_diff_deg"]), f["speed_ratio"]
+
+    def risk() -> bool:
+        return f["dcpa_nm"] < _CPA and 0.0 <= f["tcpa_min"] <= _LOOK
+
+    def give_way_wait() -> str:
+        path.append("give_way_wait")
+        if f["tcpa_min"] <= _ACT or f["time_to_domain_min"] <= _ACT:
+            path.append("give_way_act")
+            act.update(manoeuvre="alter_course", course_change_deg=_TURN, pass_distance_nm=1.0)
+            return "keep_clear"
+        return "give_way_still"
+
+    def role(node: str, own: str, encounter: str, other: str, side: str) -> None:
+        path.append(node)
+        act.update(role=own, encounter=encounter, other_role=other, direction=side)
+
+    if f["visibility_nm"] < _RV:
+        path.append("rv_risk")
+        if not risk():
+            return path, act, "assess"
+        path.append("rv_side")
+        if abs(b) < 90.0:
+            role("rv_forward", "no_role", "restricted_visibility", "no_role", "starboard")
+            act["speed_factor"] = _SLOW
+        else:
+            path.append("rv_abaft")
+            if b > 0.0:
+                role("rv_abaft_starboard", "no_role", "restricted_visibility", "no_role", "port")
+            else:
+                role("rv_abaft_port", "no_role", "restricted_visibility", "no_role",
+                     "starboard")
+        return path, act, give_way_wait()
+    path.append("risk")
+    if not risk():
+        return path, act, "assess"
+    path.append("overtaking")
+    if abs(a) > _ABAFT and sr < 1.0:
+        role("give_way_overtaking", "give_way", "overtaking", "stand_on", "either")
+        return path, act, give_way_wait()
+    path.append("overtaken")
+    if abs(b) > _ABAFT and sr > 1.0:
+        role("stand_on_overtaken", "stand_on", "overtaken", "give_way", "either")
+        act["manoeuvre"] = "keep"
+        return path, act, "overtaken_watch"
+    path.append("head_on")
+    if abs(b) <= _HEAD and abs(a) <= _HEAD and cd >= _RECIP:
+        role("head_on_role", "mutual_give_way", "head_on", "mutual_give_way", "starboard")
+        return path, act, give_way_wait()
+    path.append("crossing_side")
+    if b > 0.0:
+        path.append("crossing_starboard")
+        if a > 0.0:
+            role("mutual_crossing", "mutual_give_way", "crossing", "mutual_give_way",
+                 "starboard")
+        else:
+            role("give_way_crossing", "give_way", "crossing", "stand_on", "starboard")
+        return path, act, give_way_wait()
+    path.append("crossing_port")
+    if a > 0.0:
+        role("stand_on_crossing", "stand_on", "crossing", "give_way", "starboard")
+        act["manoeuvre"] = "keep"
+        return path, act, "stand_on_watch"
+    role("mutual_crossing", "mutual_give_way", "crossing", "mutual_give_way", "starboard")
+    return path, act, give_way_wait()
+
+
+_EPS = 1e-9
+_ANGLES = [-180.0, -112.5 - _EPS, -112.5, -90.0, -10.0 - _EPS, -10.0, -0.0, 0.0, 10.0,
+           10.0 + _EPS, 45.0, 112.5, 112.5 + _EPS, 180.0, NAN]
+
+
+def test_bundled_classification_on_a_boundary_grid() -> None:
+    """Every combination of bearing and aspect at and beside the documented sector limits
+    (10 deg, 112.5 deg, 0, 180), course differences at 165 deg, speed ratios at 1: the first
+    step of rules/colregs.yaml matches the hand-written classification node for node, with
+    the same actions and cursor. Exactly 112.5 deg is not "more than 22.5 deg abaft the beam";
+    exactly 10 deg and exactly 165 deg are head-on."""
+    import itertools
+
+    rows = [{"bearing_deg": b, "aspect_deg": a, "course_diff_deg": c, "speed_ratio": r}
+            for b, a, c, r in itertools.product(_ANGLES, _ANGLES,
+                                                [0.0, 165.0 - _EPS, 165.0, -180.0],
+                                                [0.5, 1.0, 1.0 + _EPS])]
+    got = _step(_colregs_net(), rows)
+    for row, result in zip(rows, got, strict=True):
+        assert result == _hand_first_step({**_START, **row}), row
+    # the grid reaches every classification node
+    reached = {name for path, _, _ in got for name in path}
+    assert {"give_way_overtaking", "stand_on_overtaken", "head_on_role", "mutual_crossing",
+            "give_way_crossing", "stand_on_crossing"} <= reached
+
+
+def test_bundled_risk_window_timing_and_restricted_visibility_grid() -> None:
+    """Rule 7 window (dcpa < 1 NM, 0 <= tcpa <= 30 min, both ends included), the early-action
+    threshold (tcpa or time to domain <= 15 min) and the Rule 19 branch (visibility < 2 NM;
+    forward of the beam below 90 deg, abeam counts as abaft), against the hand classification."""
+    import itertools
+
+    rows = [{"visibility_nm": v, "dcpa_nm": dc, "tcpa_min": t, "time_to_domain_min": ttd,
+             "bearing_deg": b, "aspect_deg": -b if not math.isnan(b) else NAN,
+             "course_diff_deg": 90.0}
+            for v, dc, t, ttd, b in itertools.product(
+                [10.0, _RV, _RV - _EPS], [0.0, 1.0 - _EPS, 1.0, NAN],
+                [-_EPS, 0.0, 15.0, 15.0 + _EPS, 30.0, 30.0 + _EPS, math.inf, NAN],
+                [math.inf, 15.0, 15.0 + _EPS], [-90.0, 90.0, 90.0 - _EPS, -45.0, 180.0])]
+    got = _step(_colregs_net(), rows)
+    for row, result in zip(rows, got, strict=True):
+        assert result == _hand_first_step({**_START, **row}), row
+    asked = [r for r, (_, act, _) in zip(rows, got, strict=True)
+             if act.get("manoeuvre") == "alter_course"]
+    assert asked and all(r["tcpa_min"] <= 15.0 or r["time_to_domain_min"] <= 15.0
+                         for r in asked)
+
+
+_ROLE_OF = {  # reference expected_os_role (prefix) -> role, encounter, other role, side
+    "head-on": ("mutual_give_way", "head_on", "mutual_give_way", "starboard"),
+    "OS give-way": ("give_way", "crossing", "stand_on", "starboard"),
+    "OS overtaking": ("give_way", "overtaking", "stand_on", "either"),
+    "OS stand-on": ("stand_on", "crossing", "give_way", "starboard"),
+}
+_DNV_CLASS = {"head_on": "head-on", "crossing_give_way": "OS give-way",
+              "overtaking_give_way": "OS overtaking", "crossing_stand_on": "OS stand-on"}
+
+
+def _fold(deg: float) -> float:
+    """Degrees to (-180, 180]."""
+    out = math.fmod(deg, 360.0)
+    if out > 180.0:
+        out -= 360.0
+    elif out <= -180.0:
+        out += 360.0
+    return out
+
+
+def _imazu_targets() -> list[tuple[int, dict]]:
+    import yaml
+
+    data = yaml.safe_load(REFERENCE.read_text(encoding="utf-8"))
+    return [(case["id"], t) for case in data["cases"] for t in case["targets"]]
+
+
+def _imazu_rows(own_view: bool) -> list[dict[str, float]]:
+    """Features of each Imazu target from the reference's derived values (own ship north at
+    12 kn; every ship reaches the origin at 30 min: DCPA 0, TCPA 30 min), seen by the own
+    ship, or by the target (bearing and aspect swap, the course difference and speed ratio
+    invert)."""
+    rows = []
+    for _, t in _imazu_targets():
+        d = t["derived"]
+        beta, alpha = _fold(d["rel_bearing_from_os_deg"]), _fold(d["aspect_os_seen_from_ts_deg"])
+        course, ratio = _fold(t["course_deg"]), t["speed_kn"] / 12.0
+        if not own_view:
+            beta, alpha, course, ratio = alpha, beta, _fold(-course), 1.0 / ratio
+        rows.append({"range_nm": d["range_nm"], "bearing_deg": beta, "aspect_deg": alpha,
+                     "course_diff_deg": course, "speed_ratio": ratio,
+                     "dcpa_nm": d["dcpa_nm"], "tcpa_min": d["tcpa_min"]})
+    return rows
+
+
+def test_bundled_rules_give_the_reference_roles_of_the_imazu_cases() -> None:
+    """Every target of the 22 Imazu cases at t = 0 (TCPA exactly 30 min, the inclusive end of
+    the look-ahead): the own ship's role, encounter, expected role of the other and side are
+    those of the reference's ``expected_os_role`` (and its DNV class agrees); give-way ships
+    wait for the action time, the stand-on ship keeps course and watches."""
+    targets = _imazu_targets()
+    assert len(targets) == 50
+    got = _step(_colregs_net(), _imazu_rows(own_view=True))
+    for (case, t), (path, act, cursor) in zip(targets, got, strict=True):
+        key = next(k for k in _ROLE_OF if t["expected_os_role"].startswith(k))
+        assert _DNV_CLASS[t["derived"]["class_dnv_trafficgen"]] == key
+        role, encounter, other, side = _ROLE_OF[key]
+        assert (act.get("role"), act.get("encounter"), act.get("other_role"),
+                act.get("direction")) == (role, encounter, other, side), (case, t["name"], path)
+        if role == "stand_on":
+            assert act["manoeuvre"] == "keep" and cursor == "stand_on_watch"
+        else:
+            assert "manoeuvre" not in act and cursor == "give_way_still"
+
+
+def test_imazu_roles_seen_from_the_targets_are_the_complement() -> None:
+    """The same encounters seen by each target: every pair has one give-way and one stand-on
+    ship (or both mutual_give_way in a head-on), the overtaken target stands on, and each
+    ship's expected role of the other is the role the other takes: no blind spot."""
+    net = _colregs_net()
+    own = _step(net, _imazu_rows(own_view=True))
+    other = _step(net, _imazu_rows(own_view=False))
+    partner = {"give_way": "stand_on", "stand_on": "give_way",
+               "mutual_give_way": "mutual_give_way"}
+    for (_, a, _), (path, b, cursor) in zip(own, other, strict=True):
+        assert b["role"] == partner[a["role"]], path
+        assert a["other_role"] == b["role"] and b["other_role"] == a["role"]
+        if a["encounter"] == "overtaking":
+            assert b["encounter"] == "overtaken" and cursor == "overtaken_watch"
+            assert b["direction"] == "either" and b["manoeuvre"] == "keep"
+        else:
+            assert b["encounter"] == a["encounter"]
+
+
+def test_around_the_clock_encounters_by_the_rules_sectors() -> None:
+    """The reference's "Around the Clock" set: own ship north, a target of equal speed on
+    course k x 15 deg (k = 1..23), both reaching a common point at 25 min. Bearing and aspect
+    computed here from the positions. With equal speeds nobody overtakes; courses within 15 deg
+    of reciprocal (165, 180, 195: each ship 7.5 deg or less off the other's bow) are head-on;
+    a target coming from port (course 15..150) is crossed as stand-on, from starboard
+    (210..345) as give-way."""
+    speed_nm_min = 12.0 / 60.0
+    dist = 25.0 * speed_nm_min
+    rows, expected = [], []
+    for k in range(1, 24):
+        c = 15.0 * k
+        tx, ty = -dist * math.sin(math.radians(c)), -dist * math.cos(math.radians(c))
+        ox, oy = 0.0, -dist
+        beta = _fold(math.degrees(math.atan2(tx - ox, ty - oy)))
+        alpha = _fold(math.degrees(math.atan2(ox - tx, oy - ty)) - c)
+        rows.append({"range_nm": math.hypot(tx - ox, ty - oy), "bearing_deg": beta,
+                     "aspect_deg": alpha, "course_diff_deg": _fold(c), "speed_ratio": 1.0,
+                     "tcpa_min": 25.0, "dcpa_nm": 0.0})
+        expected.append("stand_on" if c < 165.0 else "give_way" if c > 195.0
+                        else "mutual_give_way")
+    got = _step(_colregs_net(), rows)
+    assert [act["role"] for _, act, _ in got] == expected
+    assert [act["encounter"] for _, act, _ in got] == [
+        "head_on" if r == "mutual_give_way" else "crossing" for r in expected]
+    assert abs(rows[10]["bearing_deg"] + 7.5) < 1e-9 and rows[10]["course_diff_deg"] == 165.0
+
+
+_GW = {"bearing_deg": 45.0, "aspect_deg": -45.0, "course_diff_deg": 90.0, "tcpa_min": 20.0,
+       "dcpa_nm": 0.0}
+
+
+@pytest.mark.parametrize(("start", "row", "path", "actions", "cursor"), [
+    # give_way_still: risk remains; tcpa just above 15 and domain entry after 15: wait
+    ("give_way_still", {**_GW, "tcpa_min": 15.0 + _EPS, "time_to_domain_min": 15.5},
+     ["give_way_still", "give_way_wait"], {}, "give_way_still"),
+    # tcpa exactly 15 = action_time_min: act, turn_deg 30, pass_distance_nm 1
+    ("give_way_still", {**_GW, "tcpa_min": 15.0},
+     ["give_way_still", "give_way_wait", "give_way_act"],
+     {"manoeuvre": "alter_course", "course_change_deg": 30.0, "pass_distance_nm": 1.0},
+     "keep_clear"),
+    # the risk is gone (dcpa exactly 1 is not < 1): clear, forget the encounter
+    ("give_way_still", {**_GW, "dcpa_nm": 1.0},
+     ["give_way_still", "clear"],
+     {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
+      "manoeuvre": "resume_route"}, "assess"),
+    # keep_clear: past CPA but range exactly clear_nm: not yet clear; no emergency
+    ("keep_clear", {"tcpa_min": -0.5, "range_nm": 1.0, "bearing_deg": 150.0},
+     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+    # range 1.5 > 1 but the other exactly 112.5 deg off the bow and within 2 NM: not clear
+    ("keep_clear", {"tcpa_min": -0.5, "range_nm": 1.5, "bearing_deg": -112.5},
+     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+    # ... more than 22.5 deg abaft the beam: past and clear
+    ("keep_clear", {"tcpa_min": -0.5, "range_nm": 1.5, "bearing_deg": -112.5 - _EPS},
+     ["keep_clear", "clear"],
+     {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
+      "manoeuvre": "resume_route"}, "assess"),
+    # ... or beyond far_clear_nm (2 NM) whatever the bearing; exactly 2 is not beyond
+    ("keep_clear", {"tcpa_min": -0.5, "range_nm": 2.0, "bearing_deg": 10.0},
+     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+    ("keep_clear", {"tcpa_min": -0.5, "range_nm": 2.0 + _EPS, "bearing_deg": 10.0},
+     ["keep_clear", "clear"],
+     {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
+      "manoeuvre": "resume_route"}, "assess"),
+    # Rule 17(b): domain entry exactly emergency_min (2) ahead, CPA not past: emergency
+    ("keep_clear", {"tcpa_min": 0.0, "range_nm": 0.4, "time_to_domain_min": 2.0},
+     ["keep_clear", "emergency_check", "emergency"],
+     {"manoeuvre": "emergency", "course_change_deg": 60.0, "speed_factor": 0.5,
+      "pass_distance_nm": 1.0}, "keep_clear"),
+    ("keep_clear", {"tcpa_min": -_EPS, "range_nm": 0.4, "time_to_domain_min": 2.0},
+     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+    # Rule 17(a)(ii): domain entry within 10 min, other turned < 10 deg, kept > 0.8 speed
+    ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0,
+                        "other_course_change_deg": 10.0 - _EPS,
+                        "other_speed_change_ratio": 0.8 + _EPS},
+     ["stand_on_watch", "stand_on_check", "stand_on_act"],
+     {"manoeuvre": "reduce_speed", "speed_factor": 0.5, "pass_distance_nm": 1.0},
+     "keep_clear"),
+    ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0,
+                        "other_course_change_deg": 10.0},
+     ["stand_on_watch", "stand_on_check"], {}, "stand_on_watch"),
+    ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0,
+                        "other_speed_change_ratio": 0.8},
+     ["stand_on_watch", "stand_on_check"], {}, "stand_on_watch"),
+    ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0 + _EPS},
+     ["stand_on_watch", "stand_on_check"], {}, "stand_on_watch"),
+    # overtaken: released only beyond far_clear_nm (Rule 13(d)), whatever the bearing
+    ("overtaken_watch", {"tcpa_min": -1.0, "range_nm": 2.0, "bearing_deg": 170.0},
+     ["overtaken_watch", "overtaken_check"], {}, "overtaken_watch"),
+    ("overtaken_watch", {"tcpa_min": -1.0, "range_nm": 2.0 + _EPS, "bearing_deg": 0.0},
+     ["overtaken_watch", "clear"],
+     {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
+      "manoeuvre": "resume_route"}, "assess"),
+    # no track (NaN geometry): every comparison false; the keep_clear ship keeps clear
+    ("keep_clear", {k: NAN for k in ("tcpa_min", "range_nm", "bearing_deg",
+                                     "time_to_domain_min")},
+     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+])
+def test_bundled_later_steps_at_their_thresholds(start: str, row: dict, path: list[str],
+                                                 actions: dict, cursor: str) -> None:
+    """Steps after the role is set, from the node the previous step left the pair at, at
+    and beside each documented threshold (action_time_min 15, cpa_limit_nm 1, clear_nm 1,
+    far_clear_nm 2, abaft_beam_deg 112.5, emergency_min 2, stand_on_act_min 10,
+    not_acting_deg 10, not_slowing_ratio 0.8): path, merged actions (only those set in this
+    step) and the next cursor, worked out from docs/rules.md."""
+    ((got_path, got_actions, got_cursor),) = _step(_colregs_net(), [row], start)
+    assert (got_path, got_actions, got_cursor) == (path, actions, cursor)
+
+
+def test_bundled_give_way_encounter_over_successive_steps() -> None:
+    """Imazu case 2 seen step by step, each step from the previous cursor: role at the first
+    step, no new action while waiting, the alteration once TCPA reaches 15 min, then clear
+    once past and more than 22.5 deg abaft the beam; the role is set once (the memory keeps
+    it), so later steps leave it unset."""
+    net = _colregs_net()
+    steps = [{**_GW, "tcpa_min": 30.0},
+             {**_GW, "tcpa_min": 20.0},
+             {**_GW, "tcpa_min": 15.0},
+             {"tcpa_min": 0.2, "range_nm": 0.9, "bearing_deg": 95.0},
+             {"tcpa_min": -3.0, "range_nm": 1.2, "bearing_deg": 120.0}]
+    cursor = "assess"
+    trace = []
+    for row in steps:
+        ((path, act, cursor),) = _step(net, [row], cursor)
+        trace.append((path[-1], sorted(act), cursor))
+    assert trace == [
+        ("give_way_wait", ["direction", "encounter", "other_role", "role"], "give_way_still"),
+        ("give_way_wait", [], "give_way_still"),
+        ("give_way_act", ["course_change_deg", "manoeuvre", "pass_distance_nm"], "keep_clear"),
+        ("emergency_check", [], "keep_clear"),
+        ("clear", ["encounter", "manoeuvre", "other_role", "role"], "assess")]
+
+
+def test_bundled_variants_turn_to_port_and_act_later() -> None:
+    """turn_port.yaml: the give-way crossing alters to port, the overtaking side stays
+    'either'; late_action.yaml: at TCPA 10 min the bundled file acts, the late one waits
+    until 3 min."""
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    port = load(RULES / "turn_port.yaml", VOCABULARY)
+    late = load(RULES / "late_action.yaml", VOCABULARY)
+    rows = [{**_GW, "tcpa_min": 30.0},
+            {"bearing_deg": 0.0, "aspect_deg": 180.0, "speed_ratio": 0.7, "tcpa_min": 30.0}]
+    assert [a["direction"] for _, a, _ in _step(port, rows)] == ["port", "either"]
+    assert [a["direction"] for _, a, _ in _step(_colregs_net(), rows)] == ["starboard", "either"]
+    wait = [{**_GW, "tcpa_min": t} for t in (10.0, 3.0 + _EPS, 3.0)]
+    starts = ["give_way_still"] * 3
+    assert [c for _, _, c in _step(_colregs_net(), wait, starts)] == ["keep_clear"] * 3
+    assert [c for _, _, c in _step(late, wait, starts)] == [
+        "give_way_still", "give_way_still", "keep_clear"]
+
+
+def test_bundled_kernel_matches_a_plain_reading_of_the_yaml_from_every_node() -> None:
+    """rules/colregs.yaml read with plain PyYAML and run by a small interpreter here, from
+    every node as the cursor, on random features drawn from each threshold of the file and
+    its neighbours (and NaN, +-inf): same path, actions and cursor as the compiled kernel."""
+    import yaml
+
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    raw = yaml.safe_load((RULES / "colregs.yaml").read_text(encoding="utf-8"))
+    params = raw["parameters"]
+    enums = VOCABULARY.enums
+
+    def num(w):
+        w = params.get(w, w) if isinstance(w, str) else w
+        return float(enums[w]) if isinstance(w, str) else float(w)
+
+    def holds(test, x):
+        if isinstance(test, bool):
+            return test
+        if isinstance(test, list):
+            v = x[test[0]]
+            if v != v:
+                return False
+            if test[1] == "between":
+                return num(test[2][0]) <= v <= num(test[2][1])
+            c = num(test[2])
+            return {"<": v < c, "<=": v <= c, ">": v > c, ">=": v >= c, "==": v == c,
+                    "!=": v != c}[test[1]]
+        (word, inner), = test.items()
+        if word == "not":
+            return not holds(inner, x)
+        return (all if word == "all" else any)(holds(t, x) for t in inner)
+
+    def run(node, x):
+        path, acts = [], {}
+        while True:
+            path.append(node)
+            spec = raw["nodes"][node]
+            for field, w in (spec.get("action") or {}).items():
+                acts[field] = num(w)
+            # PyYAML reads the plain keys yes / no as booleans
+            edge = spec.get(True) if holds(spec["test"], x) else spec.get(False)
+            edge = {"to": edge} if isinstance(edge, str) else edge
+            if edge.get("next", False):
+                return path, acts, edge["to"]
+            node = edge["to"]
+
+    values = sorted({float(v) for v in params.values() if not isinstance(v, str)})
+    pool = [NAN, math.inf, -math.inf, 0.0, -1.0, 90.0, 180.0, -180.0,
+            *values, *(v + 1e-9 for v in values), *(v - 1e-9 for v in values)]
+    rng = np.random.default_rng(2024)
+    names = list(raw["nodes"])
+    m = 40 * len(names)
+    x_all = rng.choice(pool, size=(len(VOCABULARY.features), m))
+    x_all[VOCABULARY.features.index("own_role")] = rng.choice([0.0, 1.0, 2.0, 3.0], m)
+    cursor = np.repeat(np.arange(len(names)), 40)
+    net = _colregs_net()
+    assert list(net.node_names) == names
+    d = evaluate(net, x_all, cursor)
+    for i in range(m):
+        x = dict(zip(VOCABULARY.features, x_all[:, i], strict=True))
+        path, acts, to = run(names[cursor[i]], x)
+        assert [names[k] for k in d.path[i, :d.path_len[i]]] == path
+        assert names[d.cursor[i]] == to
+        for row, field in enumerate(VOCABULARY.actions):
+            want = acts.get(field, NAN)
+            assert d.actions[row, i] == want or (math.isnan(want)
+                                                 and math.isnan(d.actions[row, i]))

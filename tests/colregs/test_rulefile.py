@@ -808,3 +808,389 @@ def test_override_breaking_the_bundled_look_ahead_names_every_use(tmp_path: Path
         f"{child}:5: parameters.look_ahead_min: between needs lo <= hi, got "
         f"[0, look_ahead_min] = [0, -3]; the value of 'look_ahead_min' set here is used at "
         f"{parent}:{line} ({key})" for line, key in zip(uses, keys, strict=True)]
+
+
+# ------------------------------------------------------------------------------------------
+# Documented errors through `trafficsim validate`: file, line, key, exit code 2
+# ------------------------------------------------------------------------------------------
+
+_COLREGS_ONE = """\
+schema_version: 1
+name: t
+start: a
+nodes:
+  a:
+    test: {test}
+    yes: {yes}
+    no: {{to: a, next: true}}
+  b:
+    test: true
+    yes: {b_yes}
+"""
+
+
+def _colregs_text(test: str = "[tcpa_min, '<', 5]", yes: str = "b",
+                  b_yes: str = "{to: a, next: true}") -> str:
+    return _COLREGS_ONE.format(test=test, yes=yes, b_yes=b_yes)
+
+
+def _line_with(text: str, part: str, nth: int = 1) -> int:
+    """1-based line of the ``nth`` line of ``text`` containing ``part``."""
+    hits = [k + 1 for k, line in enumerate(text.splitlines()) if part in line]
+    return hits[nth - 1]
+
+
+_DUPLICATE = _colregs_text() + "  b:\n    test: false\n    no: {to: a, next: true}\n"
+_NO_CHILD = _colregs_text().replace("    no: {to: a, next: true}\n", "", 1)
+_NO_START = _colregs_text().replace("start: a\n", "")
+
+_CLI_CASES = {
+    "unknown feature": (
+        _colregs_text(test="[tcpa_mn, '<', 5]"), ("[tcpa_mn",), "nodes.a.test[0]",
+        "unknown feature 'tcpa_mn' (did you mean 'tcpa_min'?)"),
+    "bad operator": (
+        _colregs_text(test="[tcpa_min, '=<', 5]"), ("'=<'",), "nodes.a.test[1]",
+        "unknown operator '=<' (did you mean '<='?); expected one of <, <=, >, >=, ==, !=, "
+        "between"),
+    "unquoted not-equal": (
+        _colregs_text(test="[tcpa_min, !=, 5]"), ("!=",), "nodes.a.test[1]",
+        'write the operator in quotes: "!="'),
+    "wrong nesting: all of one comparison": (
+        _colregs_text(test="{all: [tcpa_min, '<', 5]}"), ("all:",), "nodes.a.test.all",
+        "all takes a list of tests, got a single comparison"),
+    "wrong nesting: not of a list": (
+        _colregs_text(test="{not: [[tcpa_min, '<', 5], [range_nm, '<', 1]]}"), ("not:",),
+        "nodes.a.test.not", "not takes one test, got a list of tests"),
+    "type mismatch: enum constant as a bound": (
+        _colregs_text(test="[tcpa_min, between, [0, give_way]]"), ("between",),
+        "nodes.a.test[2][1]", "'give_way' is an enum constant; expected a number or a "
+        "parameter name"),
+    "type mismatch: text for a number": (
+        _colregs_text(test="[tcpa_min, '<', '5']"), ("'5'",), "nodes.a.test[2]",
+        "(remove the quotes)"),
+    "type mismatch: feature as a value": (
+        _colregs_text(test="[tcpa_min, '<', dcpa_nm]"), ("dcpa_nm",), "nodes.a.test[2]",
+        "'dcpa_nm' is a feature"),
+    "cycle of now edges": (
+        _colregs_text(b_yes="a"), ("    yes: a",), "nodes.b.yes",
+        "loop of immediate edges: a (yes) -> b (yes) -> a"),
+    "duplicate node": (
+        _DUPLICATE, ("  b:", 2), "nodes.b",
+        f"duplicate key 'b' (first at line {_line_with(_DUPLICATE, '  b:')}, again at line "
+        f"{_line_with(_DUPLICATE, '  b:', 2)})"),
+    "missing child": (
+        _NO_CHILD, ("  a:",), "nodes.a", "missing required key 'no'"),
+    "missing start": (
+        _NO_START, ("schema_version",), "start", "missing required key 'start'"),
+    "unknown child": (
+        _colregs_text(yes="bb"), ("yes: bb",), "nodes.a.yes",
+        "unknown node 'bb' (did you mean 'b'?)"),
+}
+
+
+@pytest.mark.parametrize("kind", list(_CLI_CASES))
+def test_documented_errors_exit_2_naming_file_line_and_key(tmp_path: Path, capsys, kind: str
+                                                           ) -> None:
+    """Each documented error kind, in a file checked against the COLREGS vocabulary by
+    ``trafficsim validate``: exit code 2 and one stderr line ``file:line: key: message``, the
+    line being where the faulty text is written (found here by searching the text)."""
+    from trafficsim.cli import main
+
+    text, (part, *nth), key, message = _CLI_CASES[kind]
+    path = tmp_path / "rules.yaml"
+    path.write_text(text, encoding="utf-8")
+    line = _line_with(text, part, *nth)
+    assert main(["validate", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    errors = captured.err.strip().splitlines()
+    assert len(errors) == 1, captured.err
+    head = f"trafficsim: error: {path}:{line}: {key}: "
+    assert errors[0].startswith(head), errors[0]
+    assert message in errors[0]
+
+
+def test_validate_lists_every_error_and_still_checks_the_other_files(tmp_path: Path,
+                                                                    capsys) -> None:
+    """Two faulty lines and one good file: two located error lines, the good file reported
+    ``ok`` with its node count, exit code 2."""
+    from trafficsim.cli import main
+
+    bad = tmp_path / "bad.yaml"
+    text = _colregs_text(test="[tcpa_mn, '<', 5]", yes="bb")
+    bad.write_text(text, encoding="utf-8")
+    good = tmp_path / "good.yaml"
+    good.write_text(_colregs_text(), encoding="utf-8")
+    assert main(["validate", str(bad), str(good)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out.strip() == f"{good}: ok (2 nodes)"
+    assert [e.split(": ")[2] for e in captured.err.strip().splitlines()] == [
+        f"{bad}:{_line_with(text, 'tcpa_mn')}", f"{bad}:{_line_with(text, 'yes: bb')}"]
+
+
+def test_validate_counts_the_nodes_of_the_bundled_files(capsys) -> None:
+    """``FILE: ok (N nodes)``, N counted here with plain PyYAML: the node keys of colregs.yaml,
+    which its two variants inherit unchanged."""
+    import yaml
+
+    from trafficsim.cli import main
+
+    n = len(yaml.safe_load((RULES / "colregs.yaml").read_text(encoding="utf-8"))["nodes"])
+    files = [RULES / f for f in ("colregs.yaml", "turn_port.yaml", "late_action.yaml")]
+    assert main(["validate", *map(str, files)]) == 0
+    assert capsys.readouterr().out.splitlines() == [f"{f}: ok ({n} nodes)" for f in files]
+
+
+# ------------------------------------------------------------------------------------------
+# "A misspelt key is reported once (not also as the key it was meant to be missing)"
+# ------------------------------------------------------------------------------------------
+
+_GOOD_ONE = ("schema_version: 1\nname: t\nstart: a\n"
+             "nodes:\n  a: {test: true, yes: {to: a, next: true}}\n")
+
+
+def test_misspelt_node_key_is_reported_once() -> None:
+    """The node-level case: ``tset`` is reported, ``test`` is not also called missing."""
+    (err,) = _errors(_GOOD_ONE.replace("{test:", "{tset:"))
+    assert err.key == "nodes.a.tset" and "did you mean 'test'" in err.message
+
+
+@pytest.mark.parametrize(("old", "new", "key"), [
+    ("name: t", "nme: t", "nme"),
+    ("start: a", "strat: a", "strat"),
+    ("nodes:", "nodse:", "nodse"),
+    ("schema_version: 1", "schema_versoin: 1", "schema_versoin"),
+    ("{to: a, next: true}", "{too: a, next: true}", "nodes.a.yes.too"),
+])
+def test_misspelt_required_keys_are_reported_once(old: str, new: str, key: str) -> None:
+    """docs/rules.md (Errors): a misspelt key is reported once, as the unknown key with its
+    "did you mean", not also as the required key it was meant to be."""
+    assert old in _GOOD_ONE
+    errors = _errors(_GOOD_ONE.replace(old, new, 1))
+    assert [e.key for e in errors] == [key]
+    assert "did you mean" in errors[0].message
+
+
+# ------------------------------------------------------------------------------------------
+# extends: each file valid by itself, every error once, in the file that holds the text
+# ------------------------------------------------------------------------------------------
+
+def test_parent_error_is_reported_once_whatever_the_child_adds(tmp_path: Path) -> None:
+    """base.yaml names a node 'slw' that does not exist; the child adds a node 'slow'. The
+    parent is checked alone and as part of the child ("an error found both ways is reported
+    once"): one error at the parent's line, not a second copy with another hint."""
+    child = _child(tmp_path, HEAD + "nodes:\n  slow: {test: true, yes: {to: watch, "
+                                    "next: true}}\n")
+    base = tmp_path / "base.yaml"
+    text = base.read_text().replace("yes: turn", "yes: slw")
+    base.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        parse_file(child, VOCAB)
+    got = [(Path(e.path).name, e.line, e.key) for e in info.value.errors]
+    assert got == [("base.yaml", _line_with(text, "yes: slw"), "nodes.decide.yes")]
+
+
+def test_parent_typo_without_a_new_close_name_is_reported_once(tmp_path: Path) -> None:
+    """The same parent error with a child that adds nothing resembling it: one error."""
+    child = _child(tmp_path, HEAD + "parameters: {turn_deg: 40}\n")
+    base = tmp_path / "base.yaml"
+    text = base.read_text().replace("yes: turn", "yes: trn")
+    base.write_text(text)
+    with pytest.raises(ScenarioError) as info:
+        parse_file(child, VOCAB)
+    (err,) = info.value.errors
+    assert (Path(err.path).name, err.line, err.key) == (
+        "base.yaml", _line_with(text, "yes: trn"), "nodes.decide.yes")
+    assert "did you mean 'turn'" in err.message
+
+
+_MID = """\
+schema_version: 1
+name: mid
+extends: base.yaml
+parameters:
+  near: 1.5
+nodes:
+  decide:
+    test: [range_nm, "<", near]
+    yes: turn
+    no: {to: watch, next: true}
+"""
+
+_TOP = """\
+schema_version: 1
+name: top
+extends: mid.yaml
+nodes:
+  decide:
+    test: [range_nm, "<", 3]
+    yes: turn
+    no: {to: watch, next: true}
+"""
+
+
+def test_middle_file_adding_a_used_parameter_is_valid(tmp_path: Path) -> None:
+    """mid.yaml adds ``near`` and uses it in the node it writes: valid by itself."""
+    _child(tmp_path, _MID, "mid.yaml")
+    rules = parse_file(tmp_path / "mid.yaml", VOCAB)
+    assert rules.parameters["near"] == 1.5
+    assert rules.node("decide").test.value == Operand("near", 1.5)
+
+
+def test_replacing_the_node_that_used_a_parents_added_parameter(tmp_path: Path) -> None:
+    """top.yaml replaces mid.yaml's ``decide`` entirely (documented). mid.yaml is valid by
+    itself and its ``near`` is used by a node written in mid.yaml, so the chain must load: the
+    replaced node is simply not part of the result, and ``near`` stays a parameter."""
+    _child(tmp_path, _MID, "mid.yaml")
+    (tmp_path / "top.yaml").write_text(_TOP, encoding="utf-8")
+    rules = parse_file(tmp_path / "top.yaml", VOCAB)
+    assert rules.node("decide").path == str(tmp_path / "top.yaml")
+    assert rules.parameters["near"] == 1.5
+
+
+def test_three_file_chain_lists_errors_file_by_file(tmp_path: Path) -> None:
+    """Errors of a chain top -> mid -> base come in the order of ``files`` (the file read,
+    then the one it extends, ...), by line within each file."""
+    _child(tmp_path, _MID.replace('"<", near]', '"<", near]\n    action: {role: giveway}'),
+           "mid.yaml")
+    base = tmp_path / "base.yaml"
+    btext = base.read_text().replace("turn_deg: 30", "turn_deg: '30'")
+    base.write_text(btext)
+    top = tmp_path / "top.yaml"
+    ttext = ("schema_version: 1\nname: top\nextends: mid.yaml\nnodes:\n"
+             "  extra: {test: [rnge_nm, '<', 1], yes: {to: watch, next: true}, "
+             "no: {to: watch, next: true}}\n  turn: {test: true, yes: extra}\n")
+    top.write_text(ttext)
+    with pytest.raises(ScenarioError) as info:
+        parse_file(top, VOCAB)
+    got = [(Path(e.path).name, e.line) for e in info.value.errors]
+    mtext = (tmp_path / "mid.yaml").read_text()
+    assert got == [("top.yaml", _line_with(ttext, "rnge_nm")),
+                   ("mid.yaml", _line_with(mtext, "giveway")),
+                   ("base.yaml", _line_with(btext, "turn_deg"))]
+    assert str(info.value).splitlines() == [str(e) for e in info.value.errors]
+
+
+def test_absolute_extends_path_and_relative_one_give_the_same_rules(tmp_path: Path) -> None:
+    """``extends`` relative to the folder of the file, or absolute: the same rule set."""
+    rel = _child(tmp_path, HEAD + "parameters: {turn_deg: 50}\n")
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    absolute = sub / "abs.yaml"
+    absolute.write_text(rel.read_text().replace("base.yaml", str(tmp_path / "base.yaml")))
+    up = sub / "up.yaml"
+    up.write_text(rel.read_text().replace("base.yaml", "../base.yaml"))
+    a, b, c = (parse_file(p, VOCAB) for p in (rel, absolute, up))
+    assert a.nodes == b.nodes == c.nodes
+    assert a.parameters == b.parameters == c.parameters
+    assert a.parameters["turn_deg"] == 50.0
+
+
+# ------------------------------------------------------------------------------------------
+# Language constructs against a plain evaluation of the written test
+# ------------------------------------------------------------------------------------------
+
+def _plain(test, x: dict[str, float], params: dict[str, float]) -> bool:
+    """The documented meaning of a test as written (PyYAML data), NaN comparisons false."""
+    if isinstance(test, bool):
+        return test
+    if isinstance(test, list):
+        feature, op, value = test
+        v = x[feature]
+        if math.isnan(v):
+            return False
+
+        def num(w):
+            return params[w] if isinstance(w, str) and w in params else (
+                VOCAB.enums[w] if isinstance(w, str) else float(w))
+        if op == "between":
+            return num(value[0]) <= v <= num(value[1])
+        c = num(value)
+        return {"<": v < c, "<=": v <= c, ">": v > c, ">=": v >= c, "==": v == c,
+                "!=": v != c}[op]
+    (word, inner), = test.items()
+    if word == "not":
+        return not _plain(inner, x, params)
+    results = [_plain(t, x, params) for t in inner]
+    return all(results) if word == "all" else any(results)
+
+
+def _tree_holds(test, x: dict[str, float]) -> bool:
+    """The parsed tree's meaning, walked here (Literal / Comparison / AllOf / AnyOf / Not)."""
+    if isinstance(test, Literal):
+        return test.value
+    if isinstance(test, Comparison):
+        v = x[test.feature]
+        if math.isnan(v):
+            return False
+        if test.op == "between":
+            lo, hi = test.value
+            return lo.value <= v <= hi.value
+        c = test.value.value
+        return {"<": v < c, "<=": v <= c, ">": v > c, ">=": v >= c, "==": v == c,
+                "!=": v != c}[test.op]
+    if isinstance(test, Not):
+        return not _tree_holds(test.item, x)
+    results = [_tree_holds(t, x) for t in test.items]
+    return all(results) if isinstance(test, AllOf) else any(results)
+
+
+def test_every_element_file_means_what_it_says_on_a_grid() -> None:
+    """Every test of every_element.yaml, parsed, holds exactly where the written YAML (read
+    with plain PyYAML) holds by the documented semantics, over a grid of feature values with
+    the file's boundaries (2, 6.5, +-10, 0, 0.5, 180), NaN and infinities."""
+    import itertools
+
+    import yaml
+
+    path = HERE / "rules" / "valid" / "every_element.yaml"
+    raw = yaml.safe_load(path.read_text(encoding="utf-8"))
+    rules = parse_file(path, VOCAB)
+    grid = {"range_nm": [2.0, 6.5, 7.0, math.nan], "dcpa_nm": [-1.0, 0.0, -0.5],
+            "own_role": [1.0, 2.0, 0.0], "bearing_deg": [-10.0, 10.0, 10.5],
+            "speed_ratio": [0.0, 0.5, 0.6], "aspect_deg": [-180.0, math.inf],
+            "tcpa_min": [0.0, -0.0, 1e-300]}
+    names = list(grid)
+    checked = 0
+    for values in itertools.product(*grid.values()):
+        x = dict(zip(names, values, strict=True))
+        for node in rules.nodes:
+            written = raw["nodes"][node.name]["test"]
+            assert _tree_holds(node.test, x) == _plain(written, x, rules.parameters), (node, x)
+            checked += 1
+    assert checked == 4 * 3 * 3 * 3 * 3 * 2 * 3 * 4
+
+
+@pytest.mark.parametrize(("written", "rendered"), [
+    ("[range_nm, '<', 1]", "[range_nm, <, 1]"),
+    ("[range_nm, between, [-2, 2.5]]", "[range_nm, between, [-2, 2.5]]"),
+    ("{all: [true, {not: false}]}", "{all: [true, {not: false}]}"),
+    ("{any: [[own_role, '!=', stand_on], {all: [[dcpa_nm, '>=', 0]]}]}",
+     "{any: [[own_role, !=, stand_on], {all: [[dcpa_nm, >=, 0]]}]}"),
+])
+def test_render_test_round_trips(written: str, rendered: str) -> None:
+    """``render_test`` writes the flow syntax back; quoting its operators again parses to the
+    same tree."""
+    (node,) = parse(ONE_NODE.format(node=f"    test: {written}\n    yes: {{to: a, next: true}}"
+                                          "\n    no: {to: a, next: true}"), VOCAB).nodes
+    assert render_test(node.test) == rendered
+    quoted = re.sub(r", (<=|<|>=|>|==|!=), ", lambda m: f", '{m.group(1)}', ", rendered)
+    (again,) = parse(ONE_NODE.format(node=f"    test: {quoted}\n    yes: {{to: a, next: true}}"
+                                            "\n    no: {to: a, next: true}"), VOCAB).nodes
+    assert again.test == node.test
+
+
+def test_block_and_flow_styles_give_the_same_tree() -> None:
+    """The docs' block-style example and the same test in flow style: one tree."""
+    block = ("    test:\n      all:\n        - [range_nm, \"<\", far_nm]\n        - any:\n"
+             "            - [own_role, \"==\", give_way]\n"
+             "            - not: [bearing_deg, between, [lo_deg, hi_deg]]\n"
+             "    yes: {to: a, next: true}\n    no: {to: a, next: true}")
+    flow = ("    test: {all: [[range_nm, '<', far_nm], {any: [[own_role, '==', give_way], "
+            "{not: [bearing_deg, between, [lo_deg, hi_deg]]}]}]}\n"
+            "    yes: {to: a, next: true}\n    no: {to: a, next: true}")
+    head = ONE_NODE.replace("nodes:", "parameters: {far_nm: 5, lo_deg: -3, hi_deg: 3}\nnodes:")
+    (a,) = parse(head.replace("{node}", block), VOCAB).nodes
+    (b,) = parse(head.replace("{node}", flow), VOCAB).nodes
+    assert a.test == b.test
+    assert isinstance(a.test, AllOf) and isinstance(a.test.items[1], AnyOf)

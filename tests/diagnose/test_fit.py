@@ -5,6 +5,7 @@ of the right effect is zero and the cost of a known error is known in closed for
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import replace
 from types import SimpleNamespace
 from typing import Any
 
@@ -272,14 +273,16 @@ def test_gear_start_follows_the_logged_rudder_at_the_rate_limit() -> None:
     data = exact()
     res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
     logged = data.windows.inputs[:, 0, 0]
-    # tau 0.2 s (stable Euler at 0.2 s), rate 0.5 deg/s: the gear ramps from the 20 deg step at
-    # 20 s and reaches 20 deg at 60 s; the window starting at 30 s finds it at 5 deg, and from
-    # 80 s, with the order at -20 deg, it has come back 5 deg by 90 s
+    # tau 0.2 s, rate 0.5 deg/s: the gear ramps from the 20 deg step at 20 s while the lag
+    # asks for more than the rate, i.e. until 0.1 deg (tau x rate) short of 20 deg at 59.8 s,
+    # then closes the rest as exp(-t / tau): 20 - 0.1 / e at 60 s. The window starting at 30 s
+    # finds it at 5 deg, and from 80 s, with the order at -20 deg, it has come back 5 deg by 90 s
     steer = np.array([[0.0, 0.0], [0.2, np.radians(0.5)]])
     start = res.gear_start(steer)
     assert np.degrees(logged).tolist() == pytest.approx([0.0, 20.0, 20.0, -20.0])
     assert np.array_equal(start[0], logged)  # no gear: the logged angle
-    assert np.degrees(start[1]).tolist() == pytest.approx([0.0, 5.0, 20.0, 15.0], abs=1e-6)
+    assert np.degrees(start[1]).tolist() == pytest.approx(
+        [0.0, 5.0, 20.0 - 0.1 * np.exp(-1.0), 15.0], abs=1e-6)
 
 
 def test_env_offsets_give_every_window_its_run_current() -> None:
@@ -400,3 +403,315 @@ def test_phase_shrinkage_of_the_right_effect_is_complete_in_every_phase() -> Non
     # against a candidate as its own base nothing shrinks
     assert all(v == pytest.approx(0.0, abs=1e-12)
                for v in fit.phase_shrinkage(SPEC, half, hold, sc, half).values())
+
+
+# --- injection and recovery on small noisy runs -------------------------------------------------
+
+TURN_B = np.where(_T < 20, 0.0, 25.0)
+NOISE = (1.0, 0.2, 0.05)  # position m, heading deg, velocities m/s (the self-test's levels)
+CANDIDATES = ("current", "lever_arm", "resistance", "propeller_asymmetry")
+
+
+def sailed(name: str, rudder_deg: np.ndarray, psi0: float = 0.0,
+           hidden: Mapping[str, Mapping[str, float]] | None = None,
+           rng: np.random.Generator | None = None, noise: float = 1.0) -> Kinematics:
+    """The KVLCC2 with the ``hidden`` effects (hull effects on its spec, current in the
+    replay, instruments through :func:`effects.measure`) replayed through ``rudder_deg`` at
+    2 s; with ``rng``, white noise of ``noise`` times :data:`NOISE` on the measured channels,
+    while the "smoothed" state stays the noise-free measurement (a perfect smoother)."""
+    hidden = effects.check(hidden or {})
+    n = len(rudder_deg)
+    t = np.arange(n) * DT
+    rud = np.radians(np.asarray(rudder_deg, float))
+    rps = np.full(n, _rps())
+    off = effects.environment_offset(hidden)
+    x0 = np.zeros((base.N_STATE, 1))
+    x0[2, 0], x0[3, 0] = psi0, SPEED
+    env = np.zeros((1, n, 4))
+    env[..., 0], env[..., 1] = off[0], off[1]
+    win = replay.Windows(x0, np.stack([rud, rps], -1)[None], env, np.array([DT]),
+                         np.array([n]), np.full((1, n, 6), np.nan), np.array([0]),
+                         np.array([0.0]), (name,))
+    truth, _ = replay.simulate(replay.model_rows([effects.apply_spec(SPEC, hidden)]), win)
+    m = {k: v[0, 0] for k, v in effects.measure(truth, np.array([DT]), [hidden]).items()}
+    smooth = {"north_m": m["north"].copy(), "east_m": m["east"].copy(),
+              "psi_rad": m["psi"].copy(), "u_mps": m["u"].copy(), "v_mps": m["v"].copy(),
+              "r_radps": m["r"].copy()}
+    if rng is not None:
+        pos, head, vel = (noise * s for s in NOISE)
+        for k in ("north", "east"):
+            m[k] = m[k] + rng.normal(0.0, pos, n)
+        m["psi"] = m["psi"] + np.radians(rng.normal(0.0, head, n))
+        for k in ("u", "v", "sog"):
+            m[k] = m[k] + rng.normal(0.0, vel, n)
+        m["r"] = m["r"] + rng.normal(0.0, vel / LENGTH, n)
+        m["cog"] = m["cog"] + rng.normal(0.0, vel / SPEED, n)
+    trial = TrialData(name, "", t, m["north"], m["east"], np.mod(m["psi"], 2 * np.pi), rud, rps,
+                      u_mps=m["u"], v_mps=m["v"], r_radps=m["r"], sog_mps=m["sog"],
+                      cog_rad=np.mod(m["cog"], 2 * np.pi))
+    return Kinematics(trial, smooth, {}, {})
+
+
+def trio(hidden: Mapping[str, Any] | None, seed: int | None = 1, noise: float = 1.0
+         ) -> tuple[Dataset, Dataset]:
+    """Training runs ``a`` (zig-zag) and ``c`` (port turn), held-out run ``b`` (starboard
+    turn), 4 windows of 30 s each; noise-free with ``seed=None``."""
+    rng = None if seed is None else np.random.default_rng(seed)
+    train = dataset([sailed("a", ZIGZAG, 0.0, hidden, rng, noise),
+                     sailed("c", TURN, 3.0, hidden, rng, noise)], HORIZON)
+    hold = dataset([sailed("b", TURN_B, 1.0, hidden, rng, noise)], HORIZON)
+    return train, hold
+
+
+@pytest.mark.parametrize(("hidden", "noise", "tol"), [
+    ({"lever_arm": {"x_m": -80.0, "y_m": 5.0}}, 1.0, 0.05),
+    (current(0.3, -0.2), 1.0, 0.1),
+    ({"resistance": {"scale": 1.6}}, 0.3, 0.05),
+    ({"propeller_asymmetry": {"rudder_offset_deg": 3.0}}, 0.3, 0.05),
+], ids=["lever_arm", "current", "resistance", "propeller_asymmetry"])
+def test_injected_effect_is_ranked_first_chosen_and_its_size_recovered(hidden, noise,
+                                                                       tol) -> None:
+    """An effect hidden in noisy runs: it is ranked first and chosen alone, the verdict names
+    it with the held-out shrinkage it reports, its magnitude (training runs' mean for the
+    current, as the self-test measures it) is within ``tol``, and what is left of the held-out
+    gap is the noise: the cost with the effect is within 1.5 times the noise floor."""
+    name = next(iter(hidden))
+    train, hold = trio(hidden, noise=noise)
+    diag = fit.diagnose(SPEC, train, hold, CANDIDATES, forward_steps=1)
+    best = diag.singles[0]
+    assert diag.attributable and best.effects == (name,) and diag.chosen.effects == (name,)
+    shrink = best.shrinkage(diag.base)[1]
+    assert diag.verdict.startswith(f"{name}: held-out gap {100 * shrink:.0f} % smaller")
+    eff = effects.REGISTRY[name]
+    truth = eff.magnitude(effects.check(hidden)[name])
+    got = eff.magnitude(best.mean_value(name, train.windows.run_names))
+    assert got == pytest.approx(truth, rel=tol)
+    assert diag.base.cost_hold > 3.0 * diag.floor_hold
+    assert best.cost_hold < 1.5 * diag.floor_hold
+    if name == "current":  # every run's own vector, held-out run b included, within a
+        # quarter of the current's speed
+        for run_name in ("a", "b", "c"):
+            v = best.run_values[run_name]["current"]
+            err = np.hypot(v["north_mps"] - 0.3, v["east_mps"] + 0.2)
+            assert err < 0.25 * np.hypot(0.3, 0.2), run_name
+
+
+def test_no_effect_attributes_nothing() -> None:
+    """Noisy runs of the base ship itself: the held-out gap is the noise (its ratio to the
+    floor is what the verdict prints), no candidate's penalised score reaches MIN_GAIN, so
+    nothing is added, the base is kept, and the residuals after are those before."""
+    train, hold = trio(None)
+    diag = fit.diagnose(SPEC, train, hold, CANDIDATES, forward_steps=2)
+    ratio = diag.base.cost_hold / diag.floor_hold
+    assert ratio < fit.FLOOR_FACTOR
+    assert diag.verdict == (f"not attributable: the held-out gap is {ratio:.1f} times the "
+                            f"data's noise floor (below 3)")
+    assert not diag.attributable and diag.chosen is diag.base and diag.steps == []
+    for c in diag.singles:
+        score = 1.0 - fit.penalised(c.cost_hold, c.p, diag.n_eff) / diag.base.cost_hold
+        assert score <= fit.MIN_GAIN, c.effects
+    for label in ("train", "holdout"):
+        assert diag.residuals[label]["after"] == diag.residuals[label]["before"]
+
+
+def test_noise_free_base_runs_are_not_attributable() -> None:
+    """Exact data of the base ship: no gap at all (a zero ratio), whatever the candidates."""
+    train, hold = trio(None, seed=None)
+    diag = fit.diagnose(SPEC, train, hold, ("resistance", "compass_bias"), forward_steps=1)
+    assert not diag.attributable and diag.chosen.effects == ()
+    assert "held-out gap is 0.0 times" in diag.verdict
+
+
+def test_below_the_floor_the_base_is_chosen_and_the_trace_kept() -> None:
+    """A rudder offset of 3 deg under full noise: the effect shrinks the held-out cost by
+    more than 5 % and the selection adds it, but the gap is below 3 times the floor, so the
+    verdict keeps the base; ``steps`` still shows what the selection found."""
+    train, hold = trio({"propeller_asymmetry": {"rudder_offset_deg": 3.0}})
+    diag = fit.diagnose(SPEC, train, hold, ("current", "propeller_asymmetry"), forward_steps=1)
+    assert not diag.attributable and diag.chosen.effects == ()
+    assert "not attributable: the held-out gap is" in diag.verdict
+    assert [s["effects"] for s in diag.steps] == [["propeller_asymmetry"]]
+
+
+def test_refitted_base_absorbs_a_resistance_change() -> None:
+    """With ``refit=("R0",)`` the base is the hull refitted on the training runs: a 60 %
+    higher resistance goes into R0 (0.022 x 1.6) and the resistance effect, which only scales
+    R0 again, has nothing left to explain on the held-out run."""
+    train, hold = trio({"resistance": {"scale": 1.6}}, noise=0.3)
+    diag = fit.diagnose(SPEC, train, hold, ("resistance",), forward_steps=1, refit=("R0",))
+    assert diag.base.coefficients["R0"] == pytest.approx(0.022 * 1.6, rel=0.02)
+    res = diag.singles[0]
+    assert res.shrinkage(diag.base)[1] < fit.MIN_GAIN
+    assert diag.chosen.effects == () and not diag.attributable
+    assert diag.base.cost_hold < 1.5 * diag.floor_hold
+
+
+# --- the held-out check sees only data the fit did not -----------------------------------------
+
+
+def _with_target(data: Dataset, target: np.ndarray) -> Dataset:
+    return Dataset(data.runs, data.windows, target, data.phase, data.sigma, data.channels)
+
+
+def test_training_fit_never_reads_the_held_out_targets() -> None:
+    """A global effect is fitted on the training runs only: spoiling every held-out target
+    leaves its values, table and training cost bit for bit unchanged and only raises the
+    held-out cost."""
+    lever = {"lever_arm": {"x_m": 60.0, "y_m": -4.0}}
+    train, hold = exact(lever), exact(lever, TURN, "b", 1.0)
+    sc = fit.scales(train, LENGTH)
+    clean = fit.fit_set(SPEC, ("lever_arm",), train, hold, sc)
+    target = hold.target.copy()
+    target[..., CHANNELS.index("north")] += 40.0
+    target[..., CHANNELS.index("psi")] += 0.3
+    spoiled = fit.fit_set(SPEC, ("lever_arm",), train, _with_target(hold, target), sc)
+    assert spoiled.values == clean.values and spoiled.table == clean.table
+    assert spoiled.cost_train == clean.cost_train
+    assert clean.values["lever_arm"]["x_m"] == pytest.approx(60.0, abs=0.05)
+    assert spoiled.cost_hold > 1e3 * max(clean.cost_hold, 1e-9)
+
+
+def test_cross_fitting_scores_each_window_with_a_vector_fitted_without_it() -> None:
+    """Held-out run b (4 windows, folds {0, 2} and {1, 3}): spoiling window 1 leaves the
+    current fitted on the first fold bit for bit unchanged and moves the other; spoiling
+    window 0 does the opposite; and the held-out cost is the sum over windows, each window
+    replayed alone (a one-window subset) with the current of the fold it is not in."""
+    train = exact(current(0.1, 0.25), ZIGZAG, "a", 0.0)
+    hold = exact(current(0.15, -0.05), TURN, "b", 1.0)
+    sc = fit.scales(train, LENGTH)
+    noise = np.random.default_rng(4).normal(0.0, 1.0, hold.target.shape)
+    noisy = _with_target(hold, hold.target + noise * np.array([2, 2, 0.003, 0.02, 0.02, 1e-4,
+                                                               0.02, 0.003]))
+    clean = fit.fit_set(SPEC, ("current",), train, noisy, sc)
+    assert fit.alternate(noisy).tolist() == [True, False, True, False]
+    folds = clean.fold_run_values
+    for k, window in ((0, 1), (1, 0)):
+        target = noisy.target.copy()
+        target[window, :, CHANNELS.index("north")] += 30.0
+        spoiled = fit.fit_set(SPEC, ("current",), train, _with_target(noisy, target), sc)
+        assert spoiled.fold_run_values[k] == folds[k], window
+        assert spoiled.fold_run_values[1 - k]["b"] != folds[1 - k]["b"], window
+        assert spoiled.run_values["a"] == clean.run_values["a"]  # training run untouched
+    total = 0.0
+    for i in range(noisy.windows.w):
+        other = folds[0] if i % 2 else folds[1]
+        one = noisy.subset(np.arange(noisy.windows.w) == i)
+        total += fit.EffectResiduals(fit.EffectSet.of(SPEC, ("current",), run_fixed=other),
+                                     one, sc).cost(np.zeros(0))
+    assert clean.cost_hold == pytest.approx(total, rel=1e-10)
+    assert clean.cost_hold_insample < clean.cost_hold  # in sample is the optimistic one
+
+
+def test_held_out_run_of_one_window_is_scored_with_the_environment_off() -> None:
+    """A held-out run of a single window has no second fold: it is scored with the current
+    off (module doc), i.e. exactly like the base ship, while its full-run fit finds the
+    current."""
+    train = exact(current(0.2, 0.1), ZIGZAG, "a", 0.0)
+    hold = dataset([sailed("b", TURN[:16], 1.0, current(0.2, 0.1))], HORIZON)
+    assert hold.windows.w == 1
+    sc = fit.scales(train, LENGTH)
+    cand = fit.fit_set(SPEC, ("current",), train, hold, sc)
+    assert "b" in cand.fold_run_values[0] and "b" not in cand.fold_run_values[1]
+    off = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), hold, sc).cost(np.zeros(0))
+    assert off > 0.1 and cand.cost_hold == pytest.approx(off, rel=1e-12)
+    assert cand.cost_hold_insample < 1e-6 * off
+    got = cand.run_values["b"]["current"]
+    assert (got["north_mps"], got["east_mps"]) == pytest.approx((0.2, 0.1), abs=1e-3)
+
+
+# --- edge cases ---------------------------------------------------------------------------------
+
+
+def test_nan_gaps_in_measured_channels_are_left_out() -> None:
+    """Samples 20-24 of the north position and SOG from sample 45 on missing in the trial:
+    with a uniform 5 m north offset the cost is that of the remaining north samples, the RMS
+    stays 5 m, and the missing samples leave the count ``m`` and the floor's counts."""
+    k = run("a", ZIGZAG, 6.0)
+    north, sog = k.trial.north_m.copy(), k.trial.sog_mps.copy()
+    north[20:25] = np.nan
+    sog[45:] = np.nan
+    trial = replace(k.trial, north_m=north, sog_mps=sog)
+    data = dataset([Kinematics(trial, k.smooth, {}, {})], HORIZON)
+    sc = fit.scales(data, LENGTH)
+    full = exact()
+    # windows 0-15, 15-30, 30-45, 45-60 (shared boundaries), each scored after its first
+    # sample: north loses 20-24 (window 1), SOG loses 45 (end of window 2) and 46-60
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), _shifted(data, "north", 5.0), sc)
+    assert res.m == full.windows.w * 15 * 8 - 5 - 16
+    assert res.cost(np.zeros(0)) == pytest.approx(0.5 * (60 - 5) * (5.0 / sc["north"]) ** 2)
+    assert res.by_channel(np.zeros(0))["north"] == pytest.approx(5.0)
+    sigma = np.full(8, 0.01)
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), Dataset(
+        data.runs, data.windows, data.target, data.phase, sigma, data.channels), sc)
+    counts = np.full(8, 60)
+    counts[0], counts[6] = 55, 44
+    assert res.floor() == pytest.approx(0.5 * sum(
+        n * (0.01 / sc[c]) ** 2 for n, c in zip(counts, CHANNELS, strict=True)))
+
+
+def test_a_dataset_without_windows_costs_nothing() -> None:
+    """No window (an empty subset): nothing is scored, the cost and floor are zero, no phase is
+    reported and every channel's RMS is NaN; a fit with such held-out data still fits the
+    training runs as usual."""
+    data = exact(bias(2.0))
+    empty = data.subset(np.zeros(data.windows.w, dtype=bool))
+    sc = fit.scales(data, LENGTH)
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), empty, sc)
+    assert res.m == 0 and res.cost(np.zeros(0)) == 0.0 and res.floor() == 0.0
+    assert res.by_phase(np.zeros(0)) == {}
+    assert all(np.isnan(v) for v in res.by_channel(np.zeros(0)).values())
+    cand = fit.fit_set(SPEC, ("compass_bias",), data, empty, sc)
+    with_hold = fit.fit_set(SPEC, ("compass_bias",), data, exact(bias(2.0), TURN, "b"), sc)
+    assert cand.values == with_hold.values and cand.cost_hold == 0.0
+
+
+def test_straight_steady_runs_attribute_nothing() -> None:
+    """Runs with the rudder amidships throughout (constant heading and speed): every sample
+    is in the approach phase, and with noise the diagnosis attributes nothing."""
+    rng = np.random.default_rng(2)
+    zero = np.zeros(46)
+    train = dataset([sailed("a", zero, 0.5, None, rng), sailed("c", zero, 2.0, None, rng)],
+                    HORIZON)
+    hold = dataset([sailed("b", zero, 4.0, None, rng)], HORIZON)
+    assert set(np.unique(train.phase[train.windows.valid()])) == {0}
+    diag = fit.diagnose(SPEC, train, hold, ("current", "resistance"), forward_steps=1)
+    assert not diag.attributable and diag.chosen.effects == ()
+    assert set(diag.residuals["holdout"]["before"]["by_phase"]) == {"approach"}
+
+
+def test_gear_start_of_a_stable_lag_settles_on_the_logged_rudder() -> None:
+    """A 1 s lag without rate limiting (the 40 deg step from 20 to -20 deg is 0.7 rad/s at
+    most, under 90 deg/s) is the step times exp(-10) short of the logged angle 10 s after each
+    step (windows at 30 and 90 s; the one at 60 s, 40 s on, has settled): the exact lag,
+    however the steps are cut."""
+    data = exact()
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
+    start = res.gear_start(np.array([[1.0, np.radians(90.0)]]))[0]
+    short = np.exp(-10.0)
+    assert np.degrees(start) == pytest.approx([0.0, 20.0 - 20.0 * short, 20.0,
+                                               -20.0 + 40.0 * short], abs=1e-6)
+
+
+def test_gear_start_of_a_fast_lag_is_the_logged_rudder() -> None:
+    """A gear at the fit's lower bound (0.05 s lag, 90 deg/s) reaches a 20 deg step in about
+    0.25 s and then stays there: 10 s after each step it is at the logged angle. A first-order
+    lag with a rate limit never overshoots its target."""
+    data = exact()
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
+    lower = effects.bounds("steering_lag", LENGTH)[0][0]
+    start = res.gear_start(np.array([[lower, np.radians(90.0)]]))[0]
+    assert np.degrees(start) == pytest.approx([0.0, 20.0, 20.0, -20.0], abs=0.01)
+
+
+def test_gear_start_bridges_a_gap_in_the_logged_rudder() -> None:
+    """The logged rudder missing at 26 and 28 s while it stays at 20 deg (20-78 s): the replay
+    interpolates the gap (window inputs at 20 deg), and a 1 s, 5 deg/s gear that has been at
+    20 deg since about 25 s is still there at the 30 s window start."""
+    k = run("a", ZIGZAG, 6.0)
+    rud = k.trial.rudder_rad.copy()
+    rud[13:15] = np.nan
+    data = dataset([Kinematics(replace(k.trial, rudder_rad=rud), k.smooth, {}, {})], HORIZON)
+    assert np.degrees(data.windows.inputs[1, 0, 0]) == pytest.approx(20.0)
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
+    start = res.gear_start(np.array([[1.0, np.radians(5.0)]]))[0]
+    assert np.degrees(start[1]) == pytest.approx(20.0, abs=0.05)

@@ -23,7 +23,7 @@ from trafficsim.identify.command import read_runs
 from trafficsim.ships.base import families
 
 FOLDER = SHARED / "data" / "esso-osaka-mmg" / "python_module" / "input_csv"
-pytestmark = pytest.mark.skipif(not FOLDER.is_dir(), reason="MMG parameter folder not present")
+needs_folder = pytest.mark.skipif(not FOLDER.is_dir(), reason="MMG parameter folder not present")
 
 
 def _raw(name: str) -> dict[str, float]:
@@ -31,6 +31,7 @@ def _raw(name: str) -> dict[str, float]:
         return {row[0].strip(): float(row[1]) for row in list(csv.reader(fh))[1:] if row}
 
 
+@needs_folder
 def test_every_entry_mapped_or_ignored() -> None:
     spec = mmgfolder.read_folder(FOLDER)
     assert spec["model"] == "mmg_berthing"
@@ -69,6 +70,7 @@ def _line_of(name: str, key: str) -> int:
     return next(i for i, s in enumerate(lines, start=1) if s.split(",")[0].strip() == key)
 
 
+@needs_folder
 @pytest.mark.parametrize(("name", "key", "new", "message"), [
     ("MMG_params.csv", "yv_nd", "yv_nd,abc", "expected a number in column 2, got 'abc'"),
     ("MMG_params.csv", "nr_nd", "nr_nd,-0.05\nfoo_nd,1.0", "unknown entry"),
@@ -92,6 +94,7 @@ def test_bad_entry_is_one_located_error(tmp_path: Path, name: str, key: str, new
     assert err.key == bad and err.line == expected_line
 
 
+@needs_folder
 def test_missing_file_header_and_entry(tmp_path: Path) -> None:
     folder = tmp_path / "bad"
     shutil.copytree(FOLDER, folder)
@@ -110,6 +113,7 @@ def test_missing_file_header_and_entry(tmp_path: Path) -> None:
     assert info.value.key == "crn_cross_flow"
 
 
+@needs_folder
 def test_command_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A good folder gets past the base and fails on the (absent) data; a bad one is one
     line naming file, line and key, exit code 2."""
@@ -128,6 +132,7 @@ def test_command_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     assert f" {folder / 'MMG_params.csv'}:{line}: epsilon_rudder: expected a number" in err
 
 
+@needs_folder
 @pytest.mark.skipif(not ESSO.is_dir(), reason="FRT-DS-ESSO data set not present")
 def test_folder_base_tracks_the_berthing_runs_better() -> None:
     """Both bases replayed on the eight FRT-DS-ESSO berthing runs (measured rudder and rps,
@@ -151,3 +156,224 @@ def test_folder_base_tracks_the_berthing_runs_better() -> None:
     assert err["folder"][run]["end_position_rms_m"] < 0.75 * err["yaml"][run][
         "end_position_rms_m"]
     assert np.isfinite(folder_all["u_rms_mps"])
+
+
+# --- a made-up folder: every formula by hand, every malformed file one located error -----------
+
+PARTICULARS = {"lpp": 4.0, "breadth": 0.5, "draft": 0.25, "mass_nd": 0.3, "x_lcg": 0.02,
+               "rho_fresh": 1000.0, "dia_prop": 0.1, "pitchr": 0.7, "area_rudder": 0.02,
+               "lambda_rudder": 1.5, "x_location_rudder": -2.0, "area_projected_trans": 0.1,
+               "area_projected_lateral": 0.5, "AOD": 0.12, "LCW": -0.05,
+               "maxtickness_rudder": 0.18, "rho_air": 1.225}
+PARAMS = {**{key: 0.001 * (i + 1) for i, key in enumerate(mmgfolder._COEFFICIENTS)},
+          "IzzJzz_nd": 0.03, "Jmin": -0.5}
+PARAMS["coeff_drag_fore"] = PARAMS["xuu_nd"]
+SWITCHES = {"switch_prop_x": 1, "switch_prop_y": 0, "switch_prop_n": 1, "switch_rudder": 0,
+            "switch_wind": 1, "switch_windtype": 3, "switch_fn": 1, "switch_ur": 1}
+
+
+def _write_folder(folder: Path, particulars=PARTICULARS, params=PARAMS, switches=SWITCHES
+                  ) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = ["parameter,value", *(f"{k}, {v}" for k, v in particulars.items())]
+    (folder / "principal_particulars.csv").write_text("\n".join(rows) + "\n")
+    rows = ["parameter,params_init,params_min,params_max",
+            *(f"{k},{v},{v - 1},{v + 1}" if isinstance(v, float) else f"{k},{v},0,1"
+              for k, v in params.items())]
+    (folder / "MMG_params.csv").write_text("\n".join(rows) + "\n")
+    rows = ["model,value", *(f"{k},{v}" for k, v in switches.items())]
+    (folder / "model_switch.csv").write_text("\n".join(rows) + "\n")
+    return folder
+
+
+def test_made_up_folder_mapped_by_the_documented_formulas(tmp_path: Path) -> None:
+    """L 4 m, d 0.25 m, mass_nd 0.3: displacement 0.3 x 16 x 0.25 / 2 = 0.6 m3; x_G = 0.02 L =
+    0.08 m; rudder height sqrt(1.5 x 0.02); f_alpha = 6.13 x 1.5 / 3.75 = 2.452; x_R = -2 / 4;
+    J_z = 0.03 - 0.3 / 16 = 0.01125; windage centroid 2 + 0.05 m from the bow; switches 0/1
+    as coefficients; only the ignored entries present are named."""
+    folder = _write_folder(tmp_path / "made_up")
+    spec = mmgfolder.read_folder(folder)
+    p, c = spec["particulars"], spec["coefficients"]
+    assert spec["model"] == "mmg_berthing" and spec["name"] == "made_up"
+    assert p["length_m"] == 4.0 and p["beam_m"] == 0.5 and p["draught_m"] == 0.25
+    assert p["displacement_m3"] == pytest.approx(0.6)
+    assert p["displacement_m3"] * p["water_density_kgpm3"] == pytest.approx(600.0)
+    assert p["lcg_m"] == pytest.approx(0.08)
+    assert p["rudder_height_m"] == pytest.approx(np.sqrt(0.03))
+    assert p["windage_centroid_from_bow_m"] == pytest.approx(2.05)
+    assert (p["windage_frontal_area_m2"], p["windage_lateral_area_m2"],
+            p["windage_superstructure_area_m2"]) == (0.1, 0.5, 0.12)
+    assert c["f_alpha"] == pytest.approx(2.452)
+    assert c["x_R"] == pytest.approx(-0.5)
+    assert c["J_z"] == pytest.approx(0.01125) and c["k_zz"] == 0.25
+    assert c["delta_0"] == 0.0
+    for key, name in mmgfolder._COEFFICIENTS.items():
+        assert c[name] == PARAMS[key], key
+    assert (c["switch_prop_y"], c["switch_prop_n"], c["switch_rudder_astern"]) == (0, 1, 0)
+    assert set(c) == set(families()["mmg_berthing"].coefficients)
+    assert spec["service_speed_kn"] * 1852 / 3600 == pytest.approx(0.4)
+    note = spec["mmg_folder"]
+    ignored = note.split("ignored entries: ")[1]
+    for key in ("maxtickness_rudder", "rho_air", "Jmin", "switch_wind", "switch_windtype"):
+        assert key in ignored
+    for key in ("LCBR", "HBR", "alpha_prop", "XX0", "coeff_urudder_zero"):  # not in the folder
+        assert key not in ignored
+
+
+def test_made_up_folder_builds_as_its_family(tmp_path: Path) -> None:
+    """The spec read is a ship of the mmg_berthing family (its parameters build)."""
+    spec = mmgfolder.read_folder(_write_folder(tmp_path / "f"))
+    family = families()["mmg_berthing"]
+    family.build([spec])
+
+
+def test_byte_order_mark_blank_lines_and_spaces_are_accepted(tmp_path: Path) -> None:
+    """A spreadsheet's UTF-8 byte order mark, spaces around the header and the values, and
+    blank lines read the same as the plain files."""
+    plain = mmgfolder.read_folder(_write_folder(tmp_path / "plain"))
+    folder = _write_folder(tmp_path / "messy")
+    path = folder / "principal_particulars.csv"
+    lines = path.read_text().splitlines()
+    lines[0] = " parameter , value "
+    lines.insert(3, "")
+    lines.insert(5, " , ")
+    path.write_text("\ufeff" + "\n".join(lines) + "\n\n", encoding="utf-8")
+    messy = mmgfolder.read_folder(folder)
+    assert messy["particulars"] == plain["particulars"]
+    assert messy["coefficients"] == plain["coefficients"]
+
+
+def test_files_one_level_down_are_a_missing_file(tmp_path: Path) -> None:
+    """The folder above the CSV files (a wrong layout): the first file is reported missing,
+    naming the folder given and the files expected."""
+    _write_folder(tmp_path / "model" / "input_csv")
+    with pytest.raises(InputError) as info:
+        mmgfolder.read_folder(tmp_path / "model")
+    err = info.value
+    assert err.path == str(tmp_path / "model")
+    assert err.message == ("missing principal_particulars.csv in the MMG parameter folder "
+                           "(expected principal_particulars.csv, MMG_params.csv, "
+                           "model_switch.csv)")
+
+
+def test_a_file_name_that_is_a_folder_is_missing(tmp_path: Path) -> None:
+    folder = _write_folder(tmp_path / "f")
+    (folder / "model_switch.csv").unlink()
+    (folder / "model_switch.csv").mkdir()
+    with pytest.raises(InputError, match=r"missing model_switch\.csv"):
+        mmgfolder.read_folder(folder)
+
+
+@pytest.mark.parametrize(("name", "text", "header"), [
+    ("principal_particulars.csv", "", "nothing"),
+    ("principal_particulars.csv", "parameter,params_init,params_min,params_max\nlpp,1,0,2\n",
+     "parameter,params_init,params_min,params_max"),
+    ("MMG_params.csv", "parameter,value\nxuu_nd,1\n", "parameter,value"),
+    ("model_switch.csv", "parameter,value\nswitch_fn,1\n", "parameter,value"),
+])
+def test_swapped_or_empty_file_is_a_header_error_on_line_1(tmp_path: Path, name: str,
+                                                           text: str, header: str) -> None:
+    """Each file is checked by its own header (the contents of another file, or nothing)."""
+    folder = _write_folder(tmp_path / "f")
+    (folder / name).write_text(text)
+    with pytest.raises(InputError) as info:
+        mmgfolder.read_folder(folder)
+    err = info.value
+    assert err.path == str(folder / name) and err.line == 1
+    expected = ",".join(mmgfolder._HEADERS[name])
+    assert err.message == f"expected the header {expected}, got {header}"
+
+
+def _bad(tmp_path: Path, particulars=None, params=None, switches=None, raw=None):
+    """Folder with the given entries changed (``raw``: (file, line) appended verbatim)."""
+    folder = _write_folder(tmp_path / "bad", {**PARTICULARS, **(particulars or {})},
+                           {**PARAMS, **(params or {})}, {**SWITCHES, **(switches or {})})
+    if raw:
+        name, line = raw
+        with (folder / name).open("a") as fh:
+            fh.write(line + "\n")
+    with pytest.raises(InputError) as info:
+        mmgfolder.read_folder(folder)
+    return folder, info.value
+
+
+def _line(folder: Path, name: str, key: str) -> int:
+    lines = (folder / name).read_text().splitlines()
+    return next(i for i, s in enumerate(lines, start=1) if s.split(",")[0].strip() == key)
+
+
+@pytest.mark.parametrize(("change", "name", "key", "message"), [
+    ({"particulars": {"breadth": -0.5}}, "principal_particulars.csv", "breadth",
+     "must be > 0, got -0.5"),
+    ({"particulars": {"mass_nd": 0.0}}, "principal_particulars.csv", "mass_nd",
+     "must be > 0, got 0"),
+    ({"particulars": {"rho_fresh": "inf"}}, "principal_particulars.csv", "rho_fresh",
+     "expected a finite number, got inf"),
+    ({"params": {"yr_nd": "nan"}}, "MMG_params.csv", "yr_nd",
+     "expected a finite number, got nan"),
+    ({"params": {"Jmin": "x"}}, "MMG_params.csv", "Jmin",
+     "expected a number in column 2, got 'x'"),
+    ({"params": {"epsilon_rudder": 0.0}}, "MMG_params.csv", "epsilon_rudder",
+     "must be > 0, got 0"),
+    ({"params": {"IzzJzz_nd": 0.018}}, "MMG_params.csv", "IzzJzz_nd",
+     "0.018 is below the hull's own yaw inertia mass_nd k_zz^2 = 0.01875"),
+    ({"switches": {"switch_prop_y": 2}}, "model_switch.csv", "switch_prop_y",
+     "expected one of 0, 1, got 2"),
+    ({"switches": {"switch_windtype": 5}}, "model_switch.csv", "switch_windtype",
+     "expected one of 1, 2, 3, 4, got 5"),
+    ({"switches": {"switch_fn": 2}}, "model_switch.csv", "switch_fn",
+     "expected one of 1, got 2 (2 is Lindenburg's rudder force, not implemented)"),
+], ids=lambda v: str(v) if isinstance(v, str) else None)
+def test_bad_value_names_file_line_and_key(tmp_path: Path, change, name: str, key: str,
+                                           message: str) -> None:
+    folder, err = _bad(tmp_path, **change)
+    assert err.message == message
+    assert err.path == str(folder / name) and err.key == key
+    assert err.line == _line(folder, name, key)
+
+
+def test_entry_in_the_wrong_file_is_unknown(tmp_path: Path) -> None:
+    """``lpp`` in MMG_params.csv is not an entry of that file (it belongs to the
+    particulars): unknown entry on its own line, listing the file's expected entries."""
+    folder, err = _bad(tmp_path, raw=("MMG_params.csv", "lpp,4.0,0,8"))
+    assert err.key == "lpp" and err.path == str(folder / "MMG_params.csv")
+    assert err.line == len(PARAMS) + 2
+    assert err.message.startswith("unknown entry (not in the MMG parameter folder format")
+    assert "xuu_nd" in err.message and "lambda_rudder" not in err.message
+
+
+def test_row_without_a_value_and_a_repeat(tmp_path: Path) -> None:
+    """A key alone on its line gets 'nothing' as its value; a repeated key names the line of
+    the first one."""
+    folder = _write_folder(tmp_path / "f", switches={k: v for k, v in SWITCHES.items()
+                                                     if k != "switch_fn"})
+    with (folder / "model_switch.csv").open("a") as fh:
+        fh.write("switch_fn\n")
+    with pytest.raises(InputError) as info:
+        mmgfolder.read_folder(folder)
+    err = info.value
+    assert err.message == "expected a number in column 2, got 'nothing'"
+    assert err.key == "switch_fn" and err.line == len(SWITCHES) + 1
+    folder, err = _bad(tmp_path / "r", raw=("principal_particulars.csv", "draft,0.3"))
+    first = _line(folder, "principal_particulars.csv", "draft")
+    assert err.message == f"'draft' given twice (first on line {first})"
+    assert err.line == len(PARTICULARS) + 2
+
+
+def test_missing_switch_is_named(tmp_path: Path) -> None:
+    switches = {k: v for k, v in SWITCHES.items() if k != "switch_ur"}
+    folder = _write_folder(tmp_path / "f", switches=switches)
+    with pytest.raises(InputError) as info:
+        mmgfolder.read_folder(folder)
+    err = info.value
+    assert err.message == "missing entry" and err.key == "switch_ur" and err.line is None
+    assert err.path == str(folder / "model_switch.csv")
+
+
+@needs_folder
+def test_published_folder_gives_the_documented_mass_and_centre() -> None:
+    """The module doc: the Esso Osaka folder's mass with its density is 244.6 kg and x_G is
+    0.094 m (x_lcg read as x_G / L)."""
+    p = mmgfolder.read_folder(FOLDER)["particulars"]
+    assert p["displacement_m3"] * p["water_density_kgpm3"] == pytest.approx(244.6, abs=0.05)
+    assert p["lcg_m"] == pytest.approx(0.094, abs=5e-4)

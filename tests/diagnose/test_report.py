@@ -1,6 +1,6 @@
 """Reports of a diagnosis (trafficsim.diagnose.report): the JSON summary of a hand-made
 diagnosis on small exact data, the one-page markdown and parameter text of a hand-made report,
-and the files written."""
+the files written, and the numbers of a real small diagnosis recomputed from its fits."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tests.diagnose.test_fit import LENGTH, SPEC, TURN, bias, exact
+from tests.diagnose.test_fit import LENGTH, SPEC, TURN, bias, current, exact, trio
 from trafficsim.diagnose import fit, report
+from trafficsim.diagnose.data import ANGLES, CHANNELS, PHASES
 
 
 def _table(**values: tuple[float, float]) -> dict[str, dict[str, float]]:
@@ -166,3 +167,156 @@ def test_write_puts_json_markdown_and_plot_in_a_new_folder(tmp_path: Path) -> No
     assert sorted(p.name for p in out.iterdir()) == ["report.json", "report.md",
                                                      "residuals_by_phase.png"]
     assert np.isnan(rep["residuals"]["holdout"]["after"]["by_phase"]["approach"]["psi"])
+
+
+# --- a real small diagnosis, its numbers recomputed ----------------------------------------------
+
+Z = np.zeros(0)
+
+
+@pytest.fixture(scope="module")
+def real() -> tuple[dict[str, Any], fit.Diagnosis, Any, Any, dict[str, float]]:
+    """Noisy runs with a current and a GNSS antenna 80 m aft: both are chosen."""
+    hidden = {**current(0.3, -0.2), "lever_arm": {"x_m": -80.0, "y_m": 5.0}}
+    train, hold = trio(hidden)
+    diag = fit.diagnose(SPEC, train, hold, ("current", "lever_arm", "resistance"),
+                        forward_steps=2)
+    return report.summary(SPEC, diag, train, hold), diag, train, hold, fit.scales(train, LENGTH)
+
+
+def _windows_cost(cand: fit.Candidate, hold: Any, sc: dict[str, float]) -> np.ndarray:
+    """``(W, N, c)`` weighted squared errors of a candidate on the held-out windows, each
+    window replayed alone with the environment of the fold it is not in (``alternate``: the
+    even windows of run b are the first fold)."""
+    out = []
+    for i in range(hold.windows.w):
+        env = cand.run_values
+        if cand.fold_run_values:
+            env = cand.fold_run_values[1 if i % 2 == 0 else 0]
+        one = hold.subset(np.arange(hold.windows.w) == i)
+        res = fit.EffectResiduals(fit.EffectSet.of(SPEC, cand.effects, fixed=cand.values,
+                                                   run_fixed=env), one, sc)
+        out.append(res.errors(Z)[0, 0] * res._weights)
+    return np.array(out) ** 2
+
+
+def test_real_summary_scores_agree_with_recomputed_costs(real) -> None:
+    """Each ranking row's shrinkages are ``1 - J_with / J_base`` of the candidate replayed
+    again (training, cross-fitted held-out, held-out with full-run environments), its
+    penalised score uses ``p`` = 2 per held-out run for the current, the effect's own
+    parameters otherwise, and ``n_eff`` = held-out windows x 8 channels; rows are best first."""
+    rep, diag, train, hold, sc = real
+    assert diag.chosen.effects == ("current", "lever_arm")
+    base_t = fit.evaluation(SPEC, diag.base, train, sc).cost(Z)
+    base_h = float(np.sum(_windows_cost(diag.base, hold, sc))) / 2
+    assert diag.base.cost_hold == pytest.approx(base_h, rel=1e-10)
+    n_eff = hold.windows.w * len(CHANNELS)
+    p = {"current": 2 * 1, "lever_arm": 2, "resistance": 1}
+    assert [r["effect"] for r in rep["ranking"]] == [c.effects[0] for c in diag.singles]
+    for row, cand in zip(rep["ranking"], diag.singles, strict=True):
+        j_t = fit.evaluation(SPEC, cand, train, sc).cost(Z)
+        j_h = float(np.sum(_windows_cost(cand, hold, sc))) / 2
+        j_in = fit.evaluation(SPEC, cand, hold, sc).cost(Z)
+        assert row["shrinkage_train"] == pytest.approx(1 - j_t / base_t, rel=1e-9, abs=1e-12)
+        assert row["shrinkage_holdout"] == pytest.approx(1 - j_h / base_h, rel=1e-9, abs=1e-12)
+        assert row["shrinkage_holdout_insample"] == pytest.approx(1 - j_in / base_h, rel=1e-9,
+                                                                  abs=1e-12)
+        assert row["penalised_score"] == pytest.approx(
+            1 - j_h * (1 + 2 * p[row["effect"]] / n_eff) / base_h, rel=1e-9, abs=1e-12)
+    scores = [r["penalised_score"] for r in rep["ranking"]]
+    assert scores == sorted(scores, reverse=True)
+
+
+def test_real_summary_gap_and_floor_recomputed(real) -> None:
+    """Costs before and after the chosen set replayed again; the floor by hand, ``1/2 sum_c
+    m_c (sigma_c / s_c)^2`` over the scored finite samples of each channel."""
+    rep, diag, train, hold, sc = real
+    g = rep["gap"]
+    after = float(np.sum(_windows_cost(diag.chosen, hold, sc))) / 2
+    assert g["cost_holdout_after"] == pytest.approx(after, rel=1e-10)
+    assert g["cost_train_after"] == pytest.approx(
+        fit.evaluation(SPEC, diag.chosen, train, sc).cost(Z), rel=1e-10)
+    assert g["cost_train_before"] == pytest.approx(
+        fit.evaluation(SPEC, diag.base, train, sc).cost(Z), rel=1e-10)
+    for data, key in ((train, "noise_floor_train"), (hold, "noise_floor_holdout")):
+        scored = data.windows.valid().copy()
+        scored[:, 0] = False
+        floor = 0.0
+        for j, c in enumerate(CHANNELS):
+            m = int(np.sum(scored & np.isfinite(data.target[..., j])))
+            floor += 0.5 * m * (data.sigma[j] / sc[c]) ** 2
+        assert g[key] == pytest.approx(floor, rel=1e-12)
+    assert g["holdout_gap_over_floor"] == pytest.approx(
+        g["cost_holdout_before"] / g["noise_floor_holdout"])
+    ch = rep["chosen"]
+    assert ch["effects"] == list(diag.steps[-1]["effects"])
+    assert ch["shrinkage_holdout"] == pytest.approx(1 - after / g["cost_holdout_before"])
+    shares = rep["residuals"]["holdout"]["before"]["by_phase"]
+    assert g["phases_by_share"] == sorted(shares, key=lambda k: -shares[k]["cost_share"])
+
+
+def test_real_per_phase_shrinkage_averages_to_the_held_out_shrinkage(real) -> None:
+    """Per phase ``1 - J_k,with / J_k,base``; weighted by each phase's share of the base cost
+    (the residuals before) they add up to the whole held-out shrinkage, for every row and the
+    chosen set (every scored sample belongs to one phase)."""
+    rep, *_ = real
+    shares = rep["residuals"]["holdout"]["before"]["by_phase"]
+    assert sum(v["cost_share"] for v in shares.values()) == pytest.approx(1.0)
+    for row in (*rep["ranking"], rep["chosen"]):
+        assert set(row["per_phase"]) == set(shares)
+        total = sum(shares[k]["cost_share"] * v for k, v in row["per_phase"].items())
+        assert total == pytest.approx(row["shrinkage_holdout"], rel=1e-9, abs=1e-12)
+
+
+def test_real_residuals_after_recomputed_per_channel_and_phase(real) -> None:
+    """The held-out RMS after the chosen set (angles and yaw rate in degrees), per channel and
+    per phase, from the windows replayed one by one; the phase sample counts add up to the
+    scored samples of a channel."""
+    rep, diag, _, hold, sc = real
+    w2 = _windows_cost(diag.chosen, hold, sc)
+    weights = np.array([sc[c] for c in CHANNELS])
+    err2 = w2 * weights**2
+    scored = hold.windows.valid().copy()
+    scored[:, 0] = False
+    after = rep["residuals"]["holdout"]["after"]
+    for j, c in enumerate(CHANNELS):
+        sel = scored & np.isfinite(hold.target[..., j])
+        rms = np.sqrt(np.mean(err2[..., j][sel]))
+        if c in ANGLES or c == "r":
+            rms = np.degrees(rms)
+        assert after["by_channel"][c] == pytest.approx(rms, rel=1e-9)
+        for k, name in enumerate(PHASES):
+            s = sel & (hold.phase == k)
+            if s.any():
+                v = np.sqrt(np.mean(err2[..., j][s]))
+                v = np.degrees(v) if c in ANGLES or c == "r" else v
+                assert after["by_phase"][name][c] == pytest.approx(v, rel=1e-9)
+    assert sum(p["samples"] for p in after["by_phase"].values()) == int(scored.sum())
+
+
+def test_real_markdown_states_the_report_numbers(real) -> None:
+    """The page's verdict, ranking order and 'how far' line carry the report's numbers."""
+    rep, diag, *_ = real
+    text = report.markdown(rep)
+    g = rep["gap"]
+    pct = 100 * (1 - g["cost_holdout_after"] / g["cost_holdout_before"])
+    assert (f"Chosen (forward selection): current + lever_arm. Held-out cost "
+            f"{g['cost_holdout_before']:.4g} -> {g['cost_holdout_after']:.4g} ({pct:.0f} % "
+            f"smaller;") in text
+    assert f"**Verdict:** current + lever_arm: held-out gap {pct:.0f} % smaller" in text
+    rows = [ln.split(" | ")[1] for ln in text.splitlines() if ln.startswith("| ")
+            and ln.split(" | ")[0][2:].isdigit()]
+    assert rows == [c.effects[0] for c in diag.singles]
+    assert "one value per run (3 runs, report.json)" in text  # a, c fitted, b cross-fitted
+
+
+def test_real_summary_without_an_effect_keeps_the_gap() -> None:
+    """Noisy runs of the base ship: nothing chosen, the cost after is the cost before."""
+    train, hold = trio(None)
+    diag = fit.diagnose(SPEC, train, hold, ("resistance",), forward_steps=1)
+    rep = report.summary(SPEC, diag, train, hold)
+    g = rep["gap"]
+    assert rep["chosen"]["effects"] == [] and not rep["attributable"]
+    assert (g["cost_holdout_after"], g["cost_train_after"]) == (g["cost_holdout_before"],
+                                                               g["cost_train_before"])
+    assert "Chosen (forward selection): nothing." in report.markdown(rep)

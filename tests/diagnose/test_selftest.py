@@ -3,11 +3,15 @@ their tracks, and the bookkeeping of a small self-test."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from trafficsim import effects
-from trafficsim.diagnose import selftest
+from trafficsim.diagnose import fit, selftest
+from trafficsim.errors import DataError
 from trafficsim.sensors import ais
 from trafficsim.ships.base import PSI, RPS, RUDDER, Env, U, V
 from trafficsim.ships.library import load_ship
@@ -211,3 +215,176 @@ def test_confusion_text() -> None:
     assert lines[1] == f"{'current':<20}{3:>9d}{0:>9d}{1:>9d}"
     assert lines[2] == f"{'propeller_asymmetry':<20}{1:>9d}{2:>9d}{0:>9d}"
     assert lines[3] == "first-ranked correct: 5/7 (71 %); magnitude within 20 %: 4/7"
+
+
+# --- the hidden conditions reach the track and the instruments --------------------------------
+
+
+def test_uniform_current_only_carries_the_track(kvlcc2) -> None:
+    """A uniform current changes nothing of the motion through the water (heading, u, v, r,
+    rudder, the reversals): the track over ground is the still-water one plus current x time."""
+    still = selftest._manoeuvre(kvlcc2, Env(), "zigzag", 10.0, 10.0, 1.0)
+    moved = selftest._manoeuvre(kvlcc2, Env(current_north_mps=0.3, current_east_mps=-0.2),
+                                "zigzag", 10.0, 10.0, 1.0)
+    t = still["t"]
+    np.testing.assert_array_equal(moved["t"], t)
+    np.testing.assert_array_equal(moved["order"], still["order"])
+    for row in (PSI, U, V, 5, RUDDER, RPS):
+        np.testing.assert_allclose(moved["x"][row], still["x"][row], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(moved["x"][0] - still["x"][0], 0.3 * t, atol=1e-6)
+    np.testing.assert_allclose(moved["x"][1] - still["x"][1], -0.2 * t, atol=1e-6)
+
+
+def test_simulate_runs_sails_each_run_in_its_own_hidden_conditions(kvlcc2, monkeypatch
+                                                                   ) -> None:
+    """Each run is sailed with its own hidden effects: its current in the environment, its
+    air velocity (towards) as a true wind from the opposite direction, its hull and steering
+    gear on a copy of the spec (the base spec unchanged), the manoeuvre of its row of
+    TRAIN_RUNS / HOLD_RUNS, and the logged rudder the order behind a lagging gear."""
+    calls = []
+
+    def fake(spec, env, kind, rudder_deg, heading_deg, side):
+        calls.append((spec, env, (kind, rudder_deg, heading_deg, side)))
+        return _track(n=12)
+
+    monkeypatch.setattr(selftest, "_manoeuvre", fake)
+    hidden = [effects.check(h) for h in (
+        {"current": {"north_mps": 0.3, "east_mps": -0.2}},
+        {"wind": {"north_mps": 0.0, "east_mps": -30.0}},
+        {"resistance": {"scale": 1.5}},
+        {"steering_lag": {"tau_s": 6.0, "rate_degps": 2.0}},
+        {})]
+    r0 = kvlcc2["coefficients"]["R0"]
+    train, hold = selftest.simulate_runs(kvlcc2, hidden[:3], hidden[3:], _NoNoise())
+    assert [c[2] for c in calls] == [*selftest.TRAIN_RUNS, *selftest.HOLD_RUNS]
+    envs = [c[1] for c in calls]
+    assert (envs[0].current_north_mps, envs[0].current_east_mps) == (0.3, -0.2)
+    assert envs[0].wind_speed_mps == 0.0
+    assert envs[1].wind_speed_mps == pytest.approx(30.0)
+    assert envs[1].wind_from_rad == pytest.approx(np.pi / 2)  # air moving west: from east
+    assert (envs[1].current_north_mps, envs[1].current_east_mps) == (0.0, 0.0)
+    specs = [c[0] for c in calls]
+    assert specs[2]["coefficients"]["R0"] == pytest.approx(1.5 * r0)
+    assert specs[3]["actuators"]["rudder_tau_s"] == 6.0
+    assert specs[3]["actuators"]["rudder_rate_degps"] == 2.0
+    assert specs[4]["coefficients"] == kvlcc2["coefficients"]
+    assert kvlcc2["coefficients"]["R0"] == r0
+    np.testing.assert_allclose(hold[0].rudder_rad, np.radians(-3.0))  # the order
+    np.testing.assert_allclose(hold[1].rudder_rad, np.radians(7.0))  # the gear's angle
+    assert [t.name for t in (*train, *hold)] == ["zigzag_10_s", "zigzag_20_p", "turning_35_s",
+                                                 "zigzag_15_s", "turning_25_p"]
+
+
+def test_measured_run_through_an_antenna_and_a_compass_error() -> None:
+    """Antenna 50 m forward, 5 m to port, compass 3 deg high, no noise: position is the
+    reference point plus R(psi) (50, -5); heading psi + 3 deg; the antenna moves at
+    (u - r y, v + r x) = (6.05, 1.0) m/s in the body frame, so SOG is hypot(6.05, 1) and COG
+    psi + atan2(1, 6.05)."""
+    tr = _track()
+    x = tr["x"]
+    psi = x[PSI]
+    hidden = effects.check({"lever_arm": {"x_m": 50.0, "y_m": -5.0},
+                            "compass_bias": {"bias_deg": 3.0}})
+    run = selftest.measured_run("r", tr, hidden, _NoNoise())
+    c, s = np.cos(psi), np.sin(psi)
+    np.testing.assert_allclose(run.north_m, x[0] + 50.0 * c + 5.0 * s, atol=1e-9)
+    np.testing.assert_allclose(run.east_m, x[1] + 50.0 * s - 5.0 * c, atol=1e-9)
+    dpsi = np.angle(np.exp(1j * (run.psi_rad - psi)))
+    np.testing.assert_allclose(np.degrees(dpsi), 3.0, atol=1e-9)
+    np.testing.assert_allclose(run.sog_mps, np.hypot(6.05, 1.0), rtol=1e-12)
+    dcog = np.angle(np.exp(1j * (run.cog_rad - psi)))
+    np.testing.assert_allclose(dcog, np.arctan2(1.0, 6.05), atol=1e-12)
+
+
+def test_measured_run_in_a_current_reports_speed_over_ground() -> None:
+    """Current (0.3, -0.2) m/s, no noise: positions as sailed (the track carries the drift),
+    SOG and COG of the water velocity R(psi) (6, 0.5) plus the current."""
+    tr = _track()
+    psi = tr["x"][PSI]
+    run = selftest.measured_run("r", tr, effects.check(
+        {"current": {"north_mps": 0.3, "east_mps": -0.2}}), _NoNoise())
+    vn = 6.0 * np.cos(psi) - 0.5 * np.sin(psi) + 0.3
+    ve = 6.0 * np.sin(psi) + 0.5 * np.cos(psi) - 0.2
+    np.testing.assert_allclose(run.north_m, tr["x"][0])
+    np.testing.assert_allclose(run.sog_mps, np.hypot(vn, ve), rtol=1e-12)
+    dcog = np.angle(np.exp(1j * (run.cog_rad - np.arctan2(ve, vn))))
+    np.testing.assert_allclose(dcog, 0.0, atol=1e-12)
+
+
+def test_run_bookkeeping_on_a_stand_in_diagnosis(monkeypatch) -> None:
+    """With the diagnosis replaced by a stand-in: a current's fitted magnitude is that of the
+    mean vector of the TRAINING runs only (held-out run b's wild value left out), a trial whose
+    diagnosis is not attributable counts as 'not attributable' whatever is ranked first, and
+    the held-out shrinkage and gap ratio are the stand-in's."""
+    base_c = fit.Candidate((), {}, {}, 20.0, 10.0, 0)
+    cur = fit.Candidate(("current",), {}, {}, 1.0, 2.5, 2, run_values={
+        "a": {"current": {"north_mps": 0.3, "east_mps": 0.0}},
+        "c": {"current": {"north_mps": 0.5, "east_mps": 0.0}},
+        "b": {"current": {"north_mps": 9.0, "east_mps": 9.0}}})
+    res = fit.Candidate(("resistance",), {"resistance": {"scale": 1.2}}, {}, 1.0, 5.0, 1)
+    verdicts = iter([True, False])
+    seen = []
+
+    def diagnose(spec, dtrain, dhold, candidates, forward_steps):
+        seen.append((candidates, forward_steps, dhold))
+        return SimpleNamespace(singles=[cur, res], attributable=next(verdicts), base=base_c,
+                               floor_hold=4.0)
+
+    monkeypatch.setattr(selftest, "simulate_trial", lambda spec, hidden, rng: ([], []))
+    monkeypatch.setattr(selftest, "prepare", lambda spec, train, hold: (
+        SimpleNamespace(windows=SimpleNamespace(run_names=("a", "c"))), "hold"))
+    monkeypatch.setattr(selftest.fit, "diagnose", diagnose)
+    out = selftest.run(2, seed=3, candidates=("current", "resistance"))
+    assert [s[:2] for s in seen] == [(("current", "resistance"), 1)] * 2
+    by_name = {t["hidden"]: t for t in out["trials"]}
+    assert set(by_name) == {"current", "resistance"}
+    first = out["trials"][0]
+    assert first["first_ranked"] == "current"
+    assert out["trials"][1]["first_ranked"] == "not attributable"
+    t = by_name["current"]
+    assert t["magnitude_fitted"] == pytest.approx(0.4)
+    assert t["fitted_values"] == {"north_mps": pytest.approx(0.4), "east_mps": 0.0}
+    true = np.hypot(t["hidden_values"]["north_mps"], t["hidden_values"]["east_mps"])
+    assert t["magnitude_true"] == pytest.approx(true)
+    assert t["shrinkage_holdout"] == pytest.approx(0.75)
+    r = by_name["resistance"]
+    assert r["magnitude_fitted"] == pytest.approx(0.2)
+    assert r["shrinkage_holdout"] == pytest.approx(0.5)
+    assert all(x["gap_over_floor"] == pytest.approx(2.5) for x in out["trials"])
+    conf = np.array(out["confusion"])
+    row = out["hidden_labels"].index(out["trials"][1]["hidden"])
+    assert conf[row, 2] == 1 and conf.sum() == 2
+
+
+def test_self_test_pipeline_recovers_a_hidden_compass_bias(kvlcc2) -> None:
+    """A 3 deg compass bias hidden in the self-test's own runs (noise as documented): the
+    compass error fitted on the training runs (which turn through every heading) is 3 deg
+    within 0.15 deg at all headings, and scoring it on the held-out runs removes most of the
+    held-out gap."""
+    hidden = effects.check({"compass_bias": {"bias_deg": 3.0}})
+    train, hold = selftest.simulate_trial(kvlcc2, hidden, np.random.default_rng(7))
+    dtrain, dhold = selftest.prepare(kvlcc2, train, hold)
+    sc = fit.scales(dtrain, kvlcc2["particulars"]["length_m"])
+    cand = fit.fit_set(kvlcc2, ("compass_bias",), dtrain, dhold, sc)
+    base_c = fit.fit_set(kvlcc2, (), dtrain, dhold, sc)
+    psi = np.linspace(0.0, 2 * np.pi, 73)
+    err = np.degrees(effects.compass_error(psi, cand.values["compass_bias"]))
+    np.testing.assert_allclose(err, 3.0, atol=0.15)
+    assert cand.shrinkage(base_c)[1] > 0.8
+
+
+@pytest.mark.filterwarnings("ignore:Mean of empty slice", "ignore:invalid value encountered")
+def test_prepare_refuses_runs_it_cannot_replay(kvlcc2) -> None:
+    """A held-out run of one sample cannot be smoothed, and a run without any rudder
+    reading cannot be replayed: both are a DataError (a user-data InputError) saying why."""
+    tr = _track(n=60, psi0=0.5)
+    good = selftest.measured_run("good", tr, {}, _NoNoise())
+    one = selftest.measured_run("one", {k: v[..., :2] for k, v in tr.items()}, {}, _NoNoise())
+    short = replace(one, t_s=one.t_s[:1], north_m=one.north_m[:1], east_m=one.east_m[:1],
+                    psi_rad=one.psi_rad[:1], rudder_rad=one.rudder_rad[:1], rps=one.rps[:1],
+                    sog_mps=one.sog_mps[:1], cog_rad=one.cog_rad[:1])
+    with pytest.raises(DataError, match="cannot smooth"):
+        selftest.prepare(kvlcc2, [good], [short])
+    blind = replace(good, name="blind", rudder_rad=np.full(good.n, np.nan))
+    with pytest.raises(DataError, match="no finite rudder angle sample"):
+        selftest.prepare(kvlcc2, [good], [blind])

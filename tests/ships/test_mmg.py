@@ -336,3 +336,228 @@ def test_missing_required_particular_or_coefficient_is_reported() -> None:
     del spec["coefficients"]["N_rrr"]
     with pytest.raises(ShipLibraryError, match="N_rrr"):
         FAMILY.build([spec])
+
+
+# --- limits, symmetries and hand-worked forces of the kernel ---
+
+def _accel_at(spec: Mapping[str, Any], u=0.0, v=0.0, r=0.0, delta=0.0, n=0.0, psi=0.0,
+              env: Env | None = None) -> np.ndarray:
+    """``(3, k)`` accelerations of ``spec`` at the broadcast states given."""
+    cols = np.broadcast_arrays(*(np.atleast_1d(np.asarray(a, dtype=float))
+                                 for a in (u, v, r, delta, n, psi)))
+    k = cols[0].size
+    x = np.zeros((base.N_STATE, k))
+    x[U], x[V], x[R], x[RUDDER], x[RPS], x[PSI] = cols
+    params = FAMILY.build([spec] * k)
+    return np.array(base.accelerations(FAMILY, params, x, env or Env()))
+
+
+def _mass(spec: Mapping[str, Any]) -> tuple[float, np.ndarray]:
+    """``m + m_x`` and the sway-yaw mass matrix at midship of [YY15], from the ship file."""
+    c, p = spec["coefficients"], spec["particulars"]
+    rho, L, d = base.RHO_WATER, p["length_m"], p["draught_m"]
+    m = rho * p["displacement_m3"]
+    s = 0.5 * rho * L**2 * d
+    xg = p.get("lcg_m", 0.0)
+    izz = m * (c["k_zz"] * L) ** 2 + xg**2 * m + c["J_z"] * s * L**2
+    return m + c["m_x"] * s, np.array([[m + c["m_y"] * s, xg * m], [xg * m, izz]])
+
+
+def _mirror_spec(spec: Mapping[str, Any]) -> dict[str, Any]:
+    """The port/starboard mirror image of a ship: the asymmetric coefficients swap sides."""
+    c = spec["coefficients"]
+    return _spec(spec["name"], gamma_R_plus=c["gamma_R_minus"], gamma_R_minus=c["gamma_R_plus"],
+                 C_2_plus=c["C_2_minus"], C_2_minus=c["C_2_plus"],
+                 delta_0=-c.get("delta_0", 0.0))
+
+
+def test_mirrored_state_wind_and_current_give_mirrored_accelerations() -> None:
+    """Reflecting the world in the ship's centre plane (v, r, rudder, heading, east current and
+    wind direction change sign) and the ship with it (gamma_R+/- and C_2+/- swap, delta_0 changes
+    sign) reflects the accelerations: du the same, dv and dr opposite, in all four quadrants of
+    (u, n), with wind and current."""
+    spec = _spec("kvlcc2", delta_0=0.02)
+    rng = np.random.default_rng(12)
+    k = 200
+    u = rng.uniform(-3.0, 8.0, k)
+    v, r = rng.uniform(-1.0, 1.0, k), rng.uniform(-0.01, 0.01, k)
+    delta, n = rng.uniform(-0.6, 0.6, k), rng.uniform(-1.5, 2.0, k)
+    psi = rng.uniform(0.0, 2 * np.pi, k)
+    wind_from = rng.uniform(0.0, 2 * np.pi, k)
+    env = Env(current_north_mps=rng.uniform(-1, 1, k), current_east_mps=rng.uniform(-1, 1, k),
+              wind_speed_mps=rng.uniform(0, 25, k), wind_from_rad=wind_from)
+    env_m = Env(current_north_mps=env.current_north_mps, current_east_mps=-env.current_east_mps,
+                wind_speed_mps=env.wind_speed_mps, wind_from_rad=-wind_from)
+    acc = _accel_at(spec, u, v, r, delta, n, psi, env)
+    mir = _accel_at(_mirror_spec(spec), u, -v, -r, -delta, n, -psi, env_m)
+    scale = np.abs(acc).max(axis=1, keepdims=True)
+    np.testing.assert_allclose(mir * np.array([[1.0], [-1.0], [-1.0]]), acc, rtol=0,
+                               atol=1e-12 * scale.max())
+    assert np.all(scale > 0)
+
+
+def test_bollard_pull_ahead_and_astern_by_hand() -> None:
+    """At rest with the rudder amidships only the propeller pushes: ahead the open-water thrust
+    at J = 0, (1 - t_P) rho n^2 D^4 k_0; astern the same times -astern_thrust_ratio (module
+    doc); no side force or moment."""
+    spec = load_ship("kvlcc2")
+    c, D = spec["coefficients"], spec["particulars"]["propeller_diameter_m"]
+    mx, _ = _mass(spec)
+    n = np.array([1.2, -0.9])
+    acc = _accel_at(spec, n=n)
+    thrust = (1 - c["t_P"]) * base.RHO_WATER * n**2 * D**4 * c["k_0"]
+    thrust[1] *= -c["astern_thrust_ratio"]
+    np.testing.assert_allclose(acc[0], thrust / mx, rtol=1e-12)
+    assert np.all(acc[1:] == 0.0)
+
+
+def test_rudder_at_rest_in_the_propeller_race_by_hand() -> None:
+    """At u = 0 the [YY15] rudder inflow tends to its J -> 0 limit u_R = eps sqrt(eta) kappa
+    sqrt(8 k_0 / pi) n D (u_P (1 + kappa (sqrt(1 + 8 K_T / (pi J^2)) - 1)) -> kappa n D
+    sqrt(8 K_T / pi)); the normal force 1/2 rho A_R f_alpha u_R^2 sin(delta) gives X_R, Y_R, N_R
+    of [YY15] and the accelerations follow from the mass matrix."""
+    spec = load_ship("kvlcc2")
+    c, p = spec["coefficients"], spec["particulars"]
+    rho, L, D = base.RHO_WATER, p["length_m"], p["propeller_diameter_m"]
+    n, delta = 1.3, np.radians(25.0)
+    eta = D / p["rudder_height_m"]
+    u_r = c["epsilon"] * np.sqrt(eta) * c["kappa"] * np.sqrt(8 * c["k_0"] / np.pi) * n * D
+    f_n = 0.5 * rho * p["rudder_area_m2"] * c["f_alpha"] * u_r**2 * np.sin(delta)
+    X = (1 - c["t_P"]) * rho * n**2 * D**4 * c["k_0"] - (1 - c["t_R"]) * f_n * np.sin(delta)
+    Y = -(1 + c["a_H"]) * f_n * np.cos(delta)
+    N = -(c["x_R"] + c["a_H"] * c["x_H"]) * L * f_n * np.cos(delta)
+    mx, M = _mass(spec)
+    want = np.concatenate([[X / mx], np.linalg.solve(M, [Y, N])])
+    got = _accel_at(spec, delta=delta, n=n)[:, 0]
+    np.testing.assert_allclose(got, want, rtol=1e-10)
+    assert got[2] > 0.0  # starboard rudder, starboard yaw
+
+
+def test_propeller_reversed_while_going_ahead_by_hand() -> None:
+    """u > 0, n < 0 (third quadrant, module doc): thrust -c_rev k_0 rho n^2 D^4 plus the
+    open-water drag rho D^2 k_2 u_P^2; the rudder sees the race of n = 0, the wake slowed by
+    that drag, u_R^2 = eps^2 (eta race^2 + (1 - eta) u_P^2) with race = u_P ((1 - kappa) +
+    kappa sqrt(1 + 8 k_2 / pi)); the hull resists with -R0' 1/2 rho L d u^2 (U_0
+    negligible)."""
+    spec = load_ship("kvlcc2")
+    c, p = spec["coefficients"], spec["particulars"]
+    rho, L, d, D = base.RHO_WATER, p["length_m"], p["draught_m"], p["propeller_diameter_m"]
+    u, n, delta = 5.0, -1.1, np.radians(-20.0)
+    u_p = (1 - c["w_P0"]) * u
+    thrust = (-c["astern_thrust_ratio"] * c["k_0"] * rho * n**2 * D**4
+              + rho * D**2 * c["k_2"] * u_p**2)
+    eta = D / p["rudder_height_m"]
+    race = u_p * ((1 - c["kappa"]) + c["kappa"] * np.sqrt(1 + 8 * c["k_2"] / np.pi))
+    u_r2 = c["epsilon"] ** 2 * (eta * race**2 + (1 - eta) * u_p**2)
+    f_n = 0.5 * rho * p["rudder_area_m2"] * c["f_alpha"] * u_r2 * np.sin(delta)
+    u0sq = (0.002 * np.sqrt(9.80665 * L)) ** 2
+    x_h = -c["R0"] * 0.5 * rho * L * d * u**3 / np.sqrt(u**2 + u0sq)
+    X = x_h + (1 - c["t_P"]) * thrust - (1 - c["t_R"]) * f_n * np.sin(delta)
+    Y = -(1 + c["a_H"]) * f_n * np.cos(delta)
+    N = -(c["x_R"] + c["a_H"] * c["x_H"]) * L * f_n * np.cos(delta)
+    mx, M = _mass(spec)
+    want = np.concatenate([[X / mx], np.linalg.solve(M, [Y, N])])
+    np.testing.assert_allclose(_accel_at(spec, u=u, delta=delta, n=n)[:, 0], want, rtol=1e-10)
+
+
+def test_resistance_opposes_the_surge_ahead_and_astern() -> None:
+    """Propeller stopped, no rudder: astern only the hull acts, -R0' 1/2 rho L d U^2 u / sqrt(u^2
+    + U_0^2) (module doc), so du(-u) = -du_hull(u); ahead the locked propeller's open-water drag
+    (1 - t_P) rho D^2 k_2 u_P^2 (k_2 < 0) adds to it."""
+    spec = load_ship("kvlcc2")
+    c, p = spec["coefficients"], spec["particulars"]
+    rho, L, d, D = base.RHO_WATER, p["length_m"], p["draught_m"], p["propeller_diameter_m"]
+    mx, _ = _mass(spec)
+    u = np.array([0.01, 0.3, 4.0])
+    u0sq = (0.002 * np.sqrt(9.80665 * L)) ** 2
+    hull = -c["R0"] * 0.5 * rho * L * d * u**3 / np.sqrt(u**2 + u0sq)
+    drag = (1 - c["t_P"]) * rho * D**2 * c["k_2"] * ((1 - c["w_P0"]) * u) ** 2
+    ahead = _accel_at(spec, u=u)
+    astern = _accel_at(spec, u=-u)
+    np.testing.assert_allclose(ahead[0], (hull + drag) / mx, rtol=1e-12)
+    np.testing.assert_allclose(astern[0], -hull / mx, rtol=1e-12)
+    assert np.all(astern[0] > 0.0) and np.all(ahead[0] < 0.0)
+    # astern the rudder at 0 deg meets the flow from behind: sin(0 - atan2(0, u_R < 0)) =
+    # -sin(pi), a rounding's worth of force (far below the surge's 1e-12)
+    assert np.all(ahead[1:] == 0.0) and np.all(np.abs(astern[1:]) < 1e-12 * np.abs(astern[0]))
+
+
+def test_rudder_offset_is_a_shifted_rudder_angle() -> None:
+    """delta_0 (module doc): the hull feels delta + delta_0, at any state."""
+    rng = np.random.default_rng(2)
+    k = 30
+    state = dict(u=rng.uniform(-2, 8, k), v=rng.uniform(-0.5, 0.5, k),
+                 r=rng.uniform(-0.01, 0.01, k), n=rng.uniform(-1, 2, k))
+    delta = rng.uniform(-0.5, 0.5, k)
+    shifted = _accel_at(load_ship("kvlcc2"), delta=delta + 0.03, **state)
+    offset = _accel_at(_spec("kvlcc2", delta_0=0.03), delta=delta, **state)
+    np.testing.assert_allclose(offset, shifted, rtol=1e-13, atol=1e-20)
+
+
+def test_zero_c1_gives_the_constant_wake_whatever_c2() -> None:
+    """[YY15] wake: (1 - w_P)/(1 - w_P0) = 1 + (1 - exp(-C1 |beta_P|)) (C2 - 1); C1 = 0 makes
+    it 1 (module doc), so C2+/- no longer matter, also at large drift."""
+    rng = np.random.default_rng(3)
+    k = 30
+    state = dict(u=rng.uniform(1, 8, k), v=rng.uniform(-2, 2, k), r=rng.uniform(-0.02, 0.02, k),
+                 delta=rng.uniform(-0.5, 0.5, k), n=rng.uniform(0.5, 2, k))
+    a = _accel_at(_spec("kvlcc2", C_1=0.0, C_2_plus=1.0, C_2_minus=1.0), **state)
+    b = _accel_at(_spec("kvlcc2", C_1=0.0, C_2_plus=3.0, C_2_minus=0.2), **state)
+    c = _accel_at(load_ship("kvlcc2"), **state)
+    np.testing.assert_array_equal(a, b)
+    assert np.abs(c - a).max() > 0.0  # the paper's C1 = 2 does change them
+
+
+def test_wind_enters_through_the_mass_matrix() -> None:
+    """The wind's share of the accelerations is M^-1 (X_A, Y_A, N_A) with the loads of
+    :func:`trafficsim.ships.wind.wind_loads`: the kernel adds them to the hull, propeller and
+    rudder forces and nothing else changes."""
+    from trafficsim.ships import wind
+
+    spec = load_ship("kvlcc2")
+    rng = np.random.default_rng(4)
+    k = 20
+    x = np.zeros((base.N_STATE, k))
+    x[U], x[V], x[R] = rng.uniform(-2, 8, k), rng.uniform(-0.5, 0.5, k), rng.uniform(-.01, .01, k)
+    x[RUDDER], x[RPS], x[PSI] = rng.uniform(-.5, .5, k), rng.uniform(-1, 2, k), rng.uniform(0, 6, k)
+    env = Env(wind_speed_mps=rng.uniform(1, 25, k), wind_from_rad=rng.uniform(0, 6.3, k),
+              current_north_mps=0.3, current_east_mps=-0.4)
+    calm = Env(current_north_mps=0.3, current_east_mps=-0.4)
+    params = FAMILY.build([spec] * k)
+    diff = (np.array(base.accelerations(FAMILY, params, x, env))
+            - np.array(base.accelerations(FAMILY, params, x, calm)))
+    xa, ya, na = wind.wind_loads(wind.build([spec] * k), x, env)
+    mx, M = _mass(spec)
+    want = np.vstack([xa / mx, np.linalg.solve(M, np.vstack([ya, na]))])
+    np.testing.assert_allclose(diff, want, rtol=1e-6, atol=1e-12 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("wind_from_deg", [0.0, 180.0])
+def test_wind_from_dead_ahead_or_astern_keeps_a_straight_ship_straight(wind_from_deg) -> None:
+    """Wind along the centre line: no side force, no moment (Isherwood's C_Y, C_N vanish at 0 and
+    180 deg), only the surge changes."""
+    spec = load_ship("kvlcc2")
+    psi = np.radians(37.0)
+    env = Env(wind_speed_mps=20.0, wind_from_rad=psi + np.radians(wind_from_deg))
+    calm = _accel_at(spec, u=6.0, n=1.5, psi=psi)[:, 0]
+    windy = _accel_at(spec, u=6.0, n=1.5, psi=psi, env=env)[:, 0]
+    assert abs(windy[1]) < 1e-12 and abs(windy[2]) < 1e-14
+    assert windy[0] != calm[0]
+    assert (windy[0] < calm[0]) == (wind_from_deg == 0.0)
+
+
+def test_going_astern_rudder_force_is_continuous_through_zero_rps() -> None:
+    """Going astern (u < 0) with the rudder over, the propeller speed passing through zero must
+    not switch the rudder off: the ship's own flow reaches the rudder from behind whether the
+    propeller turns slowly astern or is stopped (module doc: flow from behind reverses the
+    rudder force), so dv and dr at n = -1e-9 and n = 0 agree."""
+    spec = load_ship("kvlcc2")
+    acc = _accel_at(spec, u=-2.0, delta=0.3, n=np.array([-1e-9, 0.0]))
+    assert abs(acc[2, 0]) > 0.0
+    np.testing.assert_allclose(acc[1:, 1], acc[1:, 0], rtol=1e-3)
+
+
+def test_no_ships() -> None:
+    """A batch without MMG ships builds and evaluates to empty arrays."""
+    out = base.accelerations(FAMILY, FAMILY.build([]), np.zeros((base.N_STATE, 0)), Env())
+    assert [a.shape for a in out] == [(0,), (0,), (0,)]

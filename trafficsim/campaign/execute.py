@@ -54,8 +54,8 @@ def _chunk_done(path: Path) -> bool:
 
     if not path.exists():
         return False
-    try:
-        return b"ship_steps" in (pq.read_schema(path).metadata or {})
+    try:  # the whole table: damage inside the data leaves the footer readable
+        return b"ship_steps" in (pq.read_table(path).schema.metadata or {})
     except (OSError, ValueError):  # (pyarrow's ArrowInvalid is a ValueError)
         return False
 
@@ -91,6 +91,9 @@ def _check_folder(out: Path, spec: CampaignSpec) -> None:
             old = json.loads(manifest.read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"cannot read {manifest}: {exc}") from None
+        if not isinstance(old, dict):
+            raise InputError(f"cannot read {manifest}: expected a JSON object, got "
+                             f"{type(old).__name__}")
         if old.get("spec_sha256") != digest:
             raise InputError(f"{out} holds results of another campaign spec "
                              f"({old.get('spec', '?')}); use another --out folder or delete it")

@@ -13,6 +13,7 @@ render`` and ``trafficsim explain`` work on it; its ``summary.json`` adds ``camp
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -75,7 +76,7 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
         raise InputError(f"expected an encounter index 0 .. {spec.n_encounters - 1}, got "
                          f"{encounter}", key="--encounter")
     every_s = RECORD_EVERY_S if record_every_s is None else record_every_s
-    every = round(every_s / spec.dt_s)
+    every = round(every_s / spec.dt_s) if math.isfinite(every_s) else 0
     if every < 1 or abs(every * spec.dt_s - every_s) > 1e-9 * every_s:
         if record_every_s is not None:
             raise InputError(f"expected a whole multiple of the campaign's step "

@@ -313,7 +313,10 @@ def evaluate(net: Network, features: np.ndarray, cursor: np.ndarray) -> Decision
     if feats.ndim != 2 or feats.shape[0] != n_f:
         raise ValueError(f"features must have shape ({n_f}, m), got {feats.shape}")
     m = feats.shape[1]
-    cur = np.ascontiguousarray(cursor, dtype=np.int64)
+    raw = np.asarray(cursor)
+    if not (np.issubdtype(raw.dtype, np.integer) or raw.size == 0):
+        raise ValueError(f"cursor must hold integer node indices, got dtype {raw.dtype}")
+    cur = np.ascontiguousarray(raw, dtype=np.int64)
     if cur.shape != (m,):
         raise ValueError(f"cursor must have shape ({m},), got {cur.shape}")
     if m and (cur.min() < 0 or cur.max() >= net.n_nodes):

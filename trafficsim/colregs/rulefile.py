@@ -374,6 +374,13 @@ def _read_chain(doc: Document) -> tuple[list[Document], list[ScenarioError]]:
 # Checking
 # --------------------------------------------------------------------------------------------
 
+def _meant(data: Mapping[str, Any], allowed: Sequence[str]) -> set[str]:
+    """The allowed keys that ``data``'s unknown keys look like misspellings of (a misspelt key
+    also makes the key it was meant to be missing: only the typo is reported)."""
+    return {close for key in data if key not in allowed
+            for close in difflib.get_close_matches(str(key), allowed, n=1, cutoff=0.6)}
+
+
 def _close(word: str, options: Sequence[str]) -> str:
     """`` (did you mean 'x'?)`` for the closest option, or an empty string."""
     match = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
@@ -412,6 +419,7 @@ class _Checker:
         # wrong, and the graph checks (loops, reachability) are then skipped
         self.edges: dict[str, list[tuple[str, Edge]]] = {}
         self.edges_ok = True
+        self.meant: set[str] = set()  # required top-level keys the current file misspelt
 
     def at(self, level: int) -> None:
         """Locate the following errors in file ``level`` of the chain."""
@@ -458,6 +466,7 @@ class _Checker:
     def run(self) -> RuleSet | None:
         for level in range(len(self.chain)):
             self.at(level)
+            self.meant = _meant(self.doc.data, _TOP_KEYS)
             if not self.schema_version(self.doc.data):
                 return None
         name: str | None = None
@@ -467,6 +476,7 @@ class _Checker:
         for level, doc in enumerate(self.chain):
             self.at(level)
             data = doc.data
+            self.meant = _meant(data, _TOP_KEYS)
             self.unknown_keys(data, _TOP_KEYS, (), "a rules file")
             name = self.required_text(data, "name", "the rule set's name as text")
             if "description" in data:
@@ -499,6 +509,8 @@ class _Checker:
     def schema_version(self, data: Mapping[str, Any]) -> bool:
         """False if the file is of a schema this module cannot read (stop checking then)."""
         if "schema_version" not in data:
+            if "schema_version" in self.meant:
+                return True
             self.error(("schema_version",),
                        f"missing required key 'schema_version'; expected 'schema_version: "
                        f"{SCHEMA_VERSION}' at the top of the file")
@@ -517,14 +529,15 @@ class _Checker:
 
     def required_text(self, data: Mapping[str, Any], key: str, what: str) -> str | None:
         if key not in data:
-            self.error((key,), f"missing required key '{key}' ({what})")
+            if key not in self.meant:  # (a misspelt key is reported as the unknown one)
+                self.error((key,), f"missing required key '{key}' ({what})")
             return None
         return self.text(data[key], (key,), what)
 
     def read_nodes(self, data: Mapping[str, Any]) -> dict[str, Any]:
         """The file's ``nodes`` mapping (required unless the file extends another)."""
         if "nodes" not in data:
-            if self.level == 0:
+            if self.level == 0 and "nodes" not in self.meant:
                 self.error(("nodes",), "missing required key 'nodes' (a mapping of node name "
                                        "-> node)")
             return {}
@@ -634,9 +647,12 @@ class _Checker:
 
     def check_added_parameters(self) -> None:
         """A parameter an extending file adds must be used by that file's own nodes: a name
-        nothing uses is most likely a misspelt override, which would change nothing."""
+        nothing uses is most likely a misspelt override, which would change nothing. Only the
+        last file's are checked: an earlier file's were checked with that file last (where its
+        nodes were all present; a later file may replace them)."""
         for pname, (level, inherited) in self.added.items():
-            if (pname, level) in self.used or pname in self.bad_parameters:
+            if (level != self.top or (pname, level) in self.used
+                    or pname in self.bad_parameters):
                 continue
             self.at(level)
             parent = self.chain[level - 1].path
@@ -682,10 +698,7 @@ class _Checker:
             self.edges_ok = False
             return None
         # A misspelt key also makes the key it was meant to be missing: report the typo only.
-        meant: set[str] = set()
-        for key in data:
-            if key not in _NODE_KEYS:
-                meant.update(difflib.get_close_matches(key, _NODE_KEYS, n=1, cutoff=0.6))
+        meant = _meant(data, _NODE_KEYS)
         self.unknown_keys(data, _NODE_KEYS, loc, "a node")
         test: Test | None = None
         if "test" in data:
@@ -735,7 +748,8 @@ class _Checker:
             self.error((*loc, "next"), f"expected true or false, got {shown(nxt)}")
             nxt = None
         if "to" not in value:
-            self.error(loc, f"missing required key 'to'; {expected}")
+            if "to" not in _meant(value, _EDGE_KEYS):
+                self.error(loc, f"missing required key 'to'; {expected}")
             return None
         target = self.text(value["to"], (*loc, "to"), "a node name")
         if target is None or nxt is None or any(k not in _EDGE_KEYS for k in value):
@@ -1033,8 +1047,9 @@ def _check(doc: Document, vocabulary: Vocabulary) -> RuleSet:
     """Check ``doc`` and the files it extends against ``vocabulary``.
 
     Each file the chain extends must be a valid rules file by itself, so every prefix of the
-    chain (root alone, root + next, ..., the whole chain) is checked; the same error found
-    again in a longer prefix is reported once.
+    chain (root alone, root + next, ..., the whole chain) is checked; an error found again in
+    a longer prefix, at the same place, is reported once (as the shorter prefix found it: a
+    "did you mean" may differ once a later file adds names).
     """
     chain, errors = _read_chain(doc)
     files = [d.path for d in reversed(chain)]
@@ -1044,7 +1059,8 @@ def _check(doc: Document, vocabulary: Vocabulary) -> RuleSet:
     for end in range(1, len(chain) + 1):
         checker = _Checker(chain[:end], vocabulary)
         rules = checker.run()
-        errors.extend(checker.errors)
+        found = {(e.path, e.line, e.key) for e in errors}
+        errors.extend(e for e in checker.errors if (e.path, e.line, e.key) not in found)
     if errors:
         _raise(errors, files)
     assert rules is not None

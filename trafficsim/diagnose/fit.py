@@ -226,7 +226,9 @@ class EffectResiduals:
     def gear_start(self, steer: np.ndarray) -> np.ndarray:
         """``(k, W)`` rudder angle of each model's steering gear at each window's start: the
         gear (lag and rate limit, :func:`trafficsim.effects.steering`) run over the logged
-        rudder from the start of the run (Euler, 10 steps per sample)."""
+        rudder from the start of the run (gaps in it interpolated, as the replay fills them;
+        10 steps per sample, each the exact lag step clipped to the rate limit, which stays
+        stable and never overshoots however short the lag)."""
         win = self.data.windows
         k = steer.shape[0]
         out = np.repeat(win.inputs[None, :, 0, 0], k, axis=0)
@@ -235,14 +237,17 @@ class EffectResiduals:
             return out
         tau, rate = steer[on, 0], steer[on, 1]
         for r, run in enumerate(self.data.runs):
-            rud = np.nan_to_num(run.trial.rudder_rad)
+            rud = run.trial.rudder_rad
+            ok = np.isfinite(rud)
+            rud = np.interp(run.t_s, run.t_s[ok], rud[ok]) if ok.any() else np.zeros(rud.size)
             dt = run.dt_s / 10.0
+            approach, limit = -np.expm1(-dt / tau), rate * dt  # lag and rate limit per step
             state = np.full(tau.size, rud[0])
             at = np.empty((tau.size, rud.size))
             for j in range(rud.size):
                 at[:, j] = state
                 for _ in range(10):
-                    state = state + dt * np.clip((rud[j] - state) / tau, -rate, rate)
+                    state = state + np.clip((rud[j] - state) * approach, -limit, limit)
             for i in np.flatnonzero(win.run == r):
                 j0 = round(float(win.t0_s[i] - run.t_s[0]) / run.dt_s)
                 out[on, i] = at[:, j0]
@@ -587,7 +592,12 @@ def penalised(cost: float, p: int, n_eff: int) -> float:
 
 @dataclass
 class Diagnosis:
-    """Outcome of :func:`diagnose`."""
+    """Outcome of :func:`diagnose`.
+
+    ``steps`` is the forward selection's trace (each effect added while it shrank the
+    penalised held-out cost enough); ``chosen`` is the verdict's model, the base where the gap
+    is below the noise floor whatever the trace added.
+    """
 
     base: Candidate
     singles: list[Candidate]

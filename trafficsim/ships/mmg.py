@@ -52,11 +52,15 @@ Implementation choices (documented deviations, none changes the paper's model at
   zero force.
 * Four-quadrant fallback (the paper covers n >= 0, u > 0 only):
   - n >= 0 and u_P < 0 (going astern with the propeller ahead): the open-water curve is taken at
-    J = 0 (bollard thrust) and the rudder sees only the propeller race;
+    J = 0 (bollard thrust); the race (aft) meets the ship's own flow (forward) at the rudder, so
+    u_R = eps sgn(s) sqrt(|s|) with the signed mean square s = eta race^2 - u_P^2: the
+    ship's flow from behind at n = 0 (u_R = eps u_P), the race once it is strong enough;
   - n < 0 (astern): thrust = c_rev k0 rho n|n| D^4 + rho D^2 k2 max(u_P, 0)^2, i.e. the bollard
     K_T times a reverse-efficiency ratio ``astern_thrust_ratio`` (c_rev), plus the drag the
-    open-water curve gives at n = 0 so that the thrust is continuous through n = 0; the rudder
-    sees no propeller race (it flows forward, away from the rudder): u_R = eps u_P.
+    open-water curve gives at n = 0 so that the thrust is continuous through n = 0; the race
+    over the rudder is the one at n = 0 (the reversed propeller's flows forward, away from
+    the rudder), so the rudder inflow is continuous through n = 0 too, ahead and astern
+    (u_R = eps u_P going astern).
   - the drift angle is beta = asin(-v/U_d), bounded for any u, and alpha_R uses atan2 so flow
     from behind (u_R < 0) reverses the rudder force, as it does on a real rudder.
 * Wind: Isherwood (1972) loads of :mod:`trafficsim.ships.wind` are added to X, Y, N.
@@ -350,14 +354,19 @@ def accel(p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[float, float, 
     drag = p[_K2] * u_pp * u_pp
     if n >= 0.0:
         ktn2d2 = p[_K0] * nd * nd + p[_K1] * nd * u_pp + drag
-        # rudder inflow with the propeller race [YY15]
-        race = (1.0 - p[_KAPPA]) * u_pp + p[_KAPPA] * math.sqrt(
-            max(u_pp * u_pp + _EIGHT_OVER_PI * ktn2d2, 0.0))
-        u_r = p[_EPS] * math.sqrt(p[_ETA] * race * race + (1.0 - p[_ETA]) * u_pp * u_pp)
+        race_k = ktn2d2
     else:
-        # astern fallback (module doc): reversed bollard thrust, no race over the rudder
+        # astern fallback (module doc): reversed bollard thrust, the race as at n = 0
         ktn2d2 = -p[_C_REV] * p[_K0] * nd * nd + drag
-        u_r = p[_EPS] * u_p
+        race_k = drag
+    # rudder inflow with the propeller race [YY15]; going astern, the signed mean square
+    race = (1.0 - p[_KAPPA]) * u_pp + p[_KAPPA] * math.sqrt(
+        max(u_pp * u_pp + _EIGHT_OVER_PI * race_k, 0.0))
+    if u_p >= 0.0:
+        u_r = p[_EPS] * math.sqrt(p[_ETA] * race * race + (1.0 - p[_ETA]) * u_p * u_p)
+    else:
+        sq = p[_ETA] * race * race - u_p * u_p
+        u_r = p[_EPS] * math.copysign(math.sqrt(abs(sq)), sq)
     thrust = p[_RHO_D2] * ktn2d2
 
     # rudder normal force with flow straightening [YY15]

@@ -325,10 +325,10 @@ class MMGBerthingFamily:
                             dtype=float)
 
         for key in ("switch_prop_y", "switch_prop_n", "switch_rudder_astern"):
-            bad = [s.get("name", "?") for s in ships
-                   if coefficient(s, key, 1.0, self.name) not in (0.0, 1.0)]
+            bad = [s for s in ships if coefficient(s, key, 1.0, self.name) not in (0.0, 1.0)]
             if bad:
-                raise ShipLibraryError(f"coefficient '{key}' must be 0 or 1 (ship {bad[0]})",
+                raise ShipLibraryError(f"coefficient '{key}' must be 0 or 1 (ship "
+                                       f"{bad[0].get('name', '?')})", path=bad[0].get("path"),
                                        key=f"coefficients.{key}")
         rho = part("water_density_kgpm3")
         L, d = part("length_m"), part("draught_m")

@@ -220,12 +220,15 @@ def coefficients1(w: np.ndarray, angle: float) -> tuple[float, float, float]:
 
     Args:
         w: ``float64[10]`` windage row (:data:`WINDAGE_FIELDS`).
-        angle: apparent-wind angle, rad, 0 = head wind, positive = from starboard.
+        angle: apparent-wind angle, rad, 0 = head wind, positive = from starboard (any
+            angle: wrapped to [-pi, pi) first, so 350 deg is 10 deg from port).
 
     Returns:
         ``C_X`` (+ ahead), ``C_Y`` (+ to starboard), ``C_N`` (+ bow to starboard); C_Y and C_N
         are odd in the angle, C_X even. Linear interpolation between the 10 deg table angles.
     """
+    if abs(angle) > math.pi:
+        angle = (angle + math.pi) % (2.0 * math.pi) - math.pi
     pos = min(abs(angle) * (1.0 / _STEP_RAD), _LAST)
     i = int(pos)
     f = pos - i
