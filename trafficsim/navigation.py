@@ -13,12 +13,16 @@ Decisions are taken on estimates, outcomes measured on truth. Per ship the scena
   ``u, v`` of the estimate are the over-ground velocity in the body frame;
 * ``ekf``: the extended Kalman filter on the ship's own model with current estimation
   [seed 002, ch 4.4, 5.3, 7, 7.3] (:mod:`trafficsim.estimation.ekf`), driven by the measured
-  rudder and rpm, updated with the GNSS fix, the compass and (if fitted) the speed log; its
-  noise settings default to the instruments' (``ekf:`` overrides any of them).
+  rudder and rpm, updated with the GNSS fix, the compass and (if fitted) a speed log through the
+  water (a log over ground, Doppler bottom track, is not used: the filter's log measures the
+  surge through the water, and taking the one for the other would pull the current estimate
+  towards zero); its noise settings default to the instruments' (``ekf:`` overrides any of
+  them).
 
 In both filters gross GNSS errors are
-  gated [seed 002, 6.6] on the normalised innovation (``gate``: ``gate_sigma``, default 5, or
-  ``window_diameter_m``; ``reopen_factor``, ``max_rejections``,
+  gated [seed 002, 6.6] (``gate``: on the normalised innovation, ``gate_sigma`` standard
+  deviations, default 5; or, with ``window_diameter_m`` and no ``gate_sigma``, on the fix's
+  distance from the prediction, the thesis' window; ``reopen_factor``, ``max_rejections``,
   :mod:`trafficsim.estimation.gating`); after several consecutive rejections the filter restarts
   on the fix.
 
@@ -108,9 +112,12 @@ def merge_sensors(ship_defaults: Mapping[str, Any] | None,
 
 
 def _gate_params(configs: Sequence[Mapping[str, Any]]) -> gating.GateParams:
-    """The ships' gates (default: :data:`DEFAULT_GATE_SIGMA`), a bad one an input error."""
+    """The ships' gates, a bad one an input error: a position window where
+    ``window_diameter_m`` is given, else ``gate_sigma`` (default :data:`DEFAULT_GATE_SIGMA`)."""
     try:
-        return gating.build([c or {"gate_sigma": DEFAULT_GATE_SIGMA} for c in configs])
+        return gating.build([c if c and "window_diameter_m" in c
+                             else {"gate_sigma": DEFAULT_GATE_SIGMA, **(c or {})}
+                             for c in configs])
     except (TypeError, ValueError) as err:
         raise InputError(str(err), key="gate") from None
 
@@ -315,7 +322,7 @@ class Navigation:
         ekf_multi = np.flatnonzero(np.isin(ekf_idx, multi.idx))
         log_fitted = np.array([c.get("log") is not None for c in configs], dtype=bool)
         return cls(
-            filter_pv=np.array([f == "pv" for f in filters]),
+            filter_pv=np.array([f == "pv" for f in filters], dtype=bool),
             gnss_p=gnss_p, gnss_s=gnss.init(gnss_p, init_draws[:, :a]),
             compass_p=compass_p, compass_s=compass.init(compass_p, init_draws[:, a:b]),
             log_p=speed_log.build(section("log")), act_p=actuators.build(section("actuators")),
@@ -465,11 +472,16 @@ class Navigation:
         else:
             s_pos = pred.P[:, :2, :2] + gnss_cov
             R_meas = ekf.measurement_covariance(self.ekf_p, gnss_cov_m2=gnss_cov)
-        d = np.where(valid, gating.normalised_distance(innov, s_pos), np.nan)
-        g = gating.gate(_take_gate(self.gate_p, i), d, self.ekf_rejections)
+        gate_p = _take_gate(self.gate_p, i)
+        d = np.where(gate_p.metres, gating.distance(innov),
+                     gating.normalised_distance(innov, s_pos))
+        d = np.where(valid, d, np.nan)
+        g = gating.gate(gate_p, d, self.ekf_rejections)
         self.ekf_rejections = g.rejections
-        # the log only on the ships that carry one (another ship's log must not count)
-        with_log = self.log_fitted[i] if self.log_meas is not None else np.zeros(i.size, bool)
+        # the log only on the ships that carry one through the water (another ship's log must
+        # not count; a log over ground measures something else, module docstring)
+        with_log = (self.log_fitted[i] & ~self.log_p.ground[i] if self.log_meas is not None
+                    else np.zeros(i.size, bool))
         mask = np.stack([g.accept, g.accept, np.ones(i.size, bool), with_log], axis=1)
         state, self.ekf_innovation = ekf.update(self.ekf_p, pred, np.nan_to_num(z), mask, R_meas)
         if self.adapt_rows is not None:
@@ -600,7 +612,7 @@ if (_WG_SURGE - _WG_YAW, _WG_SWAY - _WG_YAW) != (waves.SURGE, waves.SWAY):
     raise ImportError("the wave gain columns must follow the channel order")
 _G_SIGMA, _G_GM_A, _G_GM_Q, _G_GROSS_P, _G_GROSS_M, _G_P_START, _G_P_END = range(7)
 _C_SIGMA, _C_BIAS, _C_DRIFT_A, _C_DRIFT_Q, _H_ALPHA, _H_BETA = range(6)
-_F_SIGMA, _F_SP, _F_DT, _F_THRESHOLD, _F_REOPEN = range(5)
+_F_SIGMA, _F_SP, _F_DT, _F_THRESHOLD, _F_REOPEN, _F_METRES = range(6)
 # stand-ins for the arrays of an absent part (never indexed)
 _NO_STREAMS = np.zeros((0, 4), dtype=np.uint64)
 _NO_ROW = np.zeros(0)
@@ -648,7 +660,8 @@ class _StepTables:
             compass=table(c.sigma_rad, c.bias_rad, c.drift_a, c.drift_q, nav.heading_gain[:, 0],
                           nav.heading_gain[:, 1]),
             deviation=table(c.dev_a, c.dev_b, c.dev_c, c.dev_d, c.dev_e),
-            filt=table(p.sigma_m, p.sp, p.dt_s, gate.threshold, gate.reopen_factor),
+            filt=table(p.sigma_m, p.sp, p.dt_s, gate.threshold, gate.reopen_factor,
+                       gate.metres),
             every=np.ascontiguousarray(g.every, dtype=np.int64),
             bandpass=np.ascontiguousarray(np.reshape(w.bandpass, n), dtype=bool),
             max_rejections=np.ascontiguousarray(gate.max_rejections, dtype=np.int64),
@@ -791,7 +804,8 @@ def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
 
     The arithmetic, in the same order, of :func:`trafficsim.sensors.gnss.to_reference_point`,
     :func:`trafficsim.estimation.pv.predict`, :func:`trafficsim.estimation.gating.gate` on
-    :func:`~trafficsim.estimation.gating.normalised_distance` and
+    :func:`~trafficsim.estimation.gating.normalised_distance` (or
+    :func:`~trafficsim.estimation.gating.distance` for a window in metres) and
     :func:`trafficsim.estimation.pv.update`. ``heading`` ``(2, n)`` the heading filter's
     output; ``fused_*`` ``(m,)`` rows of the ships with several receivers (m; m2 as sigma);
     ``est`` ``(6, n)`` out: the pv estimate of the ``filter_pv`` ships, truth for the others.
@@ -819,12 +833,15 @@ def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
             P_out[i, a, pv.VEL, pv.POS] = P_out[i, a, pv.POS, pv.VEL]
             P_out[i, a, pv.VEL, pv.VEL] = vv + q * dt
         r = sigma * sigma
-        # gate on the normalised innovation
+        # gate on the normalised innovation, or on the distance for a window in metres
         d = math.nan
         if ok:
             nu_n, nu_e = ref_n - x_out[i, pv.POS_N], ref_e - x_out[i, pv.POS_E]
-            d = math.sqrt(nu_n * nu_n / (P_out[i, pv.AXIS_NORTH, pv.POS, pv.POS] + r)
-                          + nu_e * nu_e / (P_out[i, pv.AXIS_EAST, pv.POS, pv.POS] + r))
+            if tab[i, _F_METRES]:
+                d = math.sqrt(nu_n * nu_n + nu_e * nu_e)
+            else:
+                d = math.sqrt(nu_n * nu_n / (P_out[i, pv.AXIS_NORTH, pv.POS, pv.POS] + r)
+                              + nu_e * nu_e / (P_out[i, pv.AXIS_EAST, pv.POS, pv.POS] + r))
         window = tab[i, _F_THRESHOLD]  # reopen_factor ** 0 = 1, also for an infinite factor
         if rejections0[i]:
             window = window * tab[i, _F_REOPEN] ** float(rejections0[i])
@@ -888,4 +905,4 @@ def _take(value: Any, idx: np.ndarray) -> Any:
 
 def _take_gate(params: gating.GateParams, idx: np.ndarray) -> gating.GateParams:
     return gating.GateParams(params.threshold[idx], params.reopen_factor[idx],
-                             params.max_rejections[idx])
+                             params.max_rejections[idx], params.metres[idx])

@@ -283,7 +283,9 @@ class Innovation(NamedTuple):
         S: ``(n, N_Z, N_Z)`` innovation covariance H P- H^T + R, zero rows/columns where not valid.
         hph: ``(n, N_Z, N_Z)`` the H P- H^T part of S (same masking).
         nis: ``(n,)`` normalised innovation squared nu^T S^-1 nu over the valid components.
-        dof: ``(n,)`` int, number of valid components (chi-square degrees of freedom of nis).
+        dof: ``(n,)`` int, number of valid components (chi-square degrees of freedom of nis);
+            a component that carries no information (S singular with it) is left out of the
+            update and of all of these.
     """
 
     nu: np.ndarray
@@ -642,7 +644,9 @@ def predict(params: EkfParams, model: ShipModel, state: EkfState, rudder_rad: np
 def _update(x: np.ndarray, P: np.ndarray, z: np.ndarray, mask: np.ndarray, R: np.ndarray,
             zstate: np.ndarray, wrap: np.ndarray, nu_out: np.ndarray, S_out: np.ndarray,
             hph_out: np.ndarray, nis_out: np.ndarray, dof_out: np.ndarray) -> None:
-    """Masked Kalman update in place for every ship (Cholesky of S, Joseph form)."""
+    """Masked Kalman update in place for every ship (Cholesky of S, Joseph form); a valid
+    component that carries no information (its pivot of S is not positive: the components
+    before it, or a zero-noise instrument on an exactly known state, fix it) is left out."""
     n, k = x.shape
     nz = z.shape[1]
     idx = np.empty(nz, dtype=np.int64)
@@ -666,37 +670,42 @@ def _update(x: np.ndarray, P: np.ndarray, z: np.ndarray, mask: np.ndarray, R: np
             for b in range(nz):
                 S_out[i, a, b] = 0.0
                 hph_out[i, a, b] = 0.0
+        # Cholesky S = L L^T; a component whose pivot is not positive is already fixed exactly
+        # by the ones before it (no information): it is left out and the rest factored again
+        bad = 0
+        while m > 0 and bad >= 0:
+            for a in range(m):
+                ja = idx[a]
+                sa = zstate[ja]
+                d = z[i, ja] - x[i, sa]
+                if wrap[ja]:
+                    d = (d + math.pi) % (2.0 * math.pi) - math.pi
+                nu[a] = d
+                for b in range(m):
+                    jb = idx[b]
+                    S[a, b] = P[i, sa, zstate[jb]] + R[i, ja, jb]
+                for r in range(k):
+                    PHt[r, a] = P[i, r, sa]
+            bad = -1
+            for a in range(m):
+                for b in range(a + 1):
+                    acc = S[a, b]
+                    for c in range(b):
+                        acc -= L[a, c] * L[b, c]
+                    if a == b:
+                        if not acc > 0.0:
+                            bad = a
+                            break
+                        L[a, a] = math.sqrt(acc)
+                    else:
+                        L[a, b] = acc / L[b, b]
+                if bad >= 0:
+                    break
+            if bad >= 0:
+                for a in range(bad, m - 1):
+                    idx[a] = idx[a + 1]
+                m -= 1
         if m == 0:
-            continue
-        for a in range(m):
-            ja = idx[a]
-            sa = zstate[ja]
-            d = z[i, ja] - x[i, sa]
-            if wrap[ja]:
-                d = (d + math.pi) % (2.0 * math.pi) - math.pi
-            nu[a] = d
-            for b in range(m):
-                jb = idx[b]
-                S[a, b] = P[i, sa, zstate[jb]] + R[i, ja, jb]
-            for r in range(k):
-                PHt[r, a] = P[i, r, sa]
-        # Cholesky S = L L^T
-        ok = True
-        for a in range(m):
-            for b in range(a + 1):
-                acc = S[a, b]
-                for c in range(b):
-                    acc -= L[a, c] * L[b, c]
-                if a == b:
-                    if acc <= 0.0:
-                        ok = False
-                        break
-                    L[a, a] = math.sqrt(acc)
-                else:
-                    L[a, b] = acc / L[b, b]
-            if not ok:
-                break
-        if not ok:
             continue
         # K^T = S^-1 (P H^T)^T: forward and back substitution, one column of K^T per state
         for r in range(k):

@@ -54,11 +54,15 @@ class GateParams:
         threshold: window half-size in the statistic's unit (m for a position window).
         reopen_factor: window growth per consecutive rejection, >= 1 (inf = fully open).
         max_rejections: consecutive rejections that restart the filter, >= 1.
+        metres: True where the threshold is a position window in metres (the filter then
+            gates the fix's distance from the prediction), False where it is in standard
+            deviations (the normalised innovation).
     """
 
     threshold: np.ndarray
     reopen_factor: np.ndarray
     max_rejections: np.ndarray
+    metres: np.ndarray
 
 
 def build(configs: Sequence[Mapping[str, Any]]) -> GateParams:
@@ -76,7 +80,8 @@ def build(configs: Sequence[Mapping[str, Any]]) -> GateParams:
                    dtype=np.int64)
     if not (np.all(thr > 0) and np.all(fac >= 1) and np.all(cnt >= 1)):  # (NaN fails too)
         raise ValueError("gate needs a positive window, reopen_factor >= 1, max_rejections >= 1")
-    return GateParams(thr, fac, cnt)
+    return GateParams(thr, fac, cnt, np.array(["gate_sigma" not in c for c in configs],
+                                               dtype=bool))
 
 
 def init_state(n: int) -> np.ndarray:
