@@ -103,7 +103,7 @@ def test_a_folder_of_another_spec_is_refused(write_spec, tmp_path, capsys):
     other = write_spec(n=2, chunk=1, duration=300, name="other.yaml")
     assert main(["campaign", str(other), "--out", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err
-    assert "another campaign spec" in err and "Traceback" not in err
+    assert "another campaign" in err and "Traceback" not in err
     assert json.loads((out / "campaign.json").read_text())["n_encounters"] == 1
 
 
@@ -333,10 +333,10 @@ def test_interrupted_between_chunks_resumes_with_the_rest(base, tmp_path, monkey
     real = execute._write_chunk
     written: list[str] = []
 
-    def write_then_stop(path, rows):
+    def write_then_stop(path, rows, digest):
         if written:
             raise KeyboardInterrupt
-        real(path, rows)
+        real(path, rows, digest)
         written.append(path.name)
 
     monkeypatch.setattr(execute, "_write_chunk", write_then_stop)
@@ -451,7 +451,7 @@ def test_a_changed_spec_is_refused_and_the_folder_left_alone(base, tmp_path):
     before = _stamps(out)
     changed = tmp_path / "spec.yaml"
     changed.write_text(_spec_text(chunk=3))
-    with pytest.raises(InputError, match="another campaign spec"):
+    with pytest.raises(InputError, match="another campaign"):
         run_campaign(changed, out, workers=1, progress=False)
     assert _stamps(out) == before
     assert (out / "campaign.json").read_text() == manifest
@@ -509,3 +509,76 @@ def test_resuming_on_a_threaded_dask_worker_gives_the_same_results(base, tmp_pat
     _same(_table(base_out), _table(out))
     assert _without_rate(again) == _without_rate(summary)
 
+
+
+def _spec_with_files(folder: Path) -> Path:
+    """A one-chunk-per-encounter spec whose ship type and rules are files beside it."""
+    from trafficsim.colregs.decider import RULES_DIR
+    from trafficsim.ships.library import find_ship
+
+    folder.mkdir(parents=True, exist_ok=True)
+    shutil.copy(find_ship("container"), folder / "mine.yaml")
+    (folder / "rules.yaml").write_text("schema_version: 1\nname: mine\nextends: base.yaml\n"
+                                       "parameters: {turn_deg: 40}\n")
+    shutil.copy(RULES_DIR / "colregs.yaml", folder / "base.yaml")
+    spec = folder / "spec.yaml"
+    spec.write_text("schema_version: 1\nname: files\nn_encounters: 2\nseed: 3\n"
+                    "duration_s: 300\nchunk_encounters: 1\nship_types: {mine.yaml: 1}\n"
+                    "rules: rules.yaml\n")
+    return spec
+
+
+@pytest.mark.parametrize("edit", ["mine.yaml", "rules.yaml", "base.yaml"])
+def test_an_input_file_edited_between_runs_is_refused(tmp_path, edit):
+    """The folder is tied to every file the spec reads, not the spec alone: a ship file, the
+    rules file or the file it extends edited after a kill would mix old and new results, so
+    the rerun is refused and nothing is written."""
+    spec = _spec_with_files(tmp_path / "in")
+    out = tmp_path / "out"
+    run_campaign(spec, out, workers=1, progress=False)
+    (out / "chunks" / "00000001-00000002.parquet").unlink()
+    before = _stamps(out)
+    path = tmp_path / "in" / edit
+    path.write_text(path.read_text() + "\n# edited\n")
+    with pytest.raises(InputError, match=r"another campaign .*ship or rules files changed"):
+        run_campaign(spec, out, workers=1, progress=False)
+    assert _stamps(out) == before
+
+
+def test_the_inputs_digest_is_of_contents_not_places(tmp_path):
+    """The whole input folder copied elsewhere has the same digest; one byte more in any of
+    its files, another."""
+    a = _spec_with_files(tmp_path / "a")
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    digest = execute.inputs_digest(load_spec(a))
+    assert execute.inputs_digest(load_spec(tmp_path / "b" / "spec.yaml")) == digest
+    for name in ("spec.yaml", "mine.yaml", "rules.yaml", "base.yaml"):
+        f = tmp_path / "b" / name
+        text = f.read_text()
+        f.write_text(text + "\n")
+        assert execute.inputs_digest(load_spec(tmp_path / "b" / "spec.yaml")) != digest, name
+        f.write_text(text)
+
+
+def test_a_chunk_of_other_inputs_is_refused_without_the_manifest(base, tmp_path):
+    """With ``campaign.json`` deleted the chunks still name their inputs: another spec's run
+    into the folder is refused instead of reusing them."""
+    _, base_out, _ = base
+    out = _copy(base_out, tmp_path)
+    (out / "campaign.json").unlink()
+    other = tmp_path / "other.yaml"
+    other.write_text(_spec_text().replace("seed: 11", "seed: 12"))
+    with pytest.raises(InputError, match="holds results of other inputs"):
+        run_campaign(other, out, workers=1, progress=False)
+
+
+def test_resuming_from_a_copy_of_the_spec_records_its_place(base, tmp_path):
+    """The same inputs from another place finish the folder, and ``campaign.json`` then names
+    that spec, which ``replay`` reads (the first may be gone)."""
+    spec, base_out, _ = base
+    out = _copy(base_out, tmp_path)
+    copy = tmp_path / "moved" / "spec.yaml"
+    copy.parent.mkdir()
+    copy.write_bytes(spec.read_bytes())
+    run_campaign(copy, out, workers=1, progress=False)
+    assert json.loads((out / "campaign.json").read_text())["spec"] == str(copy)

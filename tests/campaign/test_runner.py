@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from trafficsim.campaign.generator import classify, draw
-from trafficsim.campaign.runner import _rules_path, compliant, run_chunk
+from trafficsim.campaign.runner import compliant, rules_path, run_chunk
 from trafficsim.campaign.spec import load_spec
 from trafficsim.cli import main
 from trafficsim.render.report import write_report
@@ -214,8 +214,8 @@ def test_rules_are_found_relative_to_the_spec(tmp_path):
     sub.mkdir(parents=True)
     (tmp_path / "a" / "rules.yaml").write_text("x: 1\n")  # (it must exist to load the spec)
     spec = _rows_spec(sub, extra="rules: ../rules.yaml")
-    assert _rules_path(spec) == sub / "../rules.yaml"
-    assert _rules_path(_rows_spec(sub, name="n.yaml")) is None
+    assert rules_path(spec) == sub / "../rules.yaml"
+    assert rules_path(_rows_spec(sub, name="n.yaml")) is None
 
 
 def test_columns_and_ship_steps_with_a_two_second_step(tmp_path):

@@ -3,8 +3,10 @@
 The encounters are cut into chunks of ``chunk_encounters``. Every finished chunk is written to
 ``OUT/chunks/NNNNNNNN-MMMMMMMM.parquet`` (temp file, fsync, rename), so a campaign killed at any
 point and started again with the same command runs only the missing chunks (and any chunk
-damaged from outside, which no longer reads); ``OUT/campaign.json``
-records the spec's hash, and a folder holding another spec's chunks is refused. When every chunk
+damaged from outside, which no longer reads). ``OUT/campaign.json`` and every chunk record the
+hash of the campaign's inputs (:func:`inputs_digest`: the spec and the ship and rules files it
+names), so a folder or a chunk holding results of other inputs is refused: an edited ship file
+cannot mix its results with the old ones. When every chunk
 is there the rows are gathered in encounter order into ``encounters.parquet`` with
 ``summary.json`` and the figures. A chunk's rows do not depend on which executor, worker or
 chunk neighbours computed it (:mod:`trafficsim.campaign.runner`), so the results are the same on
@@ -46,22 +48,60 @@ def _chunk_path(out: Path, start: int, stop: int) -> Path:
     return out / "chunks" / f"{start:08d}-{stop:08d}.parquet"
 
 
-def _chunk_done(path: Path) -> bool:
-    """Whether ``path`` holds a finished chunk. Chunks are written atomically, so only damage
-    from outside (a disk fault, an edit) makes one unreadable; such a chunk is run again, as
-    its rows are fixed by the spec."""
+def _chunk_done(path: Path, digest: str) -> bool:
+    """Whether ``path`` holds a finished chunk of the inputs of ``digest``. Chunks are written
+    atomically, so only damage from outside (a disk fault, an edit) makes one unreadable; such
+    a chunk is run again, as its rows are fixed by the inputs.
+
+    Raises:
+        InputError: the chunk holds results of other inputs.
+    """
     import pyarrow.parquet as pq
 
     if not path.exists():
         return False
     try:  # the whole table: damage inside the data leaves the footer readable
-        return b"ship_steps" in (pq.read_table(path).schema.metadata or {})
+        meta = pq.read_table(path).schema.metadata or {}
     except (OSError, ValueError):  # (pyarrow's ArrowInvalid is a ValueError)
         return False
+    written = meta.get(b"inputs_sha256")  # (absent in chunks of older versions)
+    if written is not None and written.decode() != digest:
+        raise InputError(f"{path} holds results of other inputs (another spec, or ship or "
+                         "rules files changed since); use another --out folder or delete it")
+    return b"ship_steps" in meta
 
 
 def _spec_hash(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def inputs_digest(spec: CampaignSpec) -> str:
+    """SHA-256 of everything a campaign reads from files: the spec, the ship files (or MMG
+    parameter folders) its ``ship_types`` name and its ``rules`` file with the files that one
+    extends. Contents only, so a copy of the lot elsewhere has the same digest."""
+    from trafficsim.campaign.runner import rules_path
+    from trafficsim.colregs.rulefile import parse_file
+    from trafficsim.colregs.vocabulary import VOCABULARY
+    from trafficsim.ships.library import find_ship
+
+    assert spec.path is not None
+    digest = hashlib.sha256()
+
+    def add(role: str, path: Path) -> None:
+        digest.update(f"{role}\0".encode())
+        digest.update(hashlib.sha256(path.read_bytes()).digest())
+
+    add("spec", spec.path)
+    for kind in sorted(spec.ship_types):
+        found = find_ship(kind, spec.path.parent)
+        for f in sorted(found.iterdir()) if found.is_dir() else [found]:
+            if f.is_file():
+                add(f"ship {kind} {f.name if found.is_dir() else ''}", f)
+    rules = rules_path(spec)
+    if rules is not None:
+        for level, f in enumerate(parse_file(rules, VOCABULARY).files):
+            add(f"rules {level}", Path(f))
+    return digest.hexdigest()
 
 
 def _job(spec_path: str, start: int, stop: int) -> dict[str, Any]:
@@ -71,21 +111,26 @@ def _job(spec_path: str, start: int, stop: int) -> dict[str, Any]:
     return run_chunk(load_spec(spec_path), start, stop)
 
 
-def _write_chunk(path: Path, rows: dict[str, Any]) -> None:
+def _write_chunk(path: Path, rows: dict[str, Any], digest: str) -> None:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    meta = {"ship_steps": str(rows["_ship_steps"]), "seconds": repr(rows["_seconds"])}
+    meta = {"ship_steps": str(rows["_ship_steps"]), "seconds": repr(rows["_seconds"]),
+            "inputs_sha256": digest}
     table = pa.table({k: v for k, v in rows.items() if not k.startswith("_")})
     table = table.replace_schema_metadata({**(table.schema.metadata or {}),
                                            **{k.encode(): v.encode() for k, v in meta.items()}})
     atomic_write(path, lambda fh: pq.write_table(table, fh))
 
 
-def _check_folder(out: Path, spec: CampaignSpec) -> None:
+def _check_folder(out: Path, spec: CampaignSpec, digest: str) -> None:
+    """Refuse a folder of another campaign's results; record this one's (the spec's path is
+    updated when the same inputs come from another place, for ``replay``)."""
     assert spec.path is not None
     manifest = out / "campaign.json"
-    digest = _spec_hash(spec.path)
+    record = {"spec": str(spec.path), "spec_sha256": _spec_hash(spec.path),
+              "inputs_sha256": digest, "name": spec.name, "n_encounters": spec.n_encounters,
+              "chunk_encounters": spec.chunk_encounters, "trafficsim_version": __version__}
     if manifest.exists():
         try:
             old = json.loads(manifest.read_text())
@@ -94,14 +139,16 @@ def _check_folder(out: Path, spec: CampaignSpec) -> None:
         if not isinstance(old, dict):
             raise InputError(f"cannot read {manifest}: expected a JSON object, got "
                              f"{type(old).__name__}")
-        if old.get("spec_sha256") != digest:
-            raise InputError(f"{out} holds results of another campaign spec "
-                             f"({old.get('spec', '?')}); use another --out folder or delete it")
-        return
-    write_json(manifest, {"spec": str(spec.path), "spec_sha256": digest, "name": spec.name,
-                          "n_encounters": spec.n_encounters,
-                          "chunk_encounters": spec.chunk_encounters,
-                          "trafficsim_version": __version__})
+        # (a manifest of an older version holds the spec's hash only)
+        same = (old.get("inputs_sha256") == digest if "inputs_sha256" in old
+                else old.get("spec_sha256") == record["spec_sha256"])
+        if not same:
+            raise InputError(f"{out} holds results of another campaign (spec "
+                             f"{old.get('spec', '?')}, or ship or rules files changed since); "
+                             "use another --out folder or delete it")
+        if old.get("spec") == record["spec"] and "inputs_sha256" in old:
+            return
+    write_json(manifest, record)
 
 
 @contextmanager
@@ -141,9 +188,10 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
     workers = (os.cpu_count() or 1) if workers is None else workers
     with _executor(executor, workers, address) as pool:  # (a bad executor flag: nothing made)
         out.mkdir(parents=True, exist_ok=True)
-        _check_folder(out, spec)
+        digest = inputs_digest(spec)
+        _check_folder(out, spec, digest)
         every = chunks(spec)
-        todo = [c for c in every if not _chunk_done(_chunk_path(out, *c))]
+        todo = [c for c in every if not _chunk_done(_chunk_path(out, *c), digest)]
         t0 = time.perf_counter()
         ship_steps_now = 0
         bar = tqdm(total=len(every), initial=len(every) - len(todo), unit="chunk",
@@ -154,7 +202,7 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
             futures = {pool.submit(_job, str(spec.path), *c): c for c in todo}
             results = ((futures[f], f.result()) for f in cf.as_completed(futures))
         for (start, stop), rows in results:
-            _write_chunk(_chunk_path(out, start, stop), rows)
+            _write_chunk(_chunk_path(out, start, stop), rows, digest)
             ship_steps_now += int(rows["_ship_steps"])
             bar.update(1)
     bar.close()

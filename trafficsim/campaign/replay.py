@@ -25,12 +25,14 @@ RECORD_EVERY_S = 5.0
 
 
 def campaign_spec(campaign_dir: str | Path) -> CampaignSpec:
-    """The spec a campaign folder was run with, checked to be unchanged since.
+    """The spec a campaign folder was run with, checked to be unchanged since (with the ship
+    and rules files it names).
 
     Raises:
-        InputError: not a campaign folder, the spec file gone or changed since the run.
+        InputError: not a campaign folder, the spec file gone, or it or a file it names
+            changed since the run.
     """
-    from trafficsim.campaign.execute import _spec_hash
+    from trafficsim.campaign.execute import _spec_hash, inputs_digest
     from trafficsim.campaign.spec import load_spec
 
     folder = Path(campaign_dir)
@@ -54,7 +56,12 @@ def campaign_spec(campaign_dir: str | Path) -> CampaignSpec:
         raise InputError(f"changed since the campaign in {folder} ran; a replay "
                          "would not reproduce it (restore the spec, or run the campaign "
                          "again)", path=str(spec_path))
-    return load_spec(spec_path)
+    spec = load_spec(spec_path)
+    if "inputs_sha256" in info and inputs_digest(spec) != info["inputs_sha256"]:
+        raise InputError(f"a ship or rules file this spec names changed since the campaign "
+                         f"in {folder} ran; a replay would not reproduce it (restore it, or run "
+                         "the campaign again)", path=str(spec_path))
+    return spec
 
 
 def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Path,

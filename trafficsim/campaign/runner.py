@@ -27,7 +27,8 @@ from trafficsim.ships.base import EAST, NORTH, PSI
 from trafficsim.units import NM
 
 
-def _rules_path(spec: CampaignSpec) -> Path | None:
+def rules_path(spec: CampaignSpec) -> Path | None:
+    """The spec's ``rules`` file (relative to the spec), None for the bundled rules."""
     if spec.rules is None:
         return None
     base = spec.path.parent if spec.path is not None else Path.cwd()
@@ -46,7 +47,7 @@ def prepare(spec: CampaignSpec, start: int, stop: int) -> tuple[list[Encounter],
     batch = build_batch(setups, envs)
     decider = None
     if spec.policy == "colregs":
-        decider = Decider.build(batch.behaviours, batch.pair_i, batch.pair_j, _rules_path(spec),
+        decider = Decider.build(batch.behaviours, batch.pair_i, batch.pair_j, rules_path(spec),
                                 spec.domain, spec.visibility_nm)
     sim = Simulation.start(batch, spec.dt_s, seed=spec.seed, decider=decider,
                            decision_period_s=spec.decision_period_s, domain=spec.domain,
