@@ -4,6 +4,7 @@ run folders, and the end of a run whose state stops being finite."""
 import json
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -523,3 +524,117 @@ def test_rudder_and_rpm_columns_are_the_state_in_degrees_and_per_minute(tmp_path
     np.testing.assert_allclose(col["rpm"][-1], 60.0 * rec.x[1, RPS, 0])
     assert col["rudder_deg"][-1] > 1.0  # turning to starboard towards the waypoint
     np.testing.assert_allclose(col["rudder_cmd_deg"][-1], math.degrees(rec.rudder_cmd[1, 0]))
+
+
+# --- end to end: what run_scenario writes -----------------------------------------------------
+
+
+def test_run_scenario_writes_a_summary_equal_to_the_one_it_returns(tmp_path):
+    """summary.json is the returned summary (NaN written as null), trajectories hold one row
+    per ship and record, the record period being the scenario's."""
+    path = tmp_path / "s.yaml"
+    path.write_text("schema_version: 1\nname: pair\nduration_s: 30\nrecord_every_s: 5\n"
+                    "ships:\n" + _ship("a", "cargo", 0, 0, 0, 10)
+                    + _ship("b", "container", 2000, 100, 180, 10))
+    summary = run_scenario(path, tmp_path / "out")
+    stored = json.loads((tmp_path / "out" / "summary.json").read_text())
+
+    def nan_to_none(value):
+        if isinstance(value, float) and math.isnan(value):
+            return None
+        if isinstance(value, dict):
+            return {k: nan_to_none(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [nan_to_none(v) for v in value]
+        return value
+
+    assert stored == nan_to_none(summary)
+    table = pq.read_table(tmp_path / "out" / "trajectories.parquet").to_pydict()
+    assert table["t_s"] == [t for t in (0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0) for _ in "ab"]
+    assert not (tmp_path / "out" / "decisions.parquet").exists()  # keep_course: no decider
+
+
+def test_three_ships_give_three_pairs_each_with_its_closed_form_cpa(tmp_path):
+    """a (0, 0) north 10 kn, b (3000, 500) south 10 kn, c (1000, -2000) east 8 kn, all holding
+    course: DCPA and TCPA of each pair from the relative position d and velocity w,
+    tcpa = -d.w / |w|^2, dcpa = |d + w tcpa|."""
+    scn = _scenario(tmp_path, [_ship("a", "cargo", 0, 0, 0, 10),
+                               _ship("b", "container", 3000, 500, 180, 10),
+                               _ship("c", "cargo", 1000, -2000, 90, 8)], 30)
+    sim = _start(scn)
+    record_run(sim, 30, 10)
+    pairs = _summary(sim, 30)["pairs"]
+    pos = {"a": (0.0, 0.0), "b": (3000.0, 500.0), "c": (1000.0, -2000.0)}
+    vel = {"a": (10 * KN, 0.0), "b": (-10 * KN, 0.0), "c": (0.0, 8 * KN)}
+    assert [(p["ship_a"], p["ship_b"]) for p in pairs] == [("a", "b"), ("a", "c"), ("b", "c")]
+    for p in pairs:
+        i, j = p["ship_a"], p["ship_b"]
+        d = np.subtract(pos[j], pos[i])
+        w = np.subtract(vel[j], vel[i])
+        tcpa = -d @ w / (w @ w)
+        assert p["tcpa_s"] == pytest.approx(tcpa, rel=1e-9)
+        assert p["dcpa_m"] == pytest.approx(np.hypot(*(d + w * tcpa)), rel=1e-9)
+        # 30 s of straight running: every range still closes, the last one is the least
+        assert p["min_range_m"] == pytest.approx(np.hypot(*(d + 30.0 * w)), rel=1e-9)
+
+
+def test_decisions_are_recorded_every_decision_period_of_the_scenario(tmp_path):
+    """decision_period_s 20 with dt 0.5: decision steps at 0, 20, 40, 60 s of a 70 s run, for
+    both (colregs) ships and about the other."""
+    path = tmp_path / "s.yaml"
+    path.write_text("schema_version: 1\nname: d\nduration_s: 70\ndt_s: 0.5\n"
+                    "decision_period_s: 20\nships:\n"
+                    + _ship("a", "cargo", 0, 0, 0, 12, behaviour="colregs")
+                    + _ship("b", "container", 5000, 200, 180, 12, behaviour="colregs"))
+    run_scenario(path, tmp_path / "out")
+    dec = pq.read_table(tmp_path / "out" / "decisions.parquet").to_pydict()
+    assert dec["t_s"] == [0.0, 0.0, 20.0, 20.0, 40.0, 40.0, 60.0, 60.0]
+    assert dec["ship"] == ["a", "b"] * 4 and dec["other"] == ["b", "a"] * 4
+
+
+def test_a_scenarios_rules_file_is_found_relative_to_the_scenario(tmp_path):
+    from trafficsim.colregs.decider import RULES_DIR
+
+    (tmp_path / "sub").mkdir()
+    rules = tmp_path / "sub" / "mine.yaml"
+    rules.write_text((RULES_DIR / "colregs.yaml").read_text())
+    scn = _scenario(tmp_path, [_ship("a", "cargo", 0, 0, 0, behaviour="colregs"),
+                               _ship("b", "cargo", 5000, 0, 180)], head="rules: sub/mine.yaml\n")
+    decider = _start(scn).decider
+    assert [Path(n.rules.path).resolve() for n in decider.networks] == [rules.resolve()]
+
+
+def _first_step_runaway(tmp_path, n_steps):
+    """The bulk carrier with a1 = 1e100: its state leaves the finite numbers in the first step
+    (the last finite state is the start, t = 0)."""
+    ship = (LIBRARY_DIR / "bulk_carrier.yaml").read_text()
+    (tmp_path / "runaway.yaml").write_text(ship.replace("  a1: -1.4347e-4\n", "  a1: 1.0e+100\n"))
+    return _scenario(tmp_path, [_ship("a", "runaway.yaml", 0, 0, 0)], n_steps)
+
+
+@pytest.mark.parametrize("every", [1, 5])
+def test_a_run_diverging_in_its_first_step_ends_its_record_at_that_step(tmp_path, every):
+    sim = _start(_first_step_runaway(tmp_path, 20), isolate=True)
+    rec, _ = record_run(sim, 20, every)
+    assert sim.diverged_at_s[0] == 0.0  # the premise: non-finite after step 1
+    assert sim.step_index == 1  # stopped stepping, as for a later divergence
+    assert rec.t[: rec.count].tolist() == [0.0, 1.0]
+    np.testing.assert_array_equal(rec.x[1], rec.x[0])  # frozen at the start
+
+
+@pytest.mark.parametrize("duration", ["10.6", "2.5"])
+def test_the_time_simulated_is_the_scenario_duration(tmp_path, duration):
+    """A duration that is not a whole number of steps must be refused (located at duration_s)
+    or simulated as reported: the last record (every step) at the reported duration."""
+    from trafficsim.errors import InputError
+
+    path = tmp_path / "s.yaml"
+    path.write_text(f"schema_version: 1\nname: d\nduration_s: {duration}\nships:\n"
+                    + _ship("a", "cargo", 0, 0, 0, 10))
+    try:
+        summary = run_scenario(path, tmp_path / "out")
+    except InputError as err:
+        assert "duration_s" in str(err)
+        return
+    t = pq.read_table(tmp_path / "out" / "trajectories.parquet").column("t_s").to_pylist()
+    assert t[-1] == summary["duration_s"] == summary["n_steps"] * summary["dt_s"]

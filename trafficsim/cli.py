@@ -21,6 +21,8 @@ if TYPE_CHECKING:
     from trafficsim.render.frame import FrameOptions
 
 EXIT_USER_ERROR = 2
+#: largest smoother noise ``identify`` accepts: position (m) and heading (deg)
+MAX_SIGMA_POS_M, MAX_SIGMA_HEADING_DEG = 1000.0, 90.0
 
 
 class _Parser(argparse.ArgumentParser):
@@ -114,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_argument("--sp", type=_positive(float), default=None,
                        help="with --sensors: receiver filter spectral amplitude S_p, m^2/s^3 "
                             "(default 0.01)")
-    trial.add_argument("--seed", type=int, default=None,
+    trial.add_argument("--seed", type=_non_negative_int, default=None,
                        help="with --sensors: seed of the instrument noise (default 0)")
     trial.add_argument("--out", type=Path, required=True, help="output folder")
     trial.set_defaults(func=_cmd_trial)
@@ -182,7 +184,8 @@ def build_parser() -> argparse.ArgumentParser:
                       "candidate, the base included (no value: identify's default subset)")
     diag.add_argument("--self-test", type=_positive(int), default=None, metavar="N",
                       help="N trials with a random hidden effect; prints the confusion matrix")
-    diag.add_argument("--seed", type=int, default=None, help="self-test seed (default 0)")
+    diag.add_argument("--seed", type=_non_negative_int, default=None,
+                      help="self-test seed (default 0)")
     diag.set_defaults(func=_cmd_diagnose)
 
     val = sub.add_parser("validate", help="check scenario, ship, rules or campaign files "
@@ -290,9 +293,12 @@ def _fps(args: argparse.Namespace, fmt: str) -> float:
 
 
 def _frame_options(args: argparse.Namespace) -> FrameOptions:
-    from trafficsim.render.frame import FrameOptions
+    from trafficsim.render.frame import MIN_RANGE_NM, FrameOptions
 
     _only_with("--range-nm", args.range_nm is not None, args.follow is not None, "with --follow")
+    if args.range_nm is not None and args.range_nm < MIN_RANGE_NM:
+        raise InputError(f"expected a view range of at least {MIN_RANGE_NM:g} NM, got "
+                         f"{args.range_nm:g}", key="--range-nm")
     return FrameOptions(size_px=args.size, dpi=args.dpi, follow=args.follow,
                         range_nm=3.0 if args.range_nm is None else args.range_nm,
                         measurements=args.measurements)
@@ -428,6 +434,12 @@ def _cmd_identify(args: argparse.Namespace) -> int:
     from trafficsim.identify.command import identify
     from trafficsim.identify.preprocess import SmootherSettings
 
+    for flag, value, most in (("--sigma-pos-m", args.sigma_pos_m, MAX_SIGMA_POS_M),
+                              ("--sigma-heading-deg", args.sigma_heading_deg,
+                               MAX_SIGMA_HEADING_DEG)):
+        if value is not None and value > most:
+            raise InputError(f"expected a noise of at most {most:g}, got {value:g} (a "
+                             "measurement that noisy says nothing of the track)", key=flag)
     smoother = SmootherSettings(
         sigma_pos_m=args.sigma_pos_m,
         sigma_heading_rad=None if args.sigma_heading_deg is None
@@ -541,12 +553,22 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def one_line(err: Exception) -> str:
+    """An error's message on one line: an error listing several problems, one per line (a
+    rules file's), gives its first and their count (``trafficsim validate`` lists all)."""
+    first, *rest = str(err).splitlines() or [""]
+    if not rest:
+        return first
+    return f"{first} (and {len(rest)} more error{'s' if len(rest) > 1 else ''}; " \
+           "'trafficsim validate' lists them all)"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args))
     except TrafficsimError as err:
-        print(f"trafficsim: error: {err}", file=sys.stderr)
+        print(f"trafficsim: error: {one_line(err)}", file=sys.stderr)
         return EXIT_USER_ERROR if isinstance(err, InputError) else 1
     except BrokenPipeError:  # output piped into a command that stopped reading
         sys.stderr.close()

@@ -226,19 +226,18 @@ def record_run(sim: Simulation, n_steps: int, every: int, on_record: RecordHook 
             hook_s += time.perf_counter() - t0
 
     record()
-    sim.step()
-    if every == 1:
-        record()
-    hook_s = 0.0
-    wall = time.perf_counter()
-    for k in range(2, n_steps + 1):
+    wall = None
+    for k in range(1, n_steps + 1):
         sim.step()
         if sim.all_diverged:  # nothing moves any more: its last state ends the record
             record()
             break
         if k % every == 0:
             record()
-    return rec, time.perf_counter() - wall - hook_s
+        if k == 1:  # the clock starts after the first step
+            hook_s = 0.0
+            wall = time.perf_counter()
+    return rec, 0.0 if wall is None else time.perf_counter() - wall - hook_s
 
 
 def raise_if_diverged(sim: Simulation, out_dir: Path) -> None:

@@ -35,7 +35,7 @@ EXPECT = re.compile(rb"# expect: (\d+): (.*)")
 MINIMAL = """\
 schema_version: 1
 name: t
-duration_s: 600
+duration_s: 420
 {extra}ships:
   - {{name: own, type: kvlcc2, north_m: 0, east_m: 0, heading_deg: 0}}
 """
@@ -147,7 +147,7 @@ def test_record_every_must_be_multiple(tmp_path, dt, every, ok) -> None:
 
 
 def test_limits(tmp_path) -> None:
-    ok = MINIMAL.replace("duration_s: 600", f"duration_s: {MAX_DURATION_S!r}").format(extra="")
+    ok = MINIMAL.replace("duration_s: 420", f"duration_s: {MAX_DURATION_S!r}").format(extra="")
     assert load_scenario(_write(tmp_path, ok)).duration_s == 30 * 86400
     too_long = ok.replace(repr(MAX_DURATION_S), "2592001")
     with pytest.raises(ScenarioError, match="must be <= 2592000, got 2592001"):
@@ -184,7 +184,7 @@ def test_validated_without_a_file_has_no_paths() -> None:
 
 
 def test_default_dt_longer_than_duration(tmp_path) -> None:
-    text = MINIMAL.replace("duration_s: 600", "duration_s: 0.5").format(extra="")
+    text = MINIMAL.replace("duration_s: 420", "duration_s: 0.5").format(extra="")
     with pytest.raises(ScenarioError, match=r"dt_s: must not exceed duration_s \(0.5 s\)"):
         load_scenario(_write(tmp_path, text))
 
@@ -324,7 +324,7 @@ def scenarios(draw: st.DrawFn) -> dict:
     set_dt = draw(st.booleans())
     dt = draw(st.sampled_from([0.1, 0.25, 0.5, 1.0, 2.0, 10.0])) if set_dt else 1.0
     data: dict = {"schema_version": 1, "name": draw(NAMES),
-                  "duration_s": draw(st.floats(dt, MAX_DURATION_S) | st.integers(60, 86400)),
+                  "duration_s": dt * draw(st.integers(1, int(MAX_DURATION_S / dt))),
                   "ships": ships}
     if set_dt:
         data["dt_s"] = dt
@@ -419,3 +419,13 @@ def test_a_missing_rules_file_is_reported_at_its_line(tmp_path) -> None:
     with pytest.raises(ScenarioError, match="rules file not found") as info:
         load_scenario(_write(tmp_path, MINIMAL.format(extra="rules: nope.yaml\n")))
     assert info.value.line == 4 and info.value.key == "rules"
+
+
+@pytest.mark.parametrize(("duration", "dt"), [("10.6", ""), ("2.5", ""), ("100", "dt_s: 3\n")])
+def test_duration_not_a_whole_number_of_steps_is_refused(tmp_path, duration, dt) -> None:
+    """10.6 s at the default 1 s step would simulate 11 s (2.5 s: 2 s, 100 s at 3 s: 99 s) and
+    report the duration written: refused, naming both settings."""
+    text = MINIMAL.replace("duration_s: 420", f"duration_s: {duration}").format(extra=dt)
+    with pytest.raises(ScenarioError, match=rf"duration_s \({duration} s\) must be a whole "
+                                            "multiple of dt_s"):
+        load_scenario(_write(tmp_path, text))

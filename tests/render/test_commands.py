@@ -68,7 +68,7 @@ def _one_line(capsys) -> str:
     (["--every-s", "7"], "--every-s: expected a whole multiple of the run's record period (5 s)"),
     (["--format", "mp4", "--size", "321x240"], "--size: MP4 frames need an even width"),
     (["--follow", "nobody"], "--follow: no ship 'nobody' in this run; ships: a"),
-    (["--fps", "500", "--format", "gif"], "--fps: expected 0 < fps <= 100"),
+    (["--fps", "500", "--format", "gif"], "--fps: expected 0.01 <= fps <= 100"),
 ])
 def test_render_option_errors_are_one_line(synthetic_run, tmp_path, capsys, args, expect):
     run = synthetic_run([Ship("a", 0.0, 0.0, 0.0)], 4)

@@ -5,7 +5,7 @@ A scenario places one or more ships in an environment for a fixed duration::
     schema_version: 1              # required, must be 1
     name: head_on                  # required, non-empty
     description: "..."             # optional
-    duration_s: 1800               # > 0, <= 30 days
+    duration_s: 1800               # > 0, <= 30 days, a whole number of steps of dt_s
     dt_s: 1.0                      # optional, default 1.0; 0 < dt <= 60; dt <= duration
     seed: 1                        # optional int >= 0, default 0
     record_every_s: 5.0            # optional positive multiple of dt_s (default: 1 s, rounded
@@ -237,10 +237,14 @@ class Scenario(Strict):
 
     @field_validator("dt_s")
     @classmethod
-    def _dt_within_duration(cls, dt: float, info: ValidationInfo) -> float:
+    def _dt_divides_duration(cls, dt: float, info: ValidationInfo) -> float:
         duration = info.data.get("duration_s")
         if duration is not None and dt > duration:
             raise ValueError(f"must not exceed duration_s ({duration:g} s), got {dt:g}")
+        steps = None if duration is None else duration / dt
+        if steps is not None and abs(steps - round(steps)) > 1e-6:  # (rounding: 1e-7 at 1e9)
+            raise ValueError(f"duration_s ({duration:g} s) must be a whole multiple of dt_s "
+                             f"({dt:g} s; 1 s when not given)")
         return dt
 
     @field_validator("record_every_s", mode="before")

@@ -16,6 +16,9 @@ from trafficsim.render.data import live_data, load_run
 from trafficsim.render.frame import DEFAULT_OPTIONS, FrameOptions, Renderer
 from trafficsim.render.writers import FORMATS, FrameWriter, open_writer
 
+#: slowest frame rate (a GIF frame lasts at most 655.35 s; a frame every 100 s is the floor)
+MIN_FPS = 0.01
+
 
 @dataclass(frozen=True)
 class Export:
@@ -53,8 +56,8 @@ def check_options(fmt: str, options: FrameOptions, fps: float) -> None:
     if fmt == "mp4" and (w % 2 or h % 2):
         raise InputError(f"MP4 frames need an even width and height, got {w}x{h} (multiples "
                          "of 16 suit every player)", key="--size")
-    if not 0.0 < fps <= 100.0:
-        raise InputError(f"expected 0 < fps <= 100, got {fps:g}", key="--fps")
+    if not MIN_FPS <= fps <= 100.0:  # (a GIF holds a frame 655 s at most)
+        raise InputError(f"expected {MIN_FPS:g} <= fps <= 100, got {fps:g}", key="--fps")
 
 
 def _write_all(renderer: Renderer, writer: FrameWriter, records: range,

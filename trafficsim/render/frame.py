@@ -23,6 +23,9 @@ from trafficsim.render.headless import pygame
 from trafficsim.render.view import fit, follow
 from trafficsim.units import NM
 
+#: closest view of a followed ship, NM (closer, a hull is drawn millions of pixels long)
+MIN_RANGE_NM = 0.01
+
 
 @dataclass(frozen=True)
 class FrameOptions:
