@@ -123,3 +123,23 @@ def test_cli_validate_checks_rules_files(capsys: pytest.CaptureFixture[str]) -> 
     assert cli.main(["validate", str(SMALL), str(INVALID)]) == cli.EXIT_USER_ERROR
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 3 and f"{INVALID}:12: nodes.watch.no.to" in err
+
+
+@pytest.mark.parametrize("kind", ["scenario", "campaign"])
+def test_a_bad_rules_file_a_scenario_or_campaign_names_is_reported(tmp_path, capsys, kind):
+    """The rules file is checked with the file that names it: ``validate`` saying "ok" and
+    ``run`` then failing on the rules would make validate worthless."""
+    (tmp_path / "rules.yaml").write_text("schema_version: 1\nname: r\nnodes:\n"
+                                         "  a: {test: [rnge_nm, '<', 1], yes: a, no: a}\n"
+                                         "start: a\n")
+    path = tmp_path / "f.yaml"
+    if kind == "scenario":
+        path.write_text("schema_version: 1\nname: s\nduration_s: 60\nrules: rules.yaml\n"
+                        "ships:\n  - {name: a, type: cargo, north_m: 0, east_m: 0, "
+                        "heading_deg: 0}\n")
+    else:
+        path.write_text("schema_version: 1\nname: c\nn_encounters: 1\nseed: 1\n"
+                        "duration_s: 60\nrules: rules.yaml\n")
+    assert validate_files([path]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'rules.yaml'}:4: nodes.a.test" in err and "rnge_nm" in err

@@ -356,7 +356,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
           f"{s['domain_violation']['count']}, blind spots {s['blind_spot']['count']}")
     print(f"  CPA P1/P5/P50: {s['cpa_nm']['p1']:.2f} / {s['cpa_nm']['p5']:.2f} / "
           f"{s['cpa_nm']['p50']:.2f} NM"
-          + (f"; {rate:,.0f} ship-steps/s" if rate else " (all chunks were already done)"))
+          + (f"; {rate:,.0f} ship-steps/s" if rate else ""))
     if s["diverged"]:
         listed = ", ".join(str(i) for i in s["diverged_encounters"][:10])
         print(f"  DIVERGED: {s['diverged']} encounters (a ship's state stopped being finite: "

@@ -3,7 +3,8 @@
 The kind of a file is told by its top-level keys: a rules file has ``nodes`` or ``extends``
 (checked against the COLREGS vocabulary, :data:`trafficsim.colregs.vocabulary.VOCABULARY`), a
 ship file has ``model`` and no ``ships``, a campaign spec has ``n_encounters``, anything else is
-read as a scenario (whose ship files are checked too).
+read as a scenario (whose ship files are checked too). The rules file a scenario or campaign
+names is checked with it.
 """
 
 from __future__ import annotations
@@ -74,6 +75,7 @@ def check_file(path: Path) -> tuple[list[InputError], str]:
         return _errors(err), ""
     if is_rules_data(doc.data):
         return _check_rules(path)
+    rules = None
     try:
         if isinstance(doc.data, dict) and "model" in doc.data and "ships" not in doc.data:
             from trafficsim.ships.library import load_ship
@@ -82,15 +84,21 @@ def check_file(path: Path) -> tuple[list[InputError], str]:
         elif isinstance(doc.data, dict) and "n_encounters" in doc.data:
             from trafficsim.campaign.spec import load_spec
 
-            load_spec(path)
+            rules = load_spec(path).rules
         else:
             from trafficsim.io.scenario import load_scenario
             from trafficsim.ships.library import load_ship
 
-            for ship_file in load_scenario(path).ship_files:
+            scenario = load_scenario(path)
+            for ship_file in scenario.ship_files:
                 load_ship(str(ship_file))
+            rules = scenario.rules
     except InputError as err:
         return _errors(err), ""
+    if rules is not None:  # the rules file it names, checked as a run would read it
+        errors = _check_rules(path.parent / rules)[0]
+        if errors:
+            return errors, ""
     return [], "ok"
 
 
