@@ -526,6 +526,8 @@ def test_build_rejects_unknown_keys() -> None:
         ekf.build([{"gnss_sigma": 3.0}])
     with pytest.raises(ValueError, match=">= 0"):
         ekf.build([{"gnss_sigma_m": -1.0}])
+    with pytest.raises(ValueError, match="finite"):  # inf would make the covariance NaN
+        ekf.build([{"gnss_sigma_m": math.inf}])
     p = ekf.build([{"compass_sigma_deg": 2.0}, {}])
     assert p.compass_var_rad2[0] == pytest.approx(math.radians(2.0) ** 2)
     assert p.gnss_var_m2[1] == ekf.DEFAULTS["gnss_sigma_m"] ** 2

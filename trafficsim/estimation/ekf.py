@@ -188,8 +188,8 @@ def build(configs: Sequence[Mapping[str, Any]]) -> EkfParams:
 
     def get(key: str) -> np.ndarray:
         out = base.stack(configs, key, DEFAULTS[key])
-        if not np.all(out >= 0.0):  # (NaN fails too)
-            raise ValueError(f"EKF config {key!r} must be >= 0")
+        if not np.all((out >= 0.0) & np.isfinite(out)):  # (NaN fails too)
+            raise ValueError(f"EKF config {key!r} must be a finite number >= 0")
         return out
 
     deg = math.pi / 180.0
