@@ -699,20 +699,6 @@ class _Sea:
         return self.x
 
 
-def _expm_taylor(M):
-    """exp(M): Taylor series (24 terms) after scaling M to a 1-norm <= 1/2, then squaring."""
-    norm = np.abs(M).sum(axis=0).max()
-    s = max(0, int(np.ceil(np.log2(norm / 0.5)))) if norm > 0 else 0
-    A = M / 2.0**s
-    E = term = np.eye(M.shape[0])
-    for k in range(1, 25):
-        term = term @ A / k
-        E = E + term
-    for _ in range(s):
-        E = E @ E
-    return E
-
-
 _FP16 = NOMOTO.build([CONTAINER] * 16)
 
 
@@ -763,7 +749,7 @@ class _TextbookEkf:
         F = _container_F(self.x, rudder, rps)
         M = np.zeros((16, 16))
         M[:8, :8], M[:8, 8:], M[8:, 8:] = -F, self.Qc, F.T
-        E = _expm_taylor(M)
+        E = scipy_expm(M)  # (scipy's Pade exponential, not the package's)
         A = E[8:, 8:].T
         xb = np.zeros((8, 1))
         xb[:6, 0], xb[RUDDER], xb[RPS] = self.x[:6], rudder, rps
@@ -801,16 +787,6 @@ class _TextbookEkf:
             x[:2] = z[:2]
         self.x = x
         return accept, restart, float(nu @ np.linalg.solve(S, nu)), len(sel)
-
-
-def test_taylor_exponential_of_the_reference_agrees_with_scipy():
-    """The reference's own matrix exponential (used 2 x 120 times below) against scipy's
-    Pade one on a Van Loan matrix of a turning container ship."""
-    xf = np.array([0.0, 0.0, 6.2, 7.0, 0.1, 0.004, 0.3, -0.2])
-    F = _container_F(xf, 10 * DEG, 1.5)
-    M = np.zeros((16, 16))
-    M[:8, :8], M[:8, 8:], M[8:, 8:] = -F, _TextbookEkf.Qc, F.T
-    np.testing.assert_allclose(_expm_taylor(M), scipy_expm(M), rtol=1e-12, atol=1e-14)
 
 
 def test_ekf_ships_of_a_mixed_batch_follow_a_textbook_ekf():

@@ -43,25 +43,7 @@ def run(name: str, rudder_deg: np.ndarray, psi0: float = 0.0,
         hidden: Mapping[str, Mapping[str, float]] | None = None) -> Kinematics:
     """The KVLCC2 replayed through ``rudder_deg`` (in the ``hidden`` current), measured through
     the ``hidden`` effects without noise; the "smoothed" state is the measured one."""
-    hidden = dict(hidden or {})
-    rud = np.radians(np.asarray(rudder_deg, float))
-    rps = np.full(N, _rps())
-    off = effects.environment_offset(hidden)
-    x0 = np.zeros((base.N_STATE, 1))
-    x0[2, 0], x0[3, 0] = psi0, SPEED
-    env = np.zeros((1, N, 4))
-    env[..., 0], env[..., 1] = off[0], off[1]
-    win = replay.Windows(x0, np.stack([rud, rps], -1)[None], env, np.array([DT]),
-                         np.array([N]), np.full((1, N, 6), np.nan), np.array([0]),
-                         np.array([0.0]), (name,))
-    truth, _ = replay.simulate(replay.model_rows([SPEC]), win)
-    m = {k: v[0, 0] for k, v in effects.measure(truth, np.array([DT]), [hidden]).items()}
-    trial = TrialData(name, "", _T.copy(), m["north"], m["east"], np.mod(m["psi"], 2 * np.pi),
-                      rud, rps, u_mps=m["u"], v_mps=m["v"], r_radps=m["r"], sog_mps=m["sog"],
-                      cog_rad=m["cog"])
-    smooth = {"north_m": m["north"], "east_m": m["east"], "psi_rad": m["psi"],
-              "u_mps": m["u"], "v_mps": m["v"], "r_radps": m["r"]}
-    return Kinematics(trial, smooth, {}, {})
+    return sailed(name, rudder_deg, psi0, hidden)
 
 
 def bias(deg: float) -> dict[str, dict[str, float]]:
