@@ -389,7 +389,7 @@ def test_a_report_drops_only_the_files_it_wrote_for_earlier_picks(tmp_path):
     (encounters / "encounter_2" / "summary.json").write_text("{}")
     mine = ["encounter_2.gif", "encounter_2.png"]
     others = ["notes.txt", "encounter_2.txt", "encounter_x.gif", "my_encounter_2.gif",
-              "encounter_2.png.bak"]
+              "encounter_2.png.bak", "encounter_02.gif"]
     for name in mine + others:
         (encounters / name).write_bytes(b"x")
     write_report(folder, worst=0)

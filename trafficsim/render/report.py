@@ -182,7 +182,7 @@ def _drop_stale(folder: Path, keep: set[int]) -> None:
         stem = item.name.removesuffix(".gif").removesuffix(".png")
         number = stem.removeprefix("encounter_")
         if stem == item.name.split(".")[0] and stem.startswith("encounter_") and \
-                number.isdigit() and int(number) not in keep:
+                number.isdigit() and number == str(int(number)) and int(number) not in keep:
             if item.is_dir():
                 shutil.rmtree(item)
             else:
