@@ -207,3 +207,16 @@ def test_a_ship_file_rewritten_on_disk_is_read_again(tmp_path):
     later = path.stat().st_mtime + 10.0
     os.utime(path, (later, later))
     assert load_ship(str(path))["coefficients"]["Y_v"] == -0.4
+
+
+@pytest.mark.parametrize("drop, kept", [("windage_frontal_area_m2", "windage_lateral_area_m2"),
+                                        ("windage_lateral_area_m2", "windage_frontal_area_m2")])
+def test_one_windage_area_without_the_other_is_refused(tmp_path, drop, kept):
+    """One area alone would silently mean no wind at all (trafficsim.ships.wind): refused at
+    the area given, naming the one missing."""
+    text = "".join(t for t in KVLCC2.splitlines(keepends=True) if drop not in t)
+    path = tmp_path / "ship.yaml"
+    path.write_text(text)
+    with pytest.raises(ShipLibraryError, match=f"{kept} is given without {drop}") as err:
+        load_ship(str(path))
+    assert err.value.line == _line_of(text, kept) and err.value.key == f"particulars.{kept}"

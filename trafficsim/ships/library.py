@@ -27,6 +27,8 @@ from trafficsim.io.yamlio import FieldError, Strict, load_yaml, validate
 LIBRARY_DIR = Path(__file__).parent / "library"
 #: the file that makes a folder an MMG parameter folder
 MMG_FOLDER_MARKER = "MMG_params.csv"
+#: the windage areas of the wind loads, given both or neither
+WINDAGE_AREAS = ("windage_lateral_area_m2", "windage_frontal_area_m2")
 
 
 class Particulars(Strict):
@@ -44,6 +46,11 @@ class Particulars(Strict):
                     raise FieldError(f"expected a number, got {value!r}", loc=(key,))
                 if not math.isfinite(value):
                     raise FieldError(f"expected a finite number, got {value!r}", loc=(key,))
+            given = [k for k in WINDAGE_AREAS if k in data]
+            if len(given) == 1:  # (one alone would mean no wind at all, trafficsim.ships.wind)
+                missing = next(k for k in WINDAGE_AREAS if k not in given)
+                raise FieldError(f"{given[0]} is given without {missing}; wind loads need both "
+                                 "areas (give neither for a ship without wind)", loc=(given[0],))
         return data
 
 

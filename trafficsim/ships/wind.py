@@ -39,7 +39,8 @@ table entries only the interpolation in angle and a 7-term dot product remain at
 :func:`wind_loads` and :func:`coefficients` are vectorised conveniences over many ships.
 
 Windage particulars (in the ship file's ``particulars``, all optional; a ship without
-``windage_lateral_area_m2`` and ``windage_frontal_area_m2`` feels no wind):
+``windage_lateral_area_m2`` and ``windage_frontal_area_m2`` feels no wind; a ship file giving
+one of the two without the other is refused when it is read):
 
 ==================================  =====================================================
 ``length_overall_m``                L (default ``length_m``)
