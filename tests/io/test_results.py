@@ -73,3 +73,15 @@ def test_csv_has_a_header_and_the_numbers(tmp_path):
     write_csv(path, {"t_s": np.array([0.0, 0.5]), "speed_kn": np.array([12.0, 11.75])})
     lines = path.read_text().splitlines()
     assert lines == ["t_s,speed_kn", "0,12", "0.5,11.75"]
+
+
+def test_bearings_rounded_up_to_360_are_written_as_0(tmp_path):
+    """359.9996 deg reads "360" at six significant digits, outside [0, 360): written as 0; a
+    bearing that stays below, and any other column, is written as it is."""
+    path = tmp_path / "t.csv"
+    write_csv(path, {"heading_deg": np.array([359.9996, 359.999, 12.5]),
+                     "gnss_cog_deg": np.array([359.99999, 0.0, 180.0]),
+                     "rudder_deg": np.array([359.9996, 0.0, 1.0])})
+    rows = [line.split(",") for line in path.read_text().splitlines()]
+    assert rows[1] == ["0", "0", "360"] and rows[2] == ["359.999", "0", "0"]
+    assert rows[3] == ["12.5", "180", "1"]

@@ -87,10 +87,19 @@ def read_parquet(path: Path, what: str = "table", columns: Sequence[str] = (),
         raise DataError(f"unreadable {what} ({err})", path=str(path)) from None
 
 
+#: column-name endings of bearings in [0, 360) deg: a value the format rounds up to 360 is 0
+BEARING_SUFFIXES = ("heading_deg", "cog_deg")
+
+
 def write_csv(path: Path, columns: Mapping[str, np.ndarray], fmt: str = "%.6g") -> None:
-    """Atomically write equal-length numeric columns as CSV with a header row."""
+    """Atomically write equal-length numeric columns as CSV with a header row (bearings stay
+    below 360 as written, :data:`BEARING_SUFFIXES`)."""
     names = list(columns)
     data = np.column_stack([np.asarray(columns[k], dtype=float) for k in names])
+    for j, name in enumerate(names):
+        if name.endswith(BEARING_SUFFIXES) and data.shape[0]:
+            shown = np.char.mod(fmt, data[:, j]).astype(float)
+            data[shown >= 360.0, j] = 0.0
 
     def write(fh: IO[bytes]) -> None:
         fh.write((",".join(names) + "\n").encode())
