@@ -506,3 +506,221 @@ def test_crossing_ahead_between_two_samples_is_still_seen():
     assert dense.crossed_ahead[0]
     coarse, _, _ = _run([own, crosser], end_s=720, every_s=60)
     assert coarse.crossed_ahead[0]
+
+
+# --------------------------------------------------------------------------------------------
+# hand-worked tracks: every term of the grade, from the sampled positions directly
+# --------------------------------------------------------------------------------------------
+
+def _by_hand(ships, end_s=2000, every_s=10):
+    """What the observer should have seen of ship 0 towards ship 1, worked out here in plain
+    Python from the track function (first smallest sampled range; course and speed changes
+    from the start; first sample with a turn over 5 deg or a speed change over 0.2 m/s)."""
+    n0, e0, psi0, u0 = _track(*ships[0], 0.0)
+    n1, e1, _, _ = _track(*ships[1], 0.0)
+    seen = dict(r0=math.hypot(n1 - n0, e1 - e0), r_cpa=math.inf, stbd=0.0, port=0.0,
+                faster=0.0, slower=0.0, u0=u0, r_man=None)
+    stbd = port = faster = slower = 0.0
+    r_man = None
+    for t in np.arange(every_s, end_s + every_s / 2, every_s):
+        on, oe, opsi, ou = _track(*ships[0], float(t))
+        tn, te, tpsi, _ = _track(*ships[1], float(t))
+        change = math.degrees(math.remainder(opsi - psi0, 2 * math.pi))
+        stbd, port = max(stbd, change), max(port, -change)
+        faster, slower = max(faster, ou - u0), max(slower, u0 - ou)
+        rng = math.hypot(tn - on, te - oe)
+        if r_man is None and (abs(change) > 5.0 or abs(ou - u0) > 0.2):
+            r_man = rng
+        if rng < seen["r_cpa"]:
+            seen.update(r_cpa=rng, stbd=stbd, port=port, faster=faster, slower=slower,
+                        r_man=r_man, t_cpa=float(t),
+                        beta=math.degrees(math.atan2(te - oe, tn - on) - opsi) % 360.0,
+                        alpha=math.degrees(math.atan2(oe - te, on - tn) - tpsi) % 360.0)
+    return seen
+
+
+def _woerner(seen, crossed=False):
+    """colregs.md section 2.4 / the module docstring, term by term, angles in degrees."""
+    r = seen["r_cpa"]
+    if r >= 1000:
+        s_r = 1.0
+    elif r >= 800:
+        s_r = 1 - 0.4 * (1000 - r) / 200
+    elif r >= 200:
+        s_r = 0.6 - 0.6 * (800 - r) / 600
+    else:
+        s_r = 0.0
+    a = min(abs((seen["alpha"] + 180) % 360 - 180), 90.0)
+    b = min(max(seen["beta"], 90.0), 270.0)
+    cos = lambda d: math.cos(math.radians(d))  # noqa: E731
+    safety = 0.5 * s_r + 0.5 * (1 - cos(a)) * (1 - cos(b)) / 2
+    r_man = r if seen["r_man"] is None else seen["r_man"]
+    p_delay = min(max((seen["r0"] - r_man) / (seen["r0"] - r), 0.0), 1.0)
+    course = max(seen["stbd"], seen["port"])
+    p_na_course = 0.5 * max(0.0, 1 - course**2 / 900)
+    kept = (seen["u0"] - seen["slower"]) / seen["u0"]
+    p_na_speed = kept - 0.5 if kept > 0.5 else 0.0
+    p_na = 0.0 if min(p_na_course, p_na_speed) < 0.3 else p_na_course * p_na_speed
+    s16 = safety * (1 - p_delay) * (1 - p_na)
+    p_nsb = min(max(1 - seen["stbd"] / 20, 0.0), 1.0) ** 4
+    sin = lambda d: math.sin(math.radians(-d))  # noqa: E731  (counter-clockwise)
+    p_sts = 1 - ((sin(seen["alpha"]) + 1) / 2) ** 2 * ((sin(seen["beta"]) + 1) / 2) ** 2
+    s14 = (1 - 0.6 * p_nsb - 0.2 * p_delay - p_sts) * (1 - p_na_course)
+    p_course = 0.0 if course < 2 else 0.5 if course > 30 else 0.5 * (course - 2) / 28
+    u0 = seen["u0"]
+    p_up = (u0 / (u0 + seen["faster"])) ** 2 if seen["faster"] > 0.2 else 1.0
+    p_down = 0.5 * seen["slower"] / u0 if seen["slower"] > 0.2 else 0.0
+    s17 = (safety - p_course) * p_up - p_down
+    clip = lambda v: min(max(v, 0.0), 1.0)  # noqa: E731
+    return {13: clip(s16 - 0.3 * crossed), 14: clip(s14), 15: clip(s16 - 0.5 * crossed),
+            16: clip(s16), 17: clip(s17), "safety": safety, "p_delay": p_delay}
+
+
+def _check(ships, crossed=False, end_s=2000):
+    obs, _, _ = _run(ships, end_s=end_s)
+    seen = _by_hand(ships, end_s=end_s)
+    assert bool(obs.crossed_ahead[0]) is crossed
+    assert obs.closest_m[0] == pytest.approx(seen["r_cpa"], abs=1e-6)
+    expected = _woerner(seen, crossed)
+    g = grade(obs)
+    for r in RULES_GRADED:
+        assert g[r][0] == pytest.approx(expected[r], abs=1e-9), r
+    return g, expected, seen
+
+
+RULES_GRADED = (13, 14, 15, 16, 17)
+
+# a ship passing on the reciprocal course 2 km to the east: both abeam at the CPA (safety
+# 0.5 * 1 + 0.5 * (1 - cos 90)(1 - cos 90) / 2 = 0.75) when the CPA falls on a sample
+
+
+def _passer(north):
+    return (north, 2000.0, [(0.0, 180.0, 6.0)])
+
+
+def test_stand_on_keeping_course_and_speed_is_graded_on_safety():
+    """Own 6 m/s north, passer from 12 km north: abeam at 1000 s, 2 km apart: S17 = 0.75; no
+    manoeuvre, so S16 = 0; starboard to starboard (each on the other's starboard beam),
+    so P_sts = 1 and S14 = 0."""
+    g, _, seen = _check([OWN_STRAIGHT, _passer(12000.0)])
+    assert seen["t_cpa"] == 1000.0
+    assert g[17][0] == pytest.approx(0.75, abs=1e-12)
+    assert g[16][0] == 0.0 and g[14][0] == 0.0
+
+
+def test_stand_on_slowing_down_is_penalised_by_half_the_share_of_speed_lost():
+    """Own slows 6 -> 4 m/s at 300 s: at 1000 s it is at 1800 + 4 * 700 = 4600 m, the passer
+    (from 10600 m) at 10600 - 6000 = 4600 m: abeam, safety 0.75. P_down = 0.5 * 2 / 6, so
+    S17 = 0.75 - 1/6 = 7/12. As a give-way manoeuvre the slow-down is apparent (4/6 of the
+    speed kept: P_na_speed = 1/6 < 0.3, so P_na = 0), first seen at 310 s (own 1840 m, passer
+    8740 m): S16 = 0.75 (1 - P_delay), P_delay = (r0 - r_man) / (r0 - 2000)."""
+    own = (0.0, 0.0, [(0.0, 0.0, 6.0), (300.0, 0.0, 4.0)])
+    g, _, seen = _check([own, _passer(10600.0)])
+    assert seen["t_cpa"] == 1000.0
+    assert g[17][0] == pytest.approx(7 / 12, abs=1e-9)
+    r0, r_man = math.hypot(10600, 2000), math.hypot(8740 - 1840, 2000)
+    assert g[16][0] == pytest.approx(0.75 * (1 - (r0 - r_man) / (r0 - 2000)), abs=1e-9)
+
+
+def test_stand_on_speeding_up_is_penalised_by_the_speed_ratio_squared():
+    """Own 6 -> 8 m/s at 300 s, passer from 13400 m: abeam at 1000 s (1800 + 5600 = 7400 m =
+    13400 - 6000), safety 0.75; P_up = (6/8)^2, S17 = 0.75 * 0.5625 = 0.421875. Speeding up
+    keeps the whole speed, so as a give-way manoeuvre it is not apparent: P_na = 0.5 * 0.5."""
+    own = (0.0, 0.0, [(0.0, 0.0, 6.0), (300.0, 0.0, 8.0)])
+    g, exp, _ = _check([own, _passer(13400.0)])
+    assert g[17][0] == pytest.approx(0.421875, abs=1e-9)
+    assert g[16][0] == pytest.approx(0.75 * (1 - exp["p_delay"]) * 0.75, abs=1e-9)
+
+
+def test_speed_changes_up_to_0_2_mps_are_no_manoeuvre():
+    """6 -> 5.85 m/s (0.15 m/s less) is below the detectable change: no first manoeuvre,
+    no P_down, S17 = 0.75 (abeam at 1000 s: 1800 + 5.85 * 700 = 5895 = 11895 - 6000)."""
+    own = (0.0, 0.0, [(0.0, 0.0, 6.0), (300.0, 0.0, 5.85)])
+    obs, _, _ = _run([own, _passer(11895.0)])
+    assert math.isnan(obs.range_at_manoeuvre_m[0])
+    assert obs.slower_cpa[0] == pytest.approx(0.15)
+    assert grade(obs)[17][0] == pytest.approx(0.75, abs=1e-9)
+
+
+@pytest.mark.parametrize("turn_deg, detected", [(4.9, False), (5.1, True), (-5.1, True)])
+def test_a_course_change_is_a_manoeuvre_only_over_5_degrees(turn_deg, detected):
+    own = (0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, turn_deg % 360.0, 6.0)])
+    obs, _, _ = _run([own, _passer(12000.0)], end_s=400)
+    assert (not math.isnan(obs.range_at_manoeuvre_m[0])) is detected
+    side = obs.stbd_rad[0] if turn_deg > 0 else obs.port_rad[0]
+    assert math.degrees(side) == pytest.approx(abs(turn_deg))
+
+
+def test_stand_on_small_course_change_is_penalised_linearly():
+    """Own turns 16 deg to port (away from the passer) at 95 s: P_course = 0.5 (16 - 2) / 28
+    = 0.25 off the safety seen at the (now later, wider) CPA."""
+    own = (0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, 344.0, 6.0)])
+    g, exp, seen = _check([own, _passer(12000.0)])
+    assert seen["port"] == pytest.approx(16.0)
+    assert g[17][0] == pytest.approx(exp["safety"] - 0.25, abs=1e-9)
+
+
+@pytest.mark.parametrize("legs", [
+    [(0.0, 0.0, 6.0), (95.0, 40.0, 6.0)],  # early and substantial
+    [(0.0, 0.0, 6.0), (95.0, 10.0, 6.0)],  # early but small: not readily apparent
+    [(0.0, 0.0, 6.0), (695.0, 40.0, 6.0)],  # late
+    [(0.0, 0.0, 6.0), (95.0, 0.0, 2.5)],  # slows to 2.5 / 6 of its speed: apparent
+])
+def test_give_way_tracks_graded_term_by_term(legs):
+    """The crossing ship from starboard (meeting point 6 km north at 1000 s): each give-way
+    track's Rule 13-17 scores equal the section 2.4 formulas evaluated on the positions,
+    course and speed changes read off the sampled tracks here."""
+    _check([(0.0, 0.0, legs), CROSSER])
+
+
+def test_small_alteration_keeps_two_ninths_of_the_non_apparent_penalty():
+    """A 10 deg turn with the speed kept: P_na_course = 0.5 (1 - 100/900) = 4/9 and
+    P_na_speed = 1 - 0.5 = 0.5, both >= 0.3: S16 = S (1 - P_delay)(1 - 2/9); the same turn
+    at 40 deg is apparent: S (1 - P_delay)."""
+    small = [(0.0, 0.0, 6.0), (95.0, 10.0, 6.0)]
+    g, exp, _ = _check([(0.0, 0.0, small), CROSSER])
+    assert g[16][0] == pytest.approx(exp["safety"] * (1 - exp["p_delay"]) * 7 / 9, abs=1e-9)
+
+
+def test_give_way_port_turn_crosses_ahead_and_loses_half_for_rule_15():
+    """40 deg to port at 95 s: the own ship runs north-west and reaches the crosser's track
+    (north 6000 m) at about 1276 s, 4.6 km west of the start, while the crosser (west-bound
+    from east 6000 m) is only at east -1.7 km: the own ship crosses ahead of her. Rule 16
+    grades the manoeuvre alone; Rule 15 takes 0.5 off it, Rule 13 0.3."""
+    port = [(0.0, 0.0, 6.0), (95.0, 320.0, 6.0)]
+    g, _, _ = _check([(0.0, 0.0, port), CROSSER], crossed=True)
+    assert g[16][0] > 0.3
+    assert g[15][0] == pytest.approx(max(0.0, g[16][0] - 0.5), abs=1e-9)
+    assert g[13][0] == pytest.approx(g[16][0] - 0.3, abs=1e-9)
+    stbd = grade(_run([(0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, 40.0, 6.0)]), CROSSER])[0])
+    assert stbd[15][0] > g[15][0]
+
+
+def test_head_on_small_starboard_turn_pays_the_non_starboard_and_apparent_terms():
+    """Reciprocal courses, the other 300 m on the own port bow at 8 km; a 10 deg starboard turn
+    at 95 s: P_nsb = (1 - 10/20)^4 = 1/16, (1 - P_na_course) = 5/9, so S14 = (1 - 0.6/16 -
+    0.2 P_delay - P_sts) 5/9, with P_sts from the passing geometry."""
+    other = (8000.0, -300.0, [(0.0, 180.0, 6.0)])
+    own = (0.0, 0.0, [(0.0, 0.0, 6.0), (95.0, 10.0, 6.0)])
+    g, exp, seen = _check([own, other], end_s=1200)
+    assert 180.0 < seen["beta"] < 360.0  # passes on the own port side
+    sin = math.sin
+    p_sts = 1 - ((sin(math.radians(-seen["alpha"])) + 1) / 2) ** 2 * (
+        (sin(math.radians(-seen["beta"])) + 1) / 2) ** 2
+    assert g[14][0] == pytest.approx(
+        max(0.0, (1 - 0.6 / 16 - 0.2 * exp["p_delay"] - p_sts) * 5 / 9), abs=1e-9)
+
+
+def test_overtaking_then_crossing_the_bow_loses_0_3_for_rule_13():
+    """Own ship (8 m/s) comes up 300 m to port of a 4 m/s ship on the same course, sheers 35
+    deg to port from 95 s to 300 s (a readily apparent early manoeuvre, 205 * 8 * sin 35 =
+    940 m more to port), passes her about 1.24 km off at some 574 s, then at 1300 s, 2.9 km
+    ahead, turns to 60 deg: relative to her it runs due east and crosses her bow line 2.9 km
+    ahead of her, the range opening all the while. S13 = S16 - 0.3."""
+    own = (0.0, 0.0, [(0.0, 0.0, 8.0), (95.0, 325.0, 8.0), (300.0, 0.0, 8.0),
+                      (1300.0, 60.0, 8.0)])
+    slow = (2000.0, 300.0, [(0.0, 0.0, 4.0)])
+    g, _, seen = _check([own, slow], crossed=True, end_s=2400)
+    assert seen["t_cpa"] < 1300.0
+    assert g[16][0] > 0.3
+    assert g[13][0] == pytest.approx(g[16][0] - 0.3, abs=1e-9)

@@ -206,3 +206,32 @@ def test_the_histogram_counts_every_pair(tmp_path):
     _, calls = _draw(_rows(pairs), tmp_path)
     (_, _, (counts, _, _)), = calls["hist"]
     assert counts[-1].sum() == len(pairs)
+
+
+def test_pairs_beyond_the_last_bin_are_counted_in_it(tmp_path):
+    """Ranges 0.1, 0.2, ..., 9.9 NM and one pair at 50 NM: the bins end at the linear 99th
+    percentile, 9.9 + 0.01 (50 - 9.9) = 10.301 NM (position 0.99 * 99 = 98.01), 40 bins of
+    0.2575 NM; the 50 NM pair lands in the last bin (alone: 9.9 < 10.301 - 0.2575), the
+    9.9 NM pair in bin 38, and no pair is lost."""
+    ranges_nm = [k / 10 for k in range(1, 100)] + [50.0]
+    pairs = [(k, "head_on", r * NM, False, False, False) for k, r in enumerate(ranges_nm)]
+    _, calls = _draw(_rows(pairs), tmp_path)
+    (_, _, (counts, edges, _)), = calls["hist"]
+    assert edges[-1] == pytest.approx(10.301)
+    total = counts[-1]
+    assert total.sum() == 100 and total[-1] == 1
+    assert total[38] >= 1 and edges[38] <= 9.9 < edges[39]
+
+
+def test_a_type_where_every_encounter_collided_has_no_upper_error_bar(tmp_path):
+    """Four head-on encounters, all collisions at 50 m: rate 1, the Wilson upper end exactly
+    1 (no bar above) and the lower end 4 / (4 + z^2) = 0.5101 (k = n: centre - half reduces
+    to n / (n + z^2)); near misses 0 of 4 (a collision is not a near miss)."""
+    pairs = [(k, "head_on", 50.0, True, True, False) for k in range(4)]
+    _, calls = _draw(_rows(pairs, diverged=False), tmp_path)
+    collision, near, domain = _rate_bars(calls)
+    assert list(collision[0][1]) == [1.0] and list(near[0][1]) == [0.0]
+    assert list(domain[0][1]) == [1.0]
+    assert collision[1]["yerr"][1] == [0.0]
+    assert collision[1]["yerr"][0] == pytest.approx([1 - 4 / (4 + Z95**2)], abs=1e-12)
+    assert near[1]["yerr"][1] == pytest.approx([Z95**2 / (4 + Z95**2)], abs=1e-12)

@@ -60,7 +60,7 @@ def test_start_geometry_has_the_drawn_dcpa_tcpa_and_type(write_spec):
             assert 0.2 * NM <= enc.dcpa_m[k] <= 0.8 * NM and 720 <= enc.tcpa_s[k] <= 1500
             kind = enc.pair_kinds[k]
             assert classify(own.heading_rad, other.heading_rad, other.north_m,
-                            other.east_m) == kind
+                            other.east_m, own.speed_mps, other.speed_mps) == kind
             kinds[kind] += 1
         if enc.kind == "multi":
             assert 3 <= len(enc.ships) <= 5
@@ -73,12 +73,16 @@ def test_start_geometry_has_the_drawn_dcpa_tcpa_and_type(write_spec):
 def test_classify_by_the_rule_sectors():
     north = 0.0
     # ahead, reciprocal: head-on; ahead on the starboard bow crossing: give way
-    assert classify(north, math.pi, 5000.0, 100.0) == "head_on"
-    assert classify(north, math.radians(260), 4000.0, 4000.0) == "crossing_give_way"
-    assert classify(north, math.radians(100), 4000.0, -4000.0) == "crossing_stand_on"
-    # a slower ship ahead on the same course: we overtake; a ship astern: we are overtaken
-    assert classify(north, 0.0, 3000.0, 0.0) == "overtaking"
-    assert classify(north, 0.0, -3000.0, 0.0) == "overtaken"
+    assert classify(north, math.pi, 5000.0, 100.0, 6.0, 6.0) == "head_on"
+    assert classify(north, math.radians(260), 4000.0, 4000.0, 6.0, 6.0) == "crossing_give_way"
+    assert classify(north, math.radians(100), 4000.0, -4000.0, 6.0, 6.0) == "crossing_stand_on"
+    # a slower ship ahead on the same course: we overtake; a faster one astern overtakes us
+    assert classify(north, 0.0, 3000.0, 0.0, 8.0, 5.0) == "overtaking"
+    assert classify(north, 0.0, -3000.0, 0.0, 5.0, 8.0) == "overtaken"
+    # coming up from abaft her beam but slower, a ship overtakes no one (rules/colregs.yaml's
+    # speed_ratio tests): the sectors of a crossing decide
+    assert classify(north, 0.0, 3000.0, 0.0, 5.0, 8.0) != "overtaking"
+    assert classify(north, 0.0, -3000.0, 0.0, 8.0, 5.0) != "overtaken"
 
 
 def test_ship_types_rogues_and_policy(write_spec):
@@ -224,10 +228,10 @@ def test_head_on_needs_the_other_ship_ahead(tmp_path):
     ship on the beam is no head-on situation. With DCPA 3 NM and TCPA 1 min the other ship
     would start nearly abeam (atan(3 NM / (closing speed x 1 min)) ~ 80 deg): no head-on
     geometry exists, and the draw says so."""
-    assert classify(0.0, math.pi, 10000.0, 1000.0) == "head_on"
-    assert classify(0.0, math.pi, 10000.0, 2000.0) == "crossing_give_way"
-    assert classify(0.0, math.pi, 10000.0, -2000.0) == "crossing_stand_on"
-    assert classify(0.0, math.pi, 500.0, 2836.0) != "head_on"  # bearing 80 deg, reciprocal
+    assert classify(0.0, math.pi, 10000.0, 1000.0, 6.0, 6.0) == "head_on"
+    assert classify(0.0, math.pi, 10000.0, 2000.0, 6.0, 6.0) == "crossing_give_way"
+    assert classify(0.0, math.pi, 10000.0, -2000.0, 6.0, 6.0) == "crossing_stand_on"
+    assert classify(0.0, math.pi, 500.0, 2836.0, 6.0, 6.0) != "head_on"  # bearing 80 deg
     spec = _spec(tmp_path, extra="encounter_types: {head_on: 1}\ndcpa_nm: [3, 3]\n"
                                  "tcpa_min: [1, 1]")
     with pytest.raises(InputError, match="no geometry for head_on"):
@@ -238,15 +242,16 @@ def test_head_on_needs_the_other_ship_ahead(tmp_path):
 def test_classify_is_invariant_under_rotating_the_whole_picture(own_psi):
     """Rotating both headings and the relative position by the same angle changes no type
     (the sectors are relative bearings; no wrap problem at 0 / 2 pi)."""
-    cases = [(math.pi, 5000.0, 100.0), (math.radians(260), 4000.0, 4000.0),
-             (math.radians(100), 4000.0, -4000.0), (0.0, 3000.0, 0.0), (0.0, -3000.0, 0.0)]
-    for other_rel, n, e in cases:
-        ref = classify(0.0, other_rel, n, e)
+    cases = [(math.pi, 5000.0, 100.0, 6.0, 6.0), (math.radians(260), 4000.0, 4000.0, 6.0, 6.0),
+             (math.radians(100), 4000.0, -4000.0, 6.0, 6.0), (0.0, 3000.0, 0.0, 8.0, 5.0),
+             (0.0, -3000.0, 0.0, 5.0, 8.0)]
+    for other_rel, n, e, *speeds in cases:
+        ref = classify(0.0, other_rel, n, e, *speeds)
         c, s = math.cos(own_psi), math.sin(own_psi)
-        rot = classify(own_psi, own_psi + other_rel, n * c - e * s, n * s + e * c)
+        rot = classify(own_psi, own_psi + other_rel, n * c - e * s, n * s + e * c, *speeds)
         assert rot == ref
         assert classify(own_psi - 2 * math.pi, own_psi + other_rel + 4 * math.pi,
-                        n * c - e * s, n * s + e * c) == ref
+                        n * c - e * s, n * s + e * c, *speeds) == ref
 
 
 def test_classify_mirrors_between_two_closing_ships():
@@ -265,8 +270,8 @@ def test_classify_mirrors_between_two_closing_ships():
         we = ub * math.sin(psi_b) - ua * math.sin(psi_a)
         if n * wn + e * we >= 0.0:  # opening: no encounter
             continue
-        ab = classify(psi_a, psi_b, n, e)
-        ba = classify(psi_b, psi_a, -n, -e)
+        ab = classify(psi_a, psi_b, n, e, ua, ub)
+        ba = classify(psi_b, psi_a, -n, -e, ub, ua)
         if ab in mirror:
             assert ba == mirror[ab], (psi_a, psi_b, n, e)
         else:
@@ -280,16 +285,20 @@ def test_classify_sector_boundaries():
     than 22.5 deg abaft the beam): just inside it is overtaken, just outside crossing."""
     r = 3000.0
 
-    def at(bearing_deg, other_deg):
+    def at(bearing_deg, other_deg):  # (the other ship faster: she may overtake)
         b = math.radians(bearing_deg)
-        return classify(0.0, math.radians(other_deg), r * math.cos(b), r * math.sin(b))
+        return classify(0.0, math.radians(other_deg), r * math.cos(b), r * math.sin(b), 5.0,
+                        8.0)
 
     assert at(112.6, 300.0) == "overtaken" and at(247.4, 60.0) == "overtaken"
     assert at(112.4, 300.0) == "crossing_give_way"
     assert at(247.6, 60.0) == "crossing_stand_on"
-    # reciprocal within 6 deg ahead: head-on; 7 deg off reciprocal: crossing
+    # courses reciprocal within 15 deg (rules/colregs.yaml's reciprocal_deg 165) with each
+    # ship within 10 deg of the other's bow: head-on; 16 deg off reciprocal: crossing. Bearing
+    # 8 deg and the other 14 deg past reciprocal put the own ship 8 - 14 = -6 deg off her bow
     assert at(2.0, 185.9) == "head_on" and at(2.0, 174.1) == "head_on"
-    assert at(2.0, 187.0) == "crossing_give_way"
+    assert at(8.0, 194.0) == "head_on" and at(-8.0, 166.0) == "head_on"
+    assert at(8.0, 196.0) == "crossing_give_way" and at(-8.0, 164.0) == "crossing_stand_on"
 
 
 # --------------------------------------------------------------------------------------------
@@ -416,3 +425,241 @@ def test_an_impossible_geometry_is_an_input_error_naming_the_key(tmp_path, monke
         gen.draw(load_spec(path), 3)
     assert info.value.key == "encounter_types"
     assert "encounter 3" in str(info.value) and "overtaking" in str(info.value)
+
+
+# --------------------------------------------------------------------------------------------
+# start CPA by brute-force propagation, per encounter type
+# --------------------------------------------------------------------------------------------
+
+def _closest_by_search(own, other, t_max):
+    """Time and distance of the closest approach of the two straight tracks, found by ternary
+    search on the convex range |p0 + w t| over [0, t_max] (no closed form used)."""
+    def gap(t):
+        on = own.north_m + own.speed_mps * math.cos(own.heading_rad) * t
+        oe = own.east_m + own.speed_mps * math.sin(own.heading_rad) * t
+        tn = other.north_m + other.speed_mps * math.cos(other.heading_rad) * t
+        te = other.east_m + other.speed_mps * math.sin(other.heading_rad) * t
+        return math.hypot(tn - on, te - oe)
+
+    lo, hi = 0.0, t_max
+    for _ in range(200):
+        a, b = lo + (hi - lo) / 3, hi - (hi - lo) / 3
+        if gap(a) < gap(b):
+            hi = b
+        else:
+            lo = a
+    t = 0.5 * (lo + hi)
+    return t, gap(t)
+
+
+@pytest.mark.parametrize("kind", ["head_on", "crossing_give_way", "crossing_stand_on",
+                                  "overtaking", "overtaken", "multi"])
+def test_start_cpa_found_by_propagating_the_tracks_is_in_the_spec_ranges(tmp_path, kind):
+    """Propagating both ships along their initial courses and searching for the smallest
+    range gives a DCPA in dcpa_nm and a TCPA in tcpa_min for every drawn ship, equal to the
+    recorded ones (the search runs to three times the largest TCPA, so a CPA outside the range
+    would be found, not cut off)."""
+    spec = _spec(tmp_path, extra=f"encounter_types: {{{kind}: 1}}\ndcpa_nm: [0.1, 0.9]\n"
+                                 "tcpa_min: [8, 20]")
+    for index in range(80):
+        enc = draw(spec, index)
+        own = enc.ships[0]
+        assert len(enc.ships) - 1 == len(enc.dcpa_m) == len(enc.tcpa_s)
+        for k, other in enumerate(enc.ships[1:]):
+            t, d = _closest_by_search(own, other, 3 * 20 * 60)
+            assert 0.1 * NM - 1e-3 <= d <= 0.9 * NM + 1e-3, (index, k, d)
+            assert 8 * 60 - 1e-3 <= t <= 20 * 60 + 1e-3, (index, k, t)
+            assert d == pytest.approx(enc.dcpa_m[k], abs=1e-3)
+            assert t == pytest.approx(enc.tcpa_s[k], abs=1e-3)
+
+
+def test_a_zero_dcpa_means_both_ships_reach_one_point_at_the_tcpa(tmp_path):
+    """dcpa_nm [0, 0]: each ship, run along its course for TCPA seconds, ends where the own
+    ship ends (a collision course), for every type."""
+    spec = _spec(tmp_path, extra="dcpa_nm: [0, 0]")
+    for index in range(60):
+        enc = draw(spec, index)
+        own = enc.ships[0]
+        for k, other in enumerate(enc.ships[1:]):
+            t = enc.tcpa_s[k]
+            own_at = (own.speed_mps * math.cos(own.heading_rad) * t,
+                      own.speed_mps * math.sin(own.heading_rad) * t)
+            other_at = (other.north_m + other.speed_mps * math.cos(other.heading_rad) * t,
+                        other.east_m + other.speed_mps * math.sin(other.heading_rad) * t)
+            assert math.dist(own_at, other_at) < 1e-6
+
+
+# --------------------------------------------------------------------------------------------
+# classification at the sector edges
+# --------------------------------------------------------------------------------------------
+
+def _at(bearing_deg, other_deg, own_deg=0.0, r=4000.0, own_speed=6.0, other_speed=6.0):
+    b = math.radians(own_deg + bearing_deg)
+    return classify(math.radians(own_deg), math.radians(other_deg), r * math.cos(b),
+                    r * math.sin(b), own_speed, other_speed)
+
+
+def test_head_on_needs_the_own_ship_nearly_ahead_of_the_other_too():
+    """Bearing 8 deg and courses 5.9 deg off reciprocal: the own ship lies at 180 + 8 = 188
+    deg from the other, so her aspect is 188 - 174.1 = 13.9 deg with the other on 174.1 deg
+    (over 10: a crossing from starboard) but 188 - 185.9 = 2.1 deg with the other on 185.9 deg
+    (head-on); mirrored, -8 deg gives -13.9 and -2.1."""
+    assert _at(8.0, 174.1) == "crossing_give_way"
+    assert _at(8.0, 185.9) == "head_on"
+    assert _at(-8.0, 185.9) == "crossing_stand_on"
+    assert _at(-8.0, 174.1) == "head_on"
+
+
+def test_head_on_bearing_limit_is_ten_degrees_inclusive_of_nearly_ahead():
+    """Reciprocal courses: bearing 9.9 deg (aspect 9.9) is head-on, 10.1 deg a crossing."""
+    assert _at(9.9, 180.0) == "head_on" and _at(-9.9, 180.0) == "head_on"
+    assert _at(10.1, 180.0) == "crossing_give_way"
+    assert _at(-10.1, 180.0) == "crossing_stand_on"
+
+
+@pytest.mark.parametrize("own_deg", [0.0, 90.0, 359.9, -720.0])
+def test_sides_across_the_bow_and_the_north_wrap(own_deg):
+    """A crossing ship 0.5 deg either side of the own bow is on that side, whatever the own
+    course (including courses that put the bow line on the 0 / 360 deg wrap)."""
+    assert _at(0.5, own_deg + 250.0, own_deg) == "crossing_give_way"
+    assert _at(-0.5, own_deg + 110.0, own_deg) == "crossing_stand_on"
+    assert _at(359.5, own_deg + 110.0, own_deg) == "crossing_stand_on"
+
+
+def test_overtaking_sector_edges_seen_from_the_other_ship():
+    """The own ship at 180 deg +- 67.4 from the other's bow (inside the stern sector) is
+    overtaking; at +- 67.6 (outside) it is not. Other ship north-bound at the origin's north:
+    the own ship's bearing from her is 180 + a, so the other's bearing from the own ship is a."""
+    for a, inside in ((67.4, True), (-67.4, True), (67.6, False), (-67.6, False)):
+        got = _at(a, 0.0, own_speed=8.0, other_speed=5.0)  # own north-bound: aspect 180 + a
+        assert (got == "overtaking") is inside, (a, got)
+
+
+# --------------------------------------------------------------------------------------------
+# the reference's overtaking criterion, and what the drawn encounters depend on
+# --------------------------------------------------------------------------------------------
+
+def test_the_overtaking_ship_is_the_faster_one(tmp_path):
+    """Rule 13 "coming up with" her: every implementation in colregs.md 2.2 (DNV speed ratio,
+    commonocean "OS faster", NTNU speed difference) and the project's own rules/colregs.yaml
+    (overtaking: aspect > 112.5 and speed_ratio < 1; overtaken: bearing > 112.5 and
+    speed_ratio > 1) call a ship overtaking only when she is the faster. A drawn overtaking
+    encounter must have the own ship faster, an overtaken one the other ship faster;
+    otherwise the rule network run on the very start state calls it a crossing and the grade
+    (Rule 13 / 17) judges the ships for roles they do not hold."""
+    spec = _spec(tmp_path, extra="encounter_types: {overtaking: 1, overtaken: 1}")
+    slower = []
+    for index in range(300):
+        enc = draw(spec, index)
+        own, other = enc.ships
+        if (enc.kind == "overtaking") != (own.speed_mps > other.speed_mps):
+            slower.append(index)
+    assert slower == []
+
+
+def test_the_policy_does_not_change_the_drawn_encounter(tmp_path):
+    """README: "Encounter k depends only on (seed, k)"; the no_avoidance policy is the
+    do-nothing baseline, to be run on the same draws (colregs.md section 5). The ships'
+    positions, courses, speeds and the current of encounter k must not depend on the policy."""
+    extra = "current_kn: [0, 2]\nwind_mps: [0, 10]\nrogue_fraction: 0.0"
+    rules = _spec(tmp_path, extra=extra, name="r.yaml")
+    baseline = _spec(tmp_path, extra=extra + "\npolicy: no_avoidance", name="n.yaml")
+    for index in range(20):
+        a, b = draw(rules, index), draw(baseline, index)
+        assert a.env == b.env, index
+        assert [(s.north_m, s.east_m, s.heading_rad, s.speed_mps) for s in a.ships] == [
+            (s.north_m, s.east_m, s.heading_rad, s.speed_mps) for s in b.ships], index
+
+
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")
+def test_huge_weights_are_refused_or_drawn_by_their_share(tmp_path):
+    """Two weights of 1e308 (finite, >= 0, so valid by the schema) sum to inf: the spec
+    must either be refused with a located error or draw both types half the time each."""
+    from trafficsim.errors import ScenarioError
+
+    path = tmp_path / "huge.yaml"
+    path.write_text(SPEC.format(n=5, seed=1, chunk=5, extra="encounter_types: "
+                                "{head_on: 1.0e+308, overtaken: 1.0e+308}"))
+    try:
+        spec = load_spec(path)
+    except ScenarioError as err:
+        assert "encounter_types" in str(err)
+        return
+    kinds = Counter(draw(spec, i).kind for i in range(40))
+    assert set(kinds) == {"head_on", "overtaken"}
+
+
+# --------------------------------------------------------------------------------------------
+# ship types, speeds and rogues against their stated distributions
+# --------------------------------------------------------------------------------------------
+
+def _within(count, n, p, sigmas=4.5):
+    """Binomial count within ``sigmas`` standard deviations of n p."""
+    return abs(count - n * p) <= sigmas * math.sqrt(n * p * (1 - p))
+
+
+def test_ship_types_follow_their_weights(tmp_path):
+    """ship_types {cargo: 3, container: 1, fishing: 0}: over 1,200 crossing encounters the own
+    ship is cargo with share 3/4 (binomial, 4.5 sigma), never fishing."""
+    path = tmp_path / "t.yaml"
+    path.write_text(SPEC.format(n=5, seed=2, chunk=5, extra="encounter_types: "
+                                "{crossing_give_way: 1, crossing_stand_on: 1}").replace(
+        "{cargo: 1, container: 1, fishing: 1}", "{cargo: 3, container: 1, fishing: 0}"))
+    spec = load_spec(path)
+    own = Counter(draw(spec, i).ships[0].spec["name"] for i in range(1200))
+    assert set(own) == {"cargo", "container"}
+    assert _within(own["cargo"], 1200, 0.75)
+
+
+def test_speed_fractions_are_uniform_in_the_range(tmp_path):
+    """Own speed / service speed over 800 encounters: a Kolmogorov-Smirnov test against the
+    uniform law on speed_fraction [0.5, 0.9] does not reject it (the own ship is drawn
+    before any geometry is tried)."""
+    from scipy import stats
+
+    from trafficsim.units import from_kn
+
+    spec = _spec(tmp_path, extra="speed_fraction: [0.5, 0.9]\n"
+                                 "encounter_types: {head_on: 1, crossing_give_way: 1}")
+    frac = [s.speed_mps / from_kn(s.spec["service_speed_kn"])
+            for s in (draw(spec, i).ships[0] for i in range(800))]
+    assert min(frac) >= 0.5 - 1e-12 and max(frac) <= 0.9 + 1e-12
+    assert stats.kstest(frac, stats.uniform(0.5, 0.4).cdf).pvalue > 1e-3
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.2])
+def test_rogue_share_of_the_other_ships(tmp_path, fraction):
+    """rogue_fraction f: each other ship is a rogue with probability f (binomial, 4.5 sigma
+    over all other ships of 400 encounters), the two rogue behaviours about equally often."""
+    spec = _spec(tmp_path, extra=f"rogue_fraction: {fraction}")
+    others = [s.behaviour for i in range(400) for s in draw(spec, i).ships[1:]]
+    rogues = [b for b in others if b != "colregs"]
+    assert set(rogues) <= {"turn_port", "late_action"}
+    if fraction == 0.0:
+        assert rogues == []
+    else:
+        assert _within(len(rogues), len(others), fraction)
+        assert _within(rogues.count("turn_port"), len(rogues), 0.5)
+
+
+def test_encounters_do_not_depend_on_the_spec_keys_that_are_not_draws(tmp_path):
+    """Name, campaign size, chunking and decision period are not draws: changing them leaves
+    every ship of the first encounters where it was; the duration only lengthens the route."""
+    a = _spec(tmp_path, n=20, chunk=3, name="a.yaml")
+    b_path = tmp_path / "b.yaml"
+    b_path.write_text(SPEC.format(n=7000, seed=7, chunk=1000, extra="decision_period_s: 30")
+                      .replace("name: gen", "name: other").replace("duration_s: 1200",
+                                                                   "duration_s: 3600"))
+    b = load_spec(b_path)
+    for index in (0, 5, 19):
+        x, y = draw(a, index), draw(b, index)
+        assert (x.kind, x.pair_kinds, x.dcpa_m, x.tcpa_s, x.env) == (
+            y.kind, y.pair_kinds, y.dcpa_m, y.tcpa_s, y.env)
+        for s, t in zip(x.ships, y.ships, strict=True):
+            assert (s.north_m, s.east_m, s.heading_rad, s.speed_mps, s.behaviour) == (
+                t.north_m, t.east_m, t.heading_rad, t.speed_mps, t.behaviour)
+            # same direction, a route three times as long (1.5 x duration x speed + 1 NM)
+            for u in (s, t):
+                leg = math.hypot(u.route_m[0, 0] - u.north_m, u.route_m[0, 1] - u.east_m)
+                duration = 1200.0 if u is s else 3600.0
+                assert leg == pytest.approx(1.5 * duration * u.speed_mps + NM)

@@ -130,7 +130,8 @@ def test_rows_are_the_pairs_of_each_encounter(straight):
                 else:
                     a, b = enc.ships[i], enc.ships[j]
                     expected_kind.append(classify(a.heading_rad, b.heading_rad,
-                                                  b.north_m - a.north_m, b.east_m - a.east_m))
+                                                  b.north_m - a.north_m, b.east_m - a.east_m,
+                                                  a.speed_mps, b.speed_mps))
     assert np.asarray(rows["encounter"]).tolist() == expected_enc
     assert list(rows["pair_type"]) == expected_kind
     assert np.all(np.asarray(rows["seed"]) == 3)

@@ -301,3 +301,74 @@ def test_a_rules_file_that_does_not_exist_is_reported_at_its_line(tmp_path):
     rules.write_text("x: 1\n")
     spec = load_spec(_minimal(tmp_path, extra="rules: mine.yaml", name="ok.yaml"))
     assert spec.rules == "mine.yaml"
+
+
+def test_the_format_example_of_the_module_docstring_loads_as_written(tmp_path, root):
+    """The YAML block of ``trafficsim.campaign.spec``'s docstring is the documented format:
+    written to a file (with its ``../rules/colregs.yaml`` next door) it loads, and reads back
+    the values it shows."""
+    from trafficsim.campaign import spec as spec_module
+
+    doc = spec_module.__doc__
+    block = doc[doc.index("::\n") + 3: doc.index("Every range is")]
+    text = "\n".join(ln[4:] for ln in block.splitlines()) + "\n"
+    (tmp_path / "rules").mkdir()
+    (tmp_path / "rules" / "colregs.yaml").write_text(
+        (root / "rules" / "colregs.yaml").read_text())
+    (tmp_path / "specs").mkdir()
+    path = tmp_path / "specs" / "doc.yaml"
+    path.write_text(text)
+    spec = load_spec(path)
+    assert (spec.name, spec.n_encounters, spec.seed, spec.duration_s) == (
+        "default", 1000, 1, 1800.0)
+    assert spec.multi_ships == (3, 5) and spec.tcpa_min == (10.0, 30.0)
+    assert spec.ship_types["cargo"] == 2 and spec.rogue_fraction == 0.05
+    assert spec.sensors is not None and spec.sensors.filter == "pv"
+
+
+BLOCK = """schema_version: 1
+name: block
+n_encounters: 3
+duration_s: 600
+sensors:
+  radar: true
+  gnss_sigma_m: [5, 1]
+ship_types:
+  cargo: 2
+  fishing: -1
+encounter_types:
+  head_on: 1
+  crosing: 1
+multi_ships:
+  - 3
+  - 6
+"""
+
+
+def test_errors_in_block_mappings_point_at_the_nested_line(tmp_path):
+    """Written as block mappings and lists, every bad entry is located at its own line (not
+    at the header line of its section), with its dotted key; all four are collected."""
+    path = tmp_path / "block.yaml"
+    path.write_text(BLOCK)
+    err = _error(path)
+    lines = BLOCK.splitlines()
+    expected = [(lines.index("  gnss_sigma_m: [5, 1]") + 1, "sensors.gnss_sigma_m"),
+                (lines.index("  fishing: -1") + 1, "ship_types.fishing"),
+                (lines.index("  crosing: 1") + 1, "encounter_types"),
+                (lines.index("  - 6") + 1, "multi_ships[1]")]
+    got = [(e.line, e.key) for e in err.errors]
+    assert [g[0] for g in got] == [e[0] for e in expected], got
+    for (_, key), (_, want) in zip(got, expected, strict=True):
+        assert key.startswith(want), got
+    assert err.path == str(path) and str(path) in str(err)
+
+
+def test_a_file_that_is_not_a_mapping_or_not_yaml_is_located(tmp_path):
+    """A list at the top level, and a tab-broken line, are ScenarioErrors naming the file."""
+    listed = tmp_path / "list.yaml"
+    listed.write_text("- schema_version: 1\n")
+    assert str(listed) in str(_error(listed))
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("schema_version: 1\nname: [x\n")
+    err = _error(broken)
+    assert str(broken) in str(err) and err.line is not None

@@ -276,3 +276,121 @@ def test_an_empty_table_summarises():
     t = _table([], [], [])
     s = summarise(t)
     assert s["n_encounters"] == 0 and s["n_completed"] == 0 and s["by_type"] == {}
+
+
+# --------------------------------------------------------------------------------------------
+# against scipy, and against per-encounter loops on random tables
+# --------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("k, n", [(0, 1), (1, 1), (0, 7), (3, 7), (7, 7), (1, 1000),
+                                  (999, 1000), (500, 1000), (17, 123456)])
+@pytest.mark.parametrize("level", [0.95, 0.9, 0.99])
+def test_wilson_matches_scipy(k, n, level):
+    """scipy.stats.binomtest(k, n).proportion_ci(method="wilson") at the same level (z the
+    normal quantile of (1 + level) / 2)."""
+    from scipy import stats
+
+    z = stats.norm.ppf(0.5 + level / 2)
+    ci = stats.binomtest(k, n).proportion_ci(confidence_level=level, method="wilson")
+    low, high = wilson(k, n, z) if level != 0.95 else wilson(k, n)
+    assert low == pytest.approx(max(0.0, ci.low), abs=1e-12)
+    assert high == pytest.approx(min(1.0, ci.high), abs=1e-12)
+
+
+def _random_table(rng, n_enc, diverged=False):
+    kinds = ["head_on", "crossing_give_way", "overtaking", "multi"]
+    enc, kind, rng_m, coll, dom, blind, beh = [], [], [], [], [], [], []
+    for e in rng.permutation(n_enc) + 100:
+        k = kinds[rng.integers(len(kinds))]
+        for _ in range(rng.integers(3, 7) if k == "multi" else 1):
+            enc.append(int(e))
+            kind.append(k)
+            rng_m.append(float(rng.choice([rng.uniform(0, 300), rng.uniform(300, 4000)])))
+            coll.append(rng_m[-1] < 100 and rng.random() < 0.8)
+            dom.append(rng_m[-1] < 1500 and rng.random() < 0.7)
+            blind.append(bool(rng.random() < 0.1))
+            beh.append("colregs" if rng.random() < 0.9 else "turn_port")
+    scores = {r: np.where(rng.random(len(enc)) < 0.5, np.nan, rng.random(len(enc)))
+              for r in (13, 14, 15, 16, 17)}
+    t = _table(enc, kind, rng_m, collision=coll, domain=dom, blind=blind, behaviour_j=beh,
+               scores=scores)
+    if diverged:
+        bad = set(rng.choice(np.unique(enc), size=3, replace=False).tolist())
+        t["diverged"] = np.array([e in bad for e in enc])
+    return t
+
+
+def _per_encounter_by_loop(t):
+    out: dict = {}
+    for i, e in enumerate(t["encounter"].tolist()):
+        if "diverged" in t and t["diverged"][i]:
+            continue
+        row = out.setdefault(e, {"type": t["encounter_type"][i], "min": math.inf,
+                                 "collision": False, "domain": False, "blind": False,
+                                 "compliant": True})
+        row["min"] = min(row["min"], t["min_range_m"][i])
+        row["collision"] |= bool(t["collision"][i])
+        row["domain"] |= bool(t["domain_violation"][i])
+        row["blind"] |= bool(t["blind_spot"][i])
+        row["compliant"] &= t["behaviour_i"][i] == "colregs" == t["behaviour_j"][i]
+    return out
+
+
+@pytest.mark.parametrize("seed, diverged", [(0, False), (1, False), (2, True)])
+def test_summary_agrees_with_a_loop_over_encounters_and_scipy_quantiles(seed, diverged):
+    """Random pair tables (shuffled rows, multi-ship encounters, some rogues, some diverged):
+    counts, Wilson intervals, CPA quantiles (scipy's scoreatpercentile, linear interpolation)
+    and rule means overall and per type equal those worked out by a plain loop."""
+    from scipy import stats
+
+    rng = np.random.default_rng(seed)
+    t = _random_table(rng, 60, diverged)
+    s = summarise(t)
+    enc = _per_encounter_by_loop(t)
+    keep = ~t["diverged"] if diverged else np.ones(len(t["encounter"]), bool)
+    groups = {"all": list(enc.values())}
+    for row in enc.values():
+        groups.setdefault(row["type"], []).append(row)
+    assert s["n_completed"] == len(enc) and s["n_encounters"] == 60
+    assert s["diverged"] == (3 if diverged else 0)
+    assert s["collisions_all_compliant"] == sum(r["collision"] and r["compliant"]
+                                                for r in enc.values())
+    assert s["encounters_all_compliant"] == sum(r["compliant"] for r in enc.values())
+    for name, rows in groups.items():
+        part = s if name == "all" else s["by_type"][name]
+        n = len(rows)
+        counts = {"collision": sum(r["collision"] for r in rows),
+                  "near_miss": sum(r["min"] < 800 and not r["collision"] for r in rows),
+                  "domain_violation": sum(r["domain"] for r in rows),
+                  "blind_spot": sum(r["blind"] for r in rows)}
+        for key, k in counts.items():
+            assert part[key]["count"] == k, (name, key)
+            assert part[key]["rate"] == pytest.approx(k / n)
+            assert part[key]["ci95"] == pytest.approx(list(wilson(k, n)), abs=1e-15)
+        minima = np.array([r["min"] for r in rows]) / NM
+        for q in (1, 5, 50):
+            assert part["cpa_nm"][f"p{q}"] == pytest.approx(
+                stats.scoreatpercentile(minima, q), rel=1e-12)
+        sel = keep & (True if name == "all" else t["encounter_type"] == name)
+        for r in (13, 14, 15, 16, 17):
+            values = [v for v in t[f"score_rule{r}"][sel] if not math.isnan(v)]
+            mean = part["compliance"][f"rule{r}"]
+            assert (mean is None) if not values else mean == pytest.approx(np.mean(values))
+    assert set(s["by_type"]) == set(groups) - {"all"}
+
+
+def test_one_encounter_gives_its_minimum_for_every_quantile():
+    """A single encounter of three pairs: P1 = P5 = P50 = its smallest range; its collision
+    rate is 1 of 1 with the Wilson interval [0.2065, 1] (z = 1.96: 1 / (1 + z^2) = 0.2066)."""
+    t = _table([4, 4, 4], ["multi"] * 3, [2500.0, 900.0, 50.0], collision=[False, False, True])
+    s = summarise(t)
+    assert s["cpa_nm"] == pytest.approx({f"p{q}": 50.0 / NM for q in (1, 5, 50)})
+    assert s["collision"]["ci95"] == pytest.approx([1 / (1 + Z95**2), 1.0], abs=1e-12)
+    assert s["near_miss"]["count"] == 0  # the encounter collided
+
+
+def test_per_type_split_counts_each_encounter_once():
+    """The per-type encounter counts add up to the completed encounters."""
+    t = _random_table(np.random.default_rng(5), 40, diverged=True)
+    s = summarise(t)
+    assert sum(v["n_encounters"] for v in s["by_type"].values()) == s["n_completed"] == 37

@@ -6,16 +6,19 @@ spec's ranges: with relative velocity ``w = v_other - v_own``, TCPA ``T`` and DC
 other ship starts at ``p = -w T + D n`` from the own ship, ``n`` a unit vector across ``w``
 (either side). Its course relative to the own ship and its speed are drawn for the encounter
 type, and a draw is kept only when the start geometry is of that type by the sectors of
-COLREGS Rules 13-15 (``../shared/reference/colregs.md``): overtaking when coming up from more
-than 22.5 degrees abaft the other's beam (relative bearing 112.5-247.5 degrees), head-on when
-nearly reciprocal (within 6 degrees) and each ship sees the other ahead or nearly ahead (Rule
-14(b); within 10 degrees of the bow, the ``head_on_bearing_deg`` of ``rules/colregs.yaml``),
-crossing otherwise, give-way when the other ship is on the own
-ship's starboard side.
+COLREGS Rules 13-15 (``../shared/reference/colregs.md``) as the bundled ``rules/colregs.yaml``
+reads them, so that the network sees the encounter the draw was meant to be: overtaking when
+coming up faster from more than 22.5 degrees abaft the other's beam (relative bearing
+112.5-247.5 degrees), head-on when nearly reciprocal (within 15 degrees, its
+``reciprocal_deg``) and each ship sees the other ahead or nearly ahead (Rule 14(b); within 10
+degrees of the bow, its ``head_on_bearing_deg``), crossing otherwise, give-way when the other
+ship is on the own ship's starboard side. Head-on draws are within 6 degrees of reciprocal.
 
 Every ship sails a straight route along its initial course, long enough for the whole run.
 All draws come from the encounter's own stream (purpose ``"encounter"``), so encounter ``k``
-is the same whatever the batch, chunk or worker it runs in.
+is the same whatever the batch, chunk or worker it runs in; the policy and the rogue share
+only decide what is done with the draws, so a ``no_avoidance`` baseline meets the very
+encounters of its ``colregs`` campaign.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from trafficsim.units import NM, from_kn
 
 PAIR_TYPES = ENCOUNTER_TYPES[:-1]  # the types of one other ship
 HEAD_ON_DEG = 6.0  # course difference from reciprocal of a head-on draw (Rule 14: "nearly")
+RECIPROCAL_DEG = 15.0  # nearly reciprocal courses (180 - rules/colregs.yaml's reciprocal_deg)
 HEAD_ON_BEARING_DEG = 10.0  # Rule 14(b): the other ship "ahead or nearly ahead" of each
 ABAFT_LOW, ABAFT_HIGH = math.radians(112.5), math.radians(247.5)  # Rule 13(b) sector
 ROGUES = ("turn_port", "late_action")
@@ -69,16 +73,18 @@ def _abaft(bearing: float) -> bool:
     return ABAFT_LOW < _wrap(bearing) < ABAFT_HIGH
 
 
-def classify(own_psi: float, other_psi: float, rel_n: float, rel_e: float) -> str:
+def classify(own_psi: float, other_psi: float, rel_n: float, rel_e: float, own_speed: float,
+             other_speed: float) -> str:
     """Encounter type of the other ship at relative position ``(rel_n, rel_e)`` m, by the
-    sectors of Rules 13-15 (both ships closing is assumed)."""
+    sectors of Rules 13-15 and the speeds (m/s) as ``rules/colregs.yaml`` reads them (both
+    ships closing is assumed)."""
     bearing = math.atan2(rel_e, rel_n) - own_psi  # of the other ship, from the own bow
     aspect = math.atan2(-rel_e, -rel_n) - other_psi  # of the own ship, from the other's bow
-    if _abaft(aspect):
+    if _abaft(aspect) and own_speed > other_speed:
         return "overtaking"
-    if _abaft(bearing):
+    if _abaft(bearing) and other_speed > own_speed:
         return "overtaken"
-    reciprocal = abs(_wrap(other_psi - own_psi) - math.pi) <= math.radians(HEAD_ON_DEG)
+    reciprocal = abs(_wrap(other_psi - own_psi) - math.pi) <= math.radians(RECIPROCAL_DEG)
     sector = math.radians(HEAD_ON_BEARING_DEG)
     if (reciprocal and abs(_wrap(bearing + math.pi) - math.pi) <= sector
             and abs(_wrap(aspect + math.pi) - math.pi) <= sector):
@@ -162,12 +168,14 @@ def _ships(spec: CampaignSpec, pair_kinds: list[str], types: list[str],
                 continue
             rel_n = -wn * tcpa - dcpa * we / w
             rel_e = -we * tcpa + dcpa * wn / w
-            if classify(own_psi, psi, rel_n, rel_e) == pair_kind:
+            if classify(own_psi, psi, rel_n, rel_e, own_speed, speed) == pair_kind:
                 break
         else:
             return None
-        rogue = spec.policy == "colregs" and rng.random() < spec.rogue_fraction
-        who = ROGUES[int(rng.integers(len(ROGUES)))] if rogue else behaviour
+        # (drawn whatever the policy and share, so that they change nothing else)
+        u, rogue_kind = rng.random(), int(rng.integers(len(ROGUES)))
+        rogue = spec.policy == "colregs" and u < spec.rogue_fraction
+        who = ROGUES[rogue_kind] if rogue else behaviour
         setups.append(ShipSetup(f"ship{k}", ship(type_), 0, rel_n, rel_e, psi, speed,
                                 _route(rel_n, rel_e, psi, speed * reach + NM), k,
                                 merge_sensors(ship(type_).get("sensors"), _sensors(spec, rng)),

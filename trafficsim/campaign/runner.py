@@ -23,7 +23,7 @@ from trafficsim.campaign.generator import Encounter, classify, draw
 from trafficsim.campaign.spec import CampaignSpec
 from trafficsim.colregs.decider import Decider
 from trafficsim.engine import Simulation
-from trafficsim.ships.base import EAST, NORTH, PSI
+from trafficsim.ships.base import EAST, NORTH, PSI, U
 from trafficsim.units import NM
 
 
@@ -91,7 +91,7 @@ def _rows(spec: CampaignSpec, encounters: list, sim: Simulation, observer: PairO
         else:
             a, c = pi[p], pj[p]
             pair_kind.append(classify(x0[PSI, a], x0[PSI, c], x0[NORTH, c] - x0[NORTH, a],
-                                      x0[EAST, c] - x0[EAST, a]))
+                                      x0[EAST, c] - x0[EAST, a], x0[U, a], x0[U, c]))
     blind = [""] * pi.shape[0]  # the role both ships held, first time it happened
     if sim.decider is not None:
         index = {(int(a), int(c)): p for p, (a, c) in enumerate(zip(pi, pj, strict=True))}

@@ -44,6 +44,7 @@ Every range is ``[low, high]`` with ``low <= high`` and is sampled uniformly.
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -162,6 +163,9 @@ class CampaignSpec(Strict):
     def _some_weight(cls, weights: dict[str, float]) -> dict[str, float]:
         if not weights or sum(weights.values()) <= 0.0:
             raise ValueError("expected at least one weight > 0")
+        if not math.isfinite(sum(weights.values())):
+            raise ValueError("expected weights whose sum is a finite number (they are relative: "
+                             "1, 2, 3 will do)")
         return weights
 
     @field_validator("dt_s")
