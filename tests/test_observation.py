@@ -5,6 +5,7 @@ import pytest
 
 from trafficsim.batch import EncounterEnv, ShipSetup, build_batch
 from trafficsim.engine import Simulation
+from trafficsim.noise import generator
 from trafficsim.observation import Observation, observes
 from trafficsim.ships.base import EAST, NORTH, PSI, U
 from trafficsim.ships.library import load_ship
@@ -196,3 +197,86 @@ def test_build_pairs_flags_and_per_ship_instruments():
     coast = obs.settings[:, 1]
     np.testing.assert_array_equal(coast == 12.0, obs.obs == 1)
     assert obs.tracks.x.shape == (6, 4) and not obs.tracks.active.any()
+
+
+# --- batch composition ------------------------------------------------------------------------
+
+
+def _encounter(enc, key, n=2, sensors=FULL, filt="none"):
+    """Ships of one encounter (stream key ``key``): a, b and optionally c of ``MOVES``-like
+    starts, under way."""
+    spec = load_ship("container")
+    starts = [(0.0, 0.0, 0.0, 14.0), (6000.0, 3000.0, np.pi, 12.0), (-3000.0, 4000.0, 5.0, 10.0)]
+    return [ShipSetup(f"s{enc}_{k}", spec, enc, *starts[k][:3], from_kn(starts[k][3]),
+                      ship_in_encounter=k, sensors=sensors, stream_encounter=key, filter=filt)
+            for k in range(n)]
+
+
+def _run(ships, steps=60, seed=3):
+    envs = [EncounterEnv()] * (max(s.encounter for s in ships) + 1)
+    sim = Simulation.start(build_batch(ships, envs), 1.0, seed)
+    for _ in range(steps):
+        sim.step()
+    return sim
+
+
+def test_encounter_tracks_identical_alone_or_inside_a_larger_batch():
+    """An encounter (stream key 7, radar with missed detections and AIS with lost reports,
+    3 s latency) run alone and as the third of four encounters whose ships differ in number
+    and instruments (one with AIS only, one with a faster radar only, none with the same
+    key): its ships' motion and its tracks are bit-identical, since every draw is keyed by
+    (encounter key, ship, purpose[, target]) and no loop couples pairs."""
+    alone = _run(_encounter(0, 7))
+    big = _run(_encounter(0, 1, 3) + _encounter(1, 4, 2, {"ais": {}})
+               + _encounter(2, 7) + _encounter(3, 9, 3, {"radar": {"scan_period_s": 2.0}}))
+    offset = 5  # the encounter's ships are rows 5, 6 of the big batch
+    np.testing.assert_array_equal(alone.batch.x, big.batch.x[:, offset:offset + 2])
+    rows = [_track_of(big.obs, o + offset, t + offset)
+            for o, t in zip(alone.obs.obs, alone.obs.tgt, strict=True)]
+    assert alone.obs.tracks.active.all() and (alone.obs.tracks.n_updates > 5).all()
+    for f in ("x", "P", "t_s", "active", "n_updates", "gate_failures"):
+        np.testing.assert_array_equal(getattr(alone.obs.tracks, f),
+                                      getattr(big.obs.tracks, f)[rows])
+
+
+def test_an_encounter_without_radar_is_unaffected_by_radars_elsewhere():
+    """AIS-only ships a, b tracked alone (the batch has no radar: no scans at all) and next to
+    an encounter with radars (scans every step there): the a-b tracks are bit-identical."""
+    ais_only = [{"ais": FULL["ais"]}] * 2
+    alone = _observe(["a", "b"], [0, 0], [0, 1], configs=ais_only)
+    assert not alone.has_radar
+    mixed = _observe(["c", "a", "b"], [3, 0, 0], [0, 0, 1],
+                     configs=[{"radar": {"scan_period_s": 1.0}}, *ais_only])
+    assert mixed.has_radar
+    _same_tracks(alone, [(0, 1), (1, 0)], mixed, [(1, 2), (2, 1)])
+
+
+def test_the_same_seed_gives_the_same_tracks_and_update_is_deterministic():
+    """Two builds from the same seed and inputs give bit-identical tracks (no hidden global
+    state), and the radar and AIS streams advance only through the observation itself."""
+    one = _observe(["a", "b", "c"], [0, 0, 0], [0, 1, 2])
+    two = _observe(["a", "b", "c"], [0, 0, 0], [0, 1, 2])
+    for f in ("x", "P", "t_s", "active", "n_updates"):
+        np.testing.assert_array_equal(getattr(one.tracks, f), getattr(two.tracks, f))
+    for name in ("radar", "ais_rx", "ais"):
+        np.testing.assert_array_equal(one.banks[name].state, two.banks[name].state)
+
+
+def test_streams_are_keyed_by_encounter_observer_purpose_and_target():
+    """Before any step, each directed pair's ``radar`` and ``ais_rx`` streams are numpy's
+    ``SFC64(SeedSequence(seed, spawn_key=(encounter, observer, purpose, target)))`` (slots
+    within the encounter) and each ship's ``ais`` stream the same without a target, as
+    :func:`trafficsim.noise.generator` builds them: the two directions of a pair differ."""
+    obs = _observe(["c", "a", "b"], [5, 2, 2], [0, 1, 0], seed=11, steps=0)
+    slot, enc = np.array([0, 1, 0]), np.array([5, 2, 2])
+    assert obs.obs.tolist() == [1, 2] and obs.tgt.tolist() == [2, 1]
+    for name in ("radar", "ais_rx"):
+        for k, (i, j) in enumerate(zip(obs.obs, obs.tgt, strict=True)):
+            g = generator(11, enc[i], slot[i], name, other=slot[j])
+            np.testing.assert_array_equal(obs.banks[name].state[k],
+                                          g.bit_generator.state["state"]["state"])
+    for i in range(3):
+        g = generator(11, enc[i], slot[i], "ais")
+        np.testing.assert_array_equal(obs.banks["ais"].state[i],
+                                      g.bit_generator.state["state"]["state"])
+    assert not np.array_equal(obs.banks["radar"].state[0], obs.banks["radar"].state[1])

@@ -959,3 +959,299 @@ def test_other_course_change_is_measured_the_short_way_across_north():
     assert feature(dec, "other_course_change_deg")[0] == pytest.approx(20.0)
     assert feature(dec, "other_speed_change_ratio")[0] == pytest.approx(1.0)
     assert feature(dec, "time_in_role_min")[0] == pytest.approx(10.0 / 60.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Speed orders
+# --------------------------------------------------------------------------------------------
+
+def _dcpa_m(pn: float, pe: float, wn: float, we: float) -> float:
+    """Closed-form DCPA of straight tracks, |p x w| / |w| (colregs.md section 4)."""
+    return abs(pn * we - pe * wn) / math.hypot(wn, we)
+
+
+def test_stand_on_ship_acts_by_slowing_on_her_course_rule_17a_ii():
+    """Ship 0 (keep_course) steers north from 2600 m south of the origin, ship 1 (colregs)
+    west from 3600 m east of it, both 12 kn: ship 1 has ship 0 on her port side and stands on
+    (Rule 15). At the next step the give-way ship has not acted and domain entry is < 10 min
+    away: Rule 17(a)(ii), slow to half speed. Relative to ship 1, ship 0 is at
+    p = (-2538, -3538) m; at full speed on 270 the relative velocity (V, V) passes at
+    0.38 NM, at half speed (V, V/2) at |p x w| / |w| = 2029 m >= 1 NM: the speed reduction
+    alone suffices, so her course order is her own course 270 at half speed."""
+    dec = build(["keep_course", "colregs"])
+    ships = [(-2600.0, 0.0, 0.0, V), (0.0, 3600.0, 270.0, V)]
+    decide(dec, 0.0, ships)
+    assert mem(dec, "own_role")[1] == STAND_ON
+    assert mem(dec, "own_manoeuvre")[1] == KEEP
+    assert np.isnan(dec.course_order_rad[1]) and dec.speed_factor[1] == 1.0
+    moved = [(-2600.0 + 10.0 * V, 0.0, 0.0, V), (0.0, 3600.0 - 10.0 * V, 270.0, V)]
+    decide(dec, 10.0, moved)
+    assert feature(dec, "time_to_domain_min")[1] <= 10.0
+    assert mem(dec, "own_manoeuvre")[1] == ENC["reduce_speed"]
+    p = (moved[0][0] - moved[1][0], moved[0][1] - moved[1][1])
+    assert _dcpa_m(*p, V, V) < NM
+    assert _dcpa_m(*p, V, V / 2.0) == pytest.approx(2029.0, abs=1.0)
+    assert dec.speed_factor[1] == 0.5
+    assert wrap_deg(dec.course_order_rad[1]) == pytest.approx(270.0, abs=1e-9)
+    assert dec.kept_distance_m[1] == pytest.approx(NM)
+
+
+def test_restricted_visibility_alters_and_slows_where_both_are_safe():
+    """Rule 19 head-on at TCPA 14.9 min (range R = 2 V 894 s = 11038 m), visibility 1 NM:
+    each ship asks for 30 deg to starboard and half speed. At half speed on 030 the relative
+    velocity is (-V - V/2 cos 30, -V/2 sin 30): DCPA = R (V/4) / |w| = 0.17186 R = 1897 m
+    >= 1 NM, so 030 at half speed (and 210 for the other ship). In clear weather the same
+    encounter asks for no speed reduction: 030 at full speed."""
+    ships = head_on(14.9)
+    R = ships[1][0]
+    th = math.radians(30.0)
+    assert _dcpa_m(R, 0.0, -V - 0.5 * V * math.cos(th), -0.5 * V * math.sin(th)) == \
+        pytest.approx(1897.0, abs=1.0)
+    fog = Decider.build(["colregs", "colregs"], np.array([0]), np.array([1]), visibility_nm=1.0)
+    decide(fog, 0.0, ships)
+    assert mem(fog, "encounter").tolist() == [ENC["restricted_visibility"]] * 2
+    assert mem(fog, "own_manoeuvre").tolist() == [ALTER_COURSE, ALTER_COURSE]
+    np.testing.assert_allclose(wrap_deg(fog.course_order_rad), [30.0, 210.0], atol=1e-9)
+    np.testing.assert_array_equal(fog.speed_factor, [0.5, 0.5])
+    clear = build(["colregs", "colregs"])
+    decide(clear, 0.0, ships)
+    np.testing.assert_allclose(wrap_deg(clear.course_order_rad), [30.0, 210.0], atol=1e-9)
+    np.testing.assert_array_equal(clear.speed_factor, [1.0, 1.0])
+
+
+def test_a_stopped_give_way_ship_alters_to_starboard_of_her_heading():
+    """Ship 0 heads 090 (route speed 6 m/s); ship 1 comes up from 2.5 NM due south (on ship
+    0's starboard beam) steering north at 12 kn, TCPA 12.5 min: Rule 15, ship 0 gives way to
+    starboard. Below 0.1 m/s own course is the heading (features module), so a ship lying
+    stopped and one creeping ahead at 0.2 m/s see the same encounter and must get the same
+    order: 120, the least alteration asked (30 deg), which at 6 m/s passes ship 1 at
+    |p x w| / |w| = 4630 x 5.196 / 10.542 = 2282 m >= 1 NM (p = (-4630, 0) m,
+    w = (6.173 + 3, -5.196) m/s)."""
+    w = (V + 3.0, -6.0 * math.sin(math.radians(120.0)))
+    assert _dcpa_m(-2.5 * NM, 0.0, *w) == pytest.approx(2282.0, abs=1.0)
+    orders = []
+    for own_speed in (0.2, 0.0):
+        dec = build(["colregs", "keep_course"])
+        ships = [(0.0, 0.0, 90.0, own_speed), (-2.5 * NM, 0.0, 0.0, V)]
+        decide(dec, 0.0, ships, route_mps=[6.0, V])
+        assert feature(dec, "bearing_deg")[0] == pytest.approx(90.0)
+        assert feature(dec, "course_diff_deg")[0] == pytest.approx(-90.0)
+        assert mem(dec, "own_role")[0] == GIVE_WAY
+        assert dec.request[0, 0] == STARBOARD
+        orders.append(float(wrap_deg(dec.course_order_rad[0])))
+    assert orders[0] == pytest.approx(120.0)
+    assert orders[1] == pytest.approx(orders[0])
+
+
+# --------------------------------------------------------------------------------------------
+# Lost tracks: the limit and the observer's own rules file
+# --------------------------------------------------------------------------------------------
+
+def test_lost_track_is_kept_for_exactly_lost_track_min():
+    """The encounter is forgotten when the track has been lost for LONGER than
+    lost_track_min (3 min): last known at 0 s, still held at 180 s, forgotten at 180.5 s."""
+    dec = build(["colregs", "colregs"])
+    decide(dec, 0.0, crossing(14.0))
+    assert mem(dec, "own_role")[0] == GIVE_WAY
+    decide(dec, 180.0, crossing(11.0), nan_pairs=(0,))
+    assert mem(dec, "own_role")[0] == GIVE_WAY
+    assert mem(dec, "own_manoeuvre")[0] == ALTER_COURSE
+    decide(dec, 180.5, crossing(11.0), nan_pairs=(0,))
+    assert mem(dec, "own_role")[0] == NO_ROLE
+    assert mem(dec, "other_role")[0] == NO_ROLE
+    assert mem(dec, "own_manoeuvre")[0] == RESUME_ROUTE
+    assert dec.cursor[0] == dec.start_cursor[0]
+
+
+def test_each_observer_forgets_after_its_own_rules_files_limit(tmp_path):
+    """Ship 0 runs a rules file that extends colregs.yaml with lost_track_min 1 and
+    look_ahead_min 40; ship 1 runs turn_port.yaml (3 min, 30 min). Both lose their tracks
+    after t = 0: at 70 s ship 0 has forgotten (> 60 s), ship 1 still stands on; at 190 s she
+    has forgotten too. The feature look-ahead is the longest of the files (40 min)."""
+    rules = tmp_path / "quick_forget.yaml"
+    rules.write_text("schema_version: 1\nname: quick_forget\n"
+                     f"extends: {RULES_DIR / 'colregs.yaml'}\n"
+                     "parameters:\n  lost_track_min: 1.0\n  look_ahead_min: 40.0\n")
+    dec = Decider.build(["colregs", "turn_port"], np.array([0]), np.array([1]), rules)
+    assert dec.lost_track_s.tolist() == [60.0, 180.0]
+    assert dec.horizon_s == 2400.0
+    decide(dec, 0.0, crossing(14.0))
+    assert mem(dec, "own_role").tolist() == [GIVE_WAY, STAND_ON]
+    decide(dec, 70.0, crossing(14.0 - 70.0 / 60.0), nan_pairs=(0, 1))
+    assert mem(dec, "own_role").tolist() == [NO_ROLE, STAND_ON]
+    decide(dec, 190.0, crossing(14.0 - 190.0 / 60.0), nan_pairs=(0, 1))
+    assert mem(dec, "own_role").tolist() == [NO_ROLE, NO_ROLE]
+
+
+def test_lost_track_limit_of_a_keep_course_ship_and_a_pair_never_known():
+    """A keep_course ship takes no decisions: her pairs have an infinite lost-track limit. A
+    pair whose target has never been known is not 'lost': it has no last-known time, and
+    gets no role."""
+    dec = build(["colregs", "keep_course"])
+    assert dec.lost_track_s.tolist() == [180.0, math.inf]
+    decide(dec, 0.0, crossing(14.0), nan_pairs=(0,))
+    decide(dec, 1000.0, crossing(14.0), nan_pairs=(0,))
+    assert np.isnan(dec.last_known_s[0]) and dec.last_known_s[1] == 1000.0
+    assert mem(dec, "own_role")[0] == NO_ROLE
+    assert mem(dec, "own_manoeuvre")[0] == NO_ACTION
+
+
+# --------------------------------------------------------------------------------------------
+# Port / starboard mirror of the classification
+# --------------------------------------------------------------------------------------------
+
+def test_mirror_image_encounters_swap_only_the_crossing_roles():
+    """600 random two-ship encounters and their mirror images (east and courses negated). The
+    Rule 7 and 13/14 tests read distances, times and |angles|, which the mirror keeps, so the
+    encounter kind is the same; Rule 15 reads the side: a give-way crossing becomes a stand-on
+    crossing and back, mutual give-way stays (both ships see each other on the same side),
+    and head-on / overtaking roles are kept."""
+    rng = np.random.default_rng(41)
+    k = 600
+    course = rng.uniform(0.0, 360.0, (k, 2))
+    speed = rng.uniform(3.0, 20.0, (k, 2)) * NM / 3600.0
+    rel = rng.uniform(-3.0, 3.0, (k, 2)) * NM
+
+    def run(sign: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        ships = []
+        for i in range(k):
+            ships += [(0.0, 0.0, sign * course[i, 0], speed[i, 0]),
+                      (rel[i, 0], sign * rel[i, 1], sign * course[i, 1], speed[i, 1])]
+        dec = Decider.build(["colregs"] * (2 * k), np.arange(0, 2 * k, 2),
+                            np.arange(1, 2 * k, 2))
+        a = np.array(ships)
+        hdg = np.radians(a[:, 2])
+        own_state = np.stack([a[:, 0], a[:, 1], hdg])
+        own_vel = np.stack([a[:, 3] * np.cos(hdg), a[:, 3] * np.sin(hdg)])
+        other = np.concatenate([own_state[:2, dec.tgt], own_vel[:, dec.tgt]])
+        dec.decide(0.0, own_state, own_vel, np.full(2 * k, 150.0), other, hdg, a[:, 3])
+        return (mem(dec, "own_role").copy(), mem(dec, "encounter").copy(),
+                mem(dec, "other_role").copy(), feature(dec, "bearing_deg").copy())
+
+    role, enc, other_role, bearing = run(1.0)
+    m_role, m_enc, m_other_role, m_bearing = run(-1.0)
+    np.testing.assert_allclose(((bearing + m_bearing + 180.0) % 360.0) - 180.0, 0.0, atol=1e-9)
+    np.testing.assert_array_equal(m_enc, enc)
+    swap = {GIVE_WAY: STAND_ON, STAND_ON: GIVE_WAY}
+    crossing_ = enc == ENC["crossing"]
+    assert ((role == GIVE_WAY) & crossing_).sum() > 20
+    for mine, mirrored in ((role, m_role), (other_role, m_other_role)):
+        want = np.where(crossing_, [swap.get(float(r), float(r)) for r in mine], mine)
+        np.testing.assert_array_equal(mirrored, want)
+
+
+# --------------------------------------------------------------------------------------------
+# Resuming the route: never away from it, and only as far as it is safe (brute force)
+# --------------------------------------------------------------------------------------------
+
+SWERVE = """schema_version: 1
+name: swerve
+description: Alter course to starboard below 2 NM visibility; resume the route otherwise.
+start: fog
+nodes:
+  fog:
+    test: [visibility_nm, "<", 2.0]
+    yes: act
+    no: resume
+  act:
+    test: true
+    action: {manoeuvre: alter_course, direction: starboard, course_change_deg: 30.0,
+             pass_distance_nm: 0.5}
+    yes: {to: fog, next: true}
+  resume:
+    test: true
+    action: {manoeuvre: resume_route}
+    yes: {to: fog, next: true}
+"""
+
+
+def test_resuming_turns_only_towards_the_route_and_keeps_the_distance(tmp_path):
+    """200 disjoint groups: a 150 m ship on a route line north through the origin at 12 kn
+    and three keep_course ships at random around her. In fog she alters course (30 deg or
+    more to starboard, 0.5 NM kept); 60 s later, in clear weather, she resumes. Her new order
+    (or, when put back on her route, the route course 000 - atan(e / 600 m)) lies between
+    her order and the line's course or the route course: she never turns away from her
+    route. Where she steers, the course at the speed ordered passes every ship that is
+    closing at least the kept distance straight on, and at least 1.1 x that along the path
+    (straight to the line, then north along it), by sampling every 0.1 s over the 30 min
+    look-ahead (no code shared with the decider)."""
+    rules = tmp_path / "swerve.yaml"
+    rules.write_text(SWERVE)
+    rng = np.random.default_rng(43)
+    g, k = 200, 3
+    n = g * (k + 1)
+    own = np.arange(g) * (k + 1)
+    others = np.setdiff1d(np.arange(n), own)
+    behaviours = ["keep_course"] * n
+    for o in own:
+        behaviours[o] = "colregs"
+    pi = np.repeat(own, k)
+    pj = (own[:, None] + 1 + np.arange(k)[None, :]).ravel()
+    dec = Decider.build(behaviours, pi, pj, rules)
+    north, east = np.zeros(n), np.zeros(n)
+    course, speed = np.zeros(n), np.full(n, V)
+    r, b = rng.uniform(0.6, 3.0, others.size) * NM, rng.uniform(0, 2 * np.pi, others.size)
+    north[others], east[others] = r * np.cos(b), r * np.sin(b)
+    course[others] = rng.uniform(0, 2 * np.pi, others.size)
+    speed[others] = rng.uniform(0.0, 9.0, others.size)
+
+    def step(t, north, east, course, route):
+        own_state = np.stack([north, east, course])
+        own_vel = np.stack([speed * np.cos(course), speed * np.sin(course)])
+        other = np.concatenate([own_state[:2, dec.tgt], own_vel[:, dec.tgt]])
+        dec.decide(t, own_state, own_vel, np.full(n, 150.0), other, route, np.full(n, V))
+
+    dec.visibility_nm = 1.0
+    step(0.0, north, east, course, course.copy())
+    first = dec.course_order_rad[own].copy()
+    assert np.isfinite(first).all()
+    kept = dec.kept_distance_m[own].copy()
+    np.testing.assert_allclose(kept, 0.5 * NM)
+    course2 = course.copy()
+    course2[own] = first
+    north2, east2 = north + speed * np.cos(course2) * 60.0, east + speed * np.sin(course2) * 60.0
+    route = course2.copy()
+    route[own] = -np.arctan(east2[own] / 600.0)
+    dec.visibility_nm = 10.0
+    step(60.0, north2, east2, course2, route)
+    new, factor, cand = (dec.course_order_rad[own], dec.speed_factor[own], dec.candidate[own])
+    assert (mem(dec, "own_manoeuvre")[: g * k] == RESUME_ROUTE).all()  # the own ships' pairs
+    released = np.isnan(new) & (cand < 0)
+    assert (factor[released] == 1.0).all()
+    assert 20 < released.sum() < g - 20  # both outcomes occur
+
+    def wrap(a):
+        return (a + math.pi) % (2 * math.pi) - math.pi
+
+    t = np.arange(0.0, dec.horizon_s + 0.05, 0.1)
+    steered = 0
+    for i in range(g):
+        o = own[i]
+        c = route[o] if np.isnan(new[i]) else new[i]
+        d = wrap(c - first[i])
+        towards = [wrap(target - first[i]) for target in (0.0, route[o])]
+        assert abs(d) < 1e-12 or any(np.sign(d) == np.sign(w) and abs(d) <= abs(w) + 1e-9
+                                     for w in towards), (i, np.degrees([first[i], c]))
+        if not np.isnan(new[i]) and new[i] == first[i]:
+            continue  # no safe candidate: she keeps her order (nothing more to check)
+        steered += 1
+        v = V * factor[i]
+        across = v * math.sin(c)
+        meet = -east2[o] / across if east2[o] * across < 0.0 else math.inf
+        t1 = np.minimum(t, meet)
+        path_n = north2[o] + v * math.cos(c) * t1 + v * (t - t1)
+        path_e = east2[o] + across * t1
+        line_n, line_e = north2[o] + v * math.cos(c) * t, east2[o] + v * math.sin(c) * t
+        j1 = int(np.searchsorted(t, meet))
+        for j in o + 1 + np.arange(k):
+            qn = north2[j] + speed[j] * math.cos(course2[j]) * t
+            qe = east2[j] + speed[j] * math.sin(course2[j]) * t
+            straight = np.hypot(qn - line_n, qe - line_e)
+            if straight[1] < straight[0]:
+                assert straight.min() >= kept[i] - 1e-6, (i, j)
+            path = np.hypot(qn - path_n, qe - path_e)
+            if path[1] < path[0]:
+                assert path[: max(j1, 2)].min() >= kept[i] * (1 + RESUME_MARGIN) - 1e-6, (i, j)
+            if j1 < t.size - 2 and path[j1 + 1] < path[j1]:
+                assert path[j1:].min() >= kept[i] * (1 + RESUME_MARGIN) - 1e-6, (i, j)
+    assert steered > 50

@@ -5,6 +5,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from trafficsim.colregs import domains
 from trafficsim.colregs.domains import (
     DOMAINS,
     boundary_distance_m,
@@ -453,3 +454,132 @@ def test_output_shapes_and_bad_shapes():
     with pytest.raises(InputError) as err:
         boundary_distance_m("fujii", np.zeros((2, 2)), L, 0.0)
     assert err.value.key == "pairs"
+
+
+# ---------------------------------------------------------------------------------------------
+# The published shapes point by point, reach, straight runs at own ship, invariances
+# ---------------------------------------------------------------------------------------------
+
+def _published_points(kind: str, length: float, speed: float, overtaking: bool, t: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Boundary points (x forward, y starboard) written from colregs.md section 3, by the
+    parametric form of each shape (not through the module's ray formula)."""
+    if kind == "coldwell" and not overtaking:
+        return 1.1 * length + 5.0 * length * np.cos(t), 0.75 * length + 2.5 * length * np.sin(t)
+    if kind == "coldwell":
+        return 6.0 * length * np.cos(t), 1.75 * length * np.sin(t)
+    if kind == "fujii":
+        return 4.0 * length * np.cos(t), 1.6 * length * np.sin(t)
+    if kind == "goodwin":
+        deg = np.degrees(t) % 360.0
+        r = np.where(deg < 112.5, 0.85, np.where(deg < 247.5, 0.45, 0.70)) * NM
+        return r * np.cos(t), r * np.sin(t)
+    fore, aft, stbd, port = (length * r for r in _kijima_radii(speed / KN))
+    c, s = np.cos(t), np.sin(t)
+    return np.where(c >= 0, fore, aft) * c, np.where(s >= 0, stbd, port) * s
+
+
+@pytest.mark.parametrize(("kind", "overtaking"), [
+    ("coldwell", False), ("coldwell", True), ("fujii", False), ("goodwin", False),
+    ("kijima", False)])
+def test_points_of_the_published_shapes_lie_on_the_boundary(kind, overtaking):
+    """720 points around each published shape (sector edges of Goodwin left out): the
+    boundary distance along each point's bearing is its range, the point scaled by 1 - 1e-9
+    is inside and by 1 + 1e-9 outside."""
+    length, speed = 130.0, 9.0 * KN
+    t = np.radians(np.arange(0.25, 360.0, 0.5))
+    if kind == "goodwin":
+        t = t[np.minimum(np.abs(np.degrees(t) - 112.5), np.abs(np.degrees(t) - 247.5)) > 0.1]
+    x, y = _published_points(kind, length, speed, overtaking, t)
+    n = x.size
+    args = (np.full(n, length), np.full(n, speed), np.full(n, overtaking))
+    r = boundary_distance_m(kind, np.arctan2(y, x), *args)
+    np.testing.assert_allclose(r, np.hypot(x, y), rtol=1e-9)
+    assert contains(kind, x * (1 - 1e-9), y * (1 - 1e-9), *args).all()
+    assert not contains(kind, x * (1 + 1e-9), y * (1 + 1e-9), *args).any()
+
+
+@pytest.mark.parametrize("kind", DOMAINS)
+def test_reach_holds_the_whole_domain(kind):
+    """The circle of radius reach_m (the cheap rejection of time_to_entry) holds every
+    boundary point on a 0.05 deg bearing grid; for the shapes centred on own ship (Goodwin,
+    Kijima, Fujii, Coldwell overtaking) it is the farthest boundary point itself."""
+    b = np.radians(np.arange(0.0, 360.0, 0.05))
+    for length, speed, ov in ((40.0, 0.0, False), (150.0, 6.0, True), (350.0, 14.0, False)):
+        r = boundary_distance_m(kind, b, np.full(b.size, length), np.full(b.size, speed),
+                                np.full(b.size, ov))
+        prm = domains.ship_params(domain_code(kind), length, speed, ov)
+        reach = domains.reach_m(domain_code(kind), prm)
+        assert r.max() <= reach * (1.0 + 1e-12)
+        if kind in ("goodwin", "kijima", "fujii") or ov:
+            # centred shapes: the reach is the farthest boundary point itself
+            assert reach == pytest.approx(r.max(), rel=1e-6)
+
+
+@pytest.mark.parametrize("kind", DOMAINS)
+def test_a_track_straight_at_own_ship_enters_at_the_boundary_of_its_bearing(kind):
+    """A point 5000 m out on bearing b running straight at own ship at 7 m/s enters when its
+    range falls to the boundary distance on that bearing: t = (5000 - R(b)) / 7, whatever
+    sector or quadrant b lies in."""
+    deg = np.arange(1.5, 360.0, 7.0)
+    b = np.radians(deg)
+    n = b.size
+    length, speed = np.full(n, 120.0), np.full(n, 8.0)
+    for ov in (False, True):
+        R = boundary_distance_m(kind, b, length, speed, np.full(n, ov))
+        x, y = 5000.0 * np.cos(b), 5000.0 * np.sin(b)
+        got = time_to_entry_s(kind, x, y, -7.0 * np.cos(b), -7.0 * np.sin(b), length, speed,
+                              np.full(n, ov), 3600.0)
+        np.testing.assert_allclose(got, (5000.0 - R) / 7.0, rtol=1e-9)
+
+
+@pytest.mark.parametrize(("kind", "ov"), [("fujii", False), ("coldwell", True)])
+def test_port_starboard_mirror_of_centred_shapes(kind, ov):
+    """Fujii and the Coldwell overtaking ellipse are symmetric about the bow line: a track
+    mirrored port for starboard (y, vy negated) enters at the same time and a point mirrored
+    is inside exactly when the point is."""
+    rng = np.random.default_rng(31)
+    n = 3000
+    x, y = rng.uniform(-3000, 3000, n), rng.uniform(-3000, 3000, n)
+    vx, vy = rng.uniform(-9, 9, n), rng.uniform(-9, 9, n)
+    args = (np.full(n, 150.0), np.full(n, 5.0), np.full(n, ov))
+    a = time_to_entry_s(kind, x, y, vx, vy, *args, 1800.0)
+    b = time_to_entry_s(kind, x, -y, vx, -vy, *args, 1800.0)
+    fin = np.isfinite(a)
+    assert (np.isfinite(b) == fin).all()
+    assert fin.mean() > 0.05
+    np.testing.assert_allclose(b[fin], a[fin], rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(contains(kind, x, y, *args), contains(kind, x, -y, *args))
+
+
+@pytest.mark.parametrize("kind", ["coldwell", "fujii", "kijima"])
+def test_entry_time_is_unchanged_when_ship_and_geometry_scale_together(kind):
+    """Coldwell, Fujii and (at a fixed speed) Kijima are multiples of L: scaling L, the
+    position and the relative velocity by 2.5 gives the same entry times (times are lengths
+    over speeds)."""
+    rng = np.random.default_rng(37)
+    n = 2000
+    x, y = rng.uniform(-2500, 2500, n), rng.uniform(-2500, 2500, n)
+    vx, vy = rng.uniform(-6, 6, n), rng.uniform(-6, 6, n)
+    ov, sp = rng.random(n) < 0.5, np.full(n, 5.0)
+    a = time_to_entry_s(kind, x, y, vx, vy, np.full(n, 80.0), sp, ov, 1800.0)
+    k = 2.5
+    b = time_to_entry_s(kind, k * x, k * y, k * vx, k * vy, np.full(n, k * 80.0), sp, ov,
+                        1800.0)
+    fin = np.isfinite(a)
+    assert fin.mean() > 0.05
+    assert (np.isfinite(b) == fin).mean() > 0.999
+    both = fin & np.isfinite(b)
+    np.testing.assert_allclose(b[both], a[both], rtol=1e-7, atol=1e-7)
+
+
+def test_horizon_per_pair_and_infinite():
+    """horizon_s may differ per pair: the same track (entry at 160 s on Fujii's bow point)
+    is seen by a 200 s look-ahead, not by a 100 s one; an infinite look-ahead sees an entry
+    however late (1e6 s away at 1e-3 m/s)."""
+    got = time_to_entry_s("fujii", np.array([2000.0, 2000.0, 400.0 + 1000.0]), 0.0,
+                          np.array([-10.0, -10.0, -1e-3]), 0.0, L, 0.0, None,
+                          np.array([200.0, 100.0, math.inf]))
+    assert got[0] == pytest.approx(160.0)
+    assert got[1] == math.inf
+    assert got[2] == pytest.approx(1e6, rel=1e-9)

@@ -264,3 +264,113 @@ def test_a_ship_that_keeps_her_course_took_no_decisions(rogue_run):
     with pytest.raises(InputError, match=r"ship 'tanker' took no decisions in .*; ships that "
                                          r"did: cargo$"):
         explain_run(run, "tanker")
+
+
+# --- decisions recorded by the decision step itself (no simulation) ----------------------------
+
+V12 = 12.0 * 1852.0 / 3600.0
+
+
+def _crossing(tcpa_min: float) -> list[tuple[float, float, float, float]]:
+    """Imazu case 2: own ship north, TS1 west from her starboard bow, meeting after tcpa_min."""
+    d = V12 * 60.0 * tcpa_min
+    return [(-d, 0.0, 0.0, V12), (0.0, d, 270.0, V12)]
+
+
+# t_s, ships (north, east, course deg, speed), route courses deg: a crossing, the give-way
+# action, past the CPA but not clear, then past and clear
+STEPS = [
+    (0.0, _crossing(16.5), None),
+    (150.0, _crossing(14.0), None),
+    (160.0, _crossing(14.0 - 1.0 / 6.0), None),
+    (210.0, [(0.0, 0.0, 30.0, V12), (2500.0, -1500.0, 270.0, V12)], [0.0, 270.0]),
+    (220.0, [(0.0, 0.0, 30.0, V12), (3500.0, -3000.0, 270.0, V12)], [0.0, 270.0]),
+]
+
+
+@pytest.fixture(scope="module")
+def decided_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, list]]:
+    """A decisions file written from Decider.records of two colregs ships over STEPS."""
+    from trafficsim.colregs.decider import Decider
+
+    dec = Decider.build(["colregs", "colregs"], np.array([0]), np.array([1]))
+    dec.record = True
+    for t, ships, route_deg in STEPS:
+        a = np.array(ships, dtype=float)
+        hdg = np.radians(a[:, 2])
+        own_state = np.stack([a[:, 0], a[:, 1], hdg])
+        own_vel = np.stack([a[:, 3] * np.cos(hdg), a[:, 3] * np.sin(hdg)])
+        other = np.concatenate([own_state[:2, dec.tgt], own_vel[:, dec.tgt]])
+        route = hdg if route_deg is None else np.radians(route_deg)
+        dec.decide(t, own_state, own_vel, np.full(2, 150.0), other, route, a[:, 3])
+    run = tmp_path_factory.mktemp("decided")
+    cols = dec.records(["own", "TS1"])
+    write_parquet(run / "decisions.parquet", cols)
+    return run, pq.read_table(run / "decisions.parquet").to_pydict()
+
+
+def _actions(block: list[str]) -> list[dict[str, str]]:
+    """The action fields each node of an explanation block set, in order."""
+    out = []
+    for line in block:
+        if line.startswith("   action: "):
+            fields = line[len("   action: "):].split(", ")
+            out.append(dict(f.split(" = ", 1) for f in fields))
+    return out
+
+
+@pytest.mark.parametrize("ship", ["own", "TS1"])
+def test_every_recorded_step_replays_along_its_recorded_path(decided_run, ship):
+    """At each recorded step the explanation walks exactly the recorded nodes (the features
+    and memory the network saw lead along them: explain raises otherwise)."""
+    run, rec = decided_run
+    rows = [k for k, s in enumerate(rec["ship"]) if s == ship]
+    assert len(rows) == len(STEPS)
+    for k in rows:
+        (block,) = _sections(explain_run(run, ship, rec["t_s"][k]))
+        assert block[0].startswith(f"t = {rec['t_s'][k]:g} s, {ship} about ")
+        names = rec["path"][k].split(">")
+        assert [t.split(" (")[0] for t in _node_titles(block)] == [
+            f"{i + 1}. {n}" for i, n in enumerate(names)]
+
+
+@pytest.mark.parametrize("ship", ["own", "TS1"])
+def test_the_explained_actions_give_the_recorded_state(decided_run, ship):
+    """The state recorded after each step is the state before it (the memory columns the
+    network saw), overwritten by the last value each action field was set to along the
+    explained path: role, encounter, other_role and manoeuvre alike."""
+    run, rec = decided_run
+    fields = {"role": "own_role", "encounter": "encounter", "other_role": "other_role",
+              "manoeuvre": "own_manoeuvre"}
+    names = {v: k for k, v in ENUMS.items()}
+    rows = [k for k, s in enumerate(rec["ship"]) if s == ship]
+    changed = 0
+    for k in rows:
+        (block,) = _sections(explain_run(run, ship, rec["t_s"][k]))
+        state = {f: names[rec[col][k]] for f, col in fields.items()}  # as the network saw it
+        for action in _actions(block):
+            state.update({f: v for f, v in action.items() if f in fields})
+        for f, col in fields.items():
+            assert state[f] == rec[f"decided_{col}"][k], (k, f)
+        changed += names[rec["own_role"][k]] != rec["decided_own_role"][k]
+    assert changed >= 2  # the role was set and dropped again
+
+
+def test_the_timeline_lists_exactly_the_recorded_changes(decided_run):
+    """One timeline line per step where the recorded state or the rounded course order of
+    own ship changed (the first step included), and the account without a time explains the
+    last step whose state changed (found here from the recorded columns)."""
+    run, rec = decided_run
+    rows = [k for k, s in enumerate(rec["ship"]) if s == "own"]
+    state = [tuple(rec[f"decided_{c}"][k] for c in ("own_role", "encounter", "other_role",
+                                                     "own_manoeuvre")) for k in rows]
+    course = [f"{rec['course_order_deg'][k]:.0f}" for k in rows]
+    want = [rec["t_s"][rows[i]] for i in range(len(rows))
+            if i == 0 or (state[i], course[i]) != (state[i - 1], course[i - 1])]
+    cols = {c: np.asarray(v) for c, v in rec.items()}
+    lines = timeline(cols, "own")
+    assert [float(line.split()[2]) for line in lines] == want
+    last = max(i for i in range(1, len(rows)) if state[i] != state[i - 1])
+    blocks = _sections(explain_run(run, "own"))
+    assert [b[0] for b in blocks] == [f"t = {rec['t_s'][rows[last]]:g} s, own about TS1 "
+                                      "(colregs.yaml):"]

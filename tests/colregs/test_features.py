@@ -6,7 +6,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from trafficsim.colregs.domains import boundary_distance_m, time_to_entry_s
+from trafficsim.colregs.domains import boundary_distance_m, contains, time_to_entry_s
 from trafficsim.colregs.features import (
     INDEX,
     NAMES,
@@ -614,3 +614,263 @@ def test_zero_range_measures_the_domain_along_the_bow():
     assert f["range_to_domain_nm"] == pytest.approx(-ahead / NM)
     assert f["time_to_domain_min"] == 0.0 and f["predicted_domain_entry"] == 1.0
     assert f["bearing_deg"] == 0.0 and f["dcpa_nm"] == 0.0 and f["tcpa_min"] == 0.0
+
+
+# ---------------------------------------------------------------------------------------------
+# Port / starboard mirror, bow crossings on sampled tracks, wrap at north, degenerate cases
+# ---------------------------------------------------------------------------------------------
+
+_SIDE_ANGLES = ("bearing_deg", "aspect_deg", "course_diff_deg")
+_DOMAIN_ROWS = ("domain_nm", "range_to_domain_nm", "time_to_domain_min",
+                "predicted_domain_entry")
+
+
+def _mirror(cols):
+    """The scene reflected in the north axis: east -> -east, headings and courses negated."""
+    on, oe, ovn, ove, h, L, tn, te, tvn, tve = cols
+    return on, -oe, ovn, -ove, -h, L, tn, -te, tvn, -tve
+
+
+@pytest.mark.parametrize("domain", ["coldwell", "fujii", "goodwin", "kijima"])
+def test_mirror_image_swaps_port_and_starboard(domain):
+    """Reflecting the whole scene port for starboard negates every side angle (bearing,
+    aspect, course difference; 180 stays 180, the fold is (-180, 180]) and leaves every
+    distance, time and speed as it was. Fujii's ellipse is symmetric about the bow line, so
+    its domain features are unchanged too; the other domains are lopsided (Coldwell offset to
+    starboard, Goodwin 0.85 / 0.70 NM, Kijima R_stbd > R_port) and are not compared."""
+    rng = np.random.default_rng(17)
+    cols = _scene(rng, 4000)
+    a = _call(cols, domain).values
+    b = _call(_mirror(cols), domain).values
+    for name in NAMES:
+        r = INDEX[name]
+        if name in _SIDE_ANGLES:
+            d = (a[r] + b[r] + 180.0) % 360.0 - 180.0
+            assert np.abs(d).max() < 1e-9, name
+            assert (b[r] > -180.0).all() and (b[r] <= 180.0).all(), name
+        elif name in _DOMAIN_ROWS and domain != "fujii":
+            continue
+        else:
+            same = (a[r] == b[r]) | np.isclose(a[r], b[r], rtol=1e-9, atol=1e-9)
+            assert same.all(), name
+
+
+def test_mirror_of_imazu_case_2_is_a_crossing_from_port():
+    """Imazu case 2 (TS 6 NM east steering 270) mirrored: TS 6 NM west steering 090. Own ship
+    sees her 45 deg on the port bow, she sees own ship 45 deg on her starboard bow; DCPA 0,
+    TCPA 30 min and the bow crossing at own ship's position after 30 min as in case 2."""
+    f = one(ship(**OS), ship(east_nm=-6.0, course_deg=90.0))
+    assert f["bearing_deg"] == pytest.approx(-45.0)
+    assert f["aspect_deg"] == pytest.approx(45.0)
+    assert f["course_diff_deg"] == pytest.approx(90.0)
+    assert f["dcpa_nm"] == pytest.approx(0.0, abs=1e-9)
+    assert f["tcpa_min"] == pytest.approx(30.0)
+    assert f["bct_min"] == pytest.approx(30.0) and f["bcr_nm"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_bow_crossing_against_sampled_tracks():
+    """The bow crossing from the relative track itself: in own body frame (x forward, y to
+    starboard) the other ship moves on a straight line; bct is where its sampled y changes sign
+    (linear interpolation between 1 s samples of a +-2 h window) and bcr its x there. A track
+    whose y never changes sign over a window far longer than |bct| must have bct = +inf."""
+    rng = np.random.default_rng(23)
+    n = 300
+    cols = _scene(rng, n)
+    f = _call(cols)
+    on, oe, ovn, ove, h, _, tn, te, tvn, tve = cols
+    c, s = np.cos(h), np.sin(h)
+    pn, pe, vn, ve = tn - on, te - oe, tvn - ovn, tve - ove
+    x, y = c * pn + s * pe, -s * pn + c * pe
+    vx, vy = c * vn + s * ve, -s * vn + c * ve
+    t = np.arange(-7200.0, 7200.0 + 0.5, 1.0)
+    checked = 0
+    for i in range(n):
+        yt = y[i] + vy[i] * t
+        flip = np.flatnonzero(np.sign(yt[:-1]) != np.sign(yt[1:]))
+        bct_s, bcr_m = f["bct_min"][i] * 60.0, f["bcr_nm"][i] * NM
+        if flip.size == 0:
+            assert not abs(bct_s) < 7000.0, i
+            continue
+        k = flip[0]
+        t0 = t[k] + yt[k] / (yt[k] - yt[k + 1])  # linear y: exact up to rounding
+        assert bct_s == pytest.approx(t0, abs=1e-6 * max(1.0, abs(t0))), i
+        assert bcr_m == pytest.approx(x[i] + vx[i] * t0, rel=1e-6, abs=1e-3), i
+        checked += 1
+    assert checked > 100
+
+
+def test_crossing_ahead_and_astern_by_hand_on_a_turned_heading():
+    """Own heading 060 at 10 kn; a stopped ship 2 NM ahead on the bow line and 1 NM to
+    starboard of it. Relative motion is own velocity reversed, straight astern along the bow
+    line, so the other never crosses it (bcr = bct = +inf). Give the other 10 kn on course 330
+    (due port across own bow): she crosses the bow line when she has covered the 1 NM, after
+    6 min, when own ship has run 1 NM: 2 - 1 = 1 NM ahead."""
+    h = 60.0
+    b = math.radians(h)
+    fwd, stbd = (math.cos(b), math.sin(b)), (-math.sin(b), math.cos(b))
+    pos = (2.0 * fwd[0] + 1.0 * stbd[0], 2.0 * fwd[1] + 1.0 * stbd[1])
+    own = ship(course_deg=h, speed_kn=10.0)
+    f = one(own, ship(north_nm=pos[0], east_nm=pos[1], speed_kn=0.0))
+    assert f["bcr_nm"] == math.inf and f["bct_min"] == math.inf
+    assert f["bearing_deg"] == pytest.approx(math.degrees(math.atan2(1.0, 2.0)))
+    g = one(own, ship(north_nm=pos[0], east_nm=pos[1], course_deg=h - 90.0, speed_kn=10.0))
+    assert g["bct_min"] == pytest.approx(6.0)
+    assert g["bcr_nm"] == pytest.approx(1.0)
+    assert g["course_diff_deg"] == pytest.approx(-90.0)
+    # from astern of the bow line (2 NM abaft own ship) the crossing is 3 NM astern
+    back = (-2.0 * fwd[0] + stbd[0], -2.0 * fwd[1] + stbd[1])
+    k = one(own, ship(north_nm=back[0], east_nm=back[1], course_deg=h - 90.0, speed_kn=10.0))
+    assert k["bct_min"] == pytest.approx(6.0) and k["bcr_nm"] == pytest.approx(-3.0)
+
+
+@pytest.mark.parametrize(("heading_deg", "true_bearing_deg", "want"), [
+    (359.9, 0.05, 0.15), (359.9, 359.8, -0.1), (0.1, 359.95, -0.15), (0.1, 0.2, 0.1),
+    (-0.1, 0.05, 0.15), (720.1, 359.95, -0.15), (179.9, 180.05, 0.15), (180.1, 179.95, -0.15),
+])
+def test_relative_bearing_across_north_and_south(heading_deg, true_bearing_deg, want):
+    """A target a fraction of a degree across north (or south) from own heading: the relative
+    bearing is the small signed difference, never about +-360 (headings of -0.1 and 720.1 deg
+    are the same as 359.9 and 0.1)."""
+    b = math.radians(true_bearing_deg)
+    f = one(ship(course_deg=heading_deg), ship(north_nm=2.0 * math.cos(b),
+                                                east_nm=2.0 * math.sin(b)))
+    assert f["bearing_deg"] == pytest.approx(want, abs=1e-9)
+    assert f["bearing_abs_deg"] == pytest.approx(abs(want), abs=1e-9)
+
+
+def test_courses_across_north_give_small_differences():
+    """Own COG 359 and the other's 001 differ by +2 deg (the other is 2 deg to starboard of
+    own course); aspect of a ship dead ahead of her across north: own ship 3 NM on her course
+    000.5 sees nothing odd: aspect 0."""
+    f = one(ship(course_deg=359.0), ship(north_nm=3.0, course_deg=1.0))
+    assert f["course_diff_deg"] == pytest.approx(2.0)
+    b = math.radians(0.5)
+    g = one(ship(north_nm=3.0 * math.cos(b), east_nm=3.0 * math.sin(b), course_deg=200.0),
+            ship(course_deg=0.5))
+    assert g["aspect_deg"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_same_position_moving_apart():
+    """Both ships at one point, own north at 12 kn, the other east at 12 kn: the closest point
+    is now (tcpa 0, dcpa 0); the other is on own bow line now (bct 0 at bcr 0); courses 90 deg
+    apart; the other is inside every domain (time to domain 0)."""
+    for domain in ("coldwell", "fujii", "goodwin", "kijima"):
+        f = one(ship(), ship(course_deg=90.0), domain=domain)
+        assert f["range_nm"] == 0.0
+        assert f["tcpa_min"] == 0.0 and f["dcpa_nm"] == 0.0
+        assert f["bct_min"] == 0.0 and f["bcr_nm"] == 0.0
+        assert f["course_diff_deg"] == pytest.approx(90.0)
+        assert f["range_to_domain_nm"] < 0.0 and f["time_to_domain_min"] == 0.0
+
+
+@pytest.mark.parametrize("abeam_nm", [0.3, -0.3, 2.0])
+def test_parallel_courses_in_company(abeam_nm):
+    """Same course and speed, the other abeam (starboard for +): no relative motion, so no
+    CPA (tcpa +inf, dcpa = range), no bow crossing, speed ratio 1, bearing +-90, and she is
+    inside the domain now or never enters it."""
+    f = one(ship(course_deg=30.0), dict(ship(course_deg=30.0),
+                                        n=-abeam_nm * NM * math.sin(math.radians(30.0)),
+                                        e=abeam_nm * NM * math.cos(math.radians(30.0))))
+    assert f["range_nm"] == pytest.approx(abs(abeam_nm))
+    assert f["tcpa_min"] == math.inf and f["dcpa_nm"] == pytest.approx(abs(abeam_nm))
+    assert f["bcr_nm"] == math.inf and f["bct_min"] == math.inf
+    assert f["speed_ratio"] == pytest.approx(1.0)
+    assert f["bearing_deg"] == pytest.approx(math.copysign(90.0, abeam_nm))
+    assert f["course_diff_deg"] == pytest.approx(0.0, abs=1e-9)
+    assert f["time_to_domain_min"] in (0.0, math.inf)
+    assert (f["time_to_domain_min"] == 0.0) == (f["range_to_domain_nm"] <= 0.0)
+
+
+def test_parallel_courses_at_different_speeds_never_cross_the_bow_line():
+    """Same course, the other 0.5 NM to starboard and faster: she runs parallel to own bow
+    line (no crossing, bcr = +inf), the CPA is abeam at 0.5 NM when she draws level (1 NM
+    astern, 6 kn faster: 10 min)."""
+    own = ship(course_deg=0.0)
+    f = one(own, ship(north_nm=-1.0, east_nm=0.5, speed_kn=18.0))
+    assert f["bcr_nm"] == math.inf and f["bct_min"] == math.inf
+    assert f["tcpa_min"] == pytest.approx(10.0)
+    assert f["dcpa_nm"] == pytest.approx(0.5)
+    assert f["speed_ratio"] == pytest.approx(1.5)
+
+
+def test_no_relative_motion_threshold():
+    """Relative speed squared at or below 1e-12 m^2/s^2 is no relative motion (tcpa +inf,
+    dcpa = range); a relative speed of 2e-6 m/s closing head-on from 1000 m is motion:
+    tcpa = 1000 / 2e-6 s, dcpa 0."""
+    own = dict(n=0.0, e=0.0, vn=0.0, ve=0.0, h=0.0, L=100.0)
+    still = one(own, dict(n=1000.0, e=0.0, vn=-0.9e-6, ve=0.0, h=0.0, L=100.0))
+    assert still["tcpa_min"] == math.inf
+    assert still["dcpa_nm"] == pytest.approx(1000.0 / NM)
+    moving = one(own, dict(n=1000.0, e=0.0, vn=-2e-6, ve=0.0, h=0.0, L=100.0))
+    assert moving["tcpa_min"] == pytest.approx(1000.0 / 2e-6 / 60.0)
+    assert moving["dcpa_nm"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_bow_crossing_threshold():
+    """Relative speed across the bow line at most 1e-6 m/s never crosses it (+inf); 1e-4 m/s
+    does: a ship 100 m to starboard, 500 m ahead, closing sideways at 1e-4 m/s crosses after
+    1e6 s at 500 m ahead (no relative motion along the bow line)."""
+    own = dict(n=0.0, e=0.0, vn=0.0, ve=0.0, h=0.0, L=100.0)
+    f = one(own, dict(n=500.0, e=100.0, vn=0.0, ve=-0.9e-6, h=0.0, L=100.0))
+    assert f["bcr_nm"] == math.inf and f["bct_min"] == math.inf
+    g = one(own, dict(n=500.0, e=100.0, vn=0.0, ve=-1e-4, h=0.0, L=100.0))
+    assert g["bct_min"] == pytest.approx(1e6 / 60.0)
+    assert g["bcr_nm"] == pytest.approx(500.0 / NM)
+
+
+@pytest.mark.parametrize(("other_kn", "overtaking"), [(12.0, False), (12.5, True), (11.5, False)])
+def test_coldwell_overtaking_needs_the_ship_astern_to_be_faster(other_kn, overtaking):
+    """A ship 1 NM dead astern on own course: the Coldwell overtaking ellipse (6 L astern)
+    applies only when she is faster (Rule 13, "coming up with"); at equal or lower speed own
+    ship gets the crossing ellipse, 5 L sqrt(1 - 0.3^2) - 1.1 L = 3.6697 L astern."""
+    L = 100.0
+    f = one(ship(length_m=L), ship(north_nm=-1.0, speed_kn=other_kn))
+    want = 6.0 * L if overtaking else (5.0 * math.sqrt(0.91) - 1.1) * L
+    assert f["domain_nm"] == pytest.approx(want / NM)
+
+
+def test_coldwell_overtaking_seen_from_the_overtaking_ship_needs_the_beam_sector():
+    """Own ship (12 kn) 1 NM from a 6 kn ship that steers north, seen from her 112.6 deg and
+    112.4 deg off her bow: beyond 112.5 own ship is overtaking her (aspect > 112.5 and own
+    faster), so own domain is the 6 L x 1.75 L overtaking ellipse; at 112.4 it is not."""
+    L = 100.0
+    for theta, overtaking in ((112.6, True), (112.4, False), (-112.6, True)):
+        th = math.radians(theta)
+        own = ship(north_nm=math.cos(th), east_nm=math.sin(th), course_deg=0.0, length_m=L)
+        f = one(own, ship(speed_kn=6.0))
+        assert abs(f["aspect_deg"]) == pytest.approx(abs(theta))
+        b = math.radians(f["bearing_deg"])
+        if overtaking:
+            want = (math.cos(b) ** 2 / 36.0 + math.sin(b) ** 2 / 1.75**2) ** -0.5 * L
+        else:
+            want = float(boundary_distance_m("coldwell", b, L, 12.0 * KN, False))
+        assert f["domain_nm"] * NM == pytest.approx(want, rel=1e-9), theta
+
+
+def test_goodwin_edge_point_domain_agrees_with_contains():
+    """Own heading north, both ships stopped, the other 859 m out on the 112.5 deg edge between
+    the starboard (0.85 NM) and astern (0.45 NM) sectors. The domain module places this point
+    inside (the edge belongs to the starboard sector, and 859 m < 1574 m) and the feature's
+    time to domain is 0; range_to_domain_nm must then be <= 0 (the module docstring: inside
+    exactly when range_to_domain_nm <= 0, "the two features never disagree")."""
+    c1, s1 = math.cos(math.radians(112.5)), math.sin(math.radians(112.5))
+    x, y = 859.0 * c1, 859.0 * s1
+    still = dict(vn=0.0, ve=0.0, h=0.0, L=100.0)
+    f = one(dict(still, n=0.0, e=0.0), dict(still, n=x, e=y), domain="goodwin")
+    assert bool(contains("goodwin", x, y, 100.0, 0.0))
+    assert f["time_to_domain_min"] == 0.0
+    assert f["range_to_domain_nm"] <= 0.0
+    assert f["domain_nm"] == pytest.approx(0.85)
+
+
+def test_speed_ratio_at_exactly_the_stopped_speed():
+    """STOPPED_MPS is "the speed below which a ship counts as stopped": at exactly 1e-6 m/s
+    (sqrt(1e-6^2) is exactly 1e-6) a ship is not stopped. Own ship at 1e-6 m/s and the other
+    at 3e-6 m/s: the plain ratio 3; own ship at rest and the other at exactly 1e-6 m/s: own
+    ship stopped and the other not, +inf."""
+    def ratio(own_v, oth_v):
+        return one(dict(n=0.0, e=0.0, vn=own_v, ve=0.0, h=0.0, L=100.0),
+                   dict(n=500.0, e=0.0, vn=oth_v, ve=0.0, h=0.0, L=100.0))["speed_ratio"]
+    assert math.sqrt(1e-6 * 1e-6) == 1e-6
+    assert ratio(1e-6, 3e-6) == pytest.approx(3.0)
+    assert ratio(0.0, 1e-6) == math.inf

@@ -985,3 +985,321 @@ def test_nees_with_irregular_overtaking_ais_reports_only() -> None:
             means.append(float(np.mean(np.einsum("ki,kij,kj->k", e, np.linalg.inv(P), e))))
     assert state.active.all()
     assert all(3.3 < v < 5.0 for v in means), means
+
+
+# ---------------------------------------------------------------- steady state, batch, sensors
+
+
+def _cv_steady_state(q: float, T: float, sigma: float):
+    """Steady-state alpha-beta gains and filtered covariance (one axis) of the CV filter with
+    Q(T) = q [[T^3/3, T^2/2], [T^2/2, T]] and position noise sigma^2 every T, in closed form.
+
+    With M the predicted covariance and K = (alpha, beta / T), M = F (I - K H) M F^T + Q gives
+    per element: (2,2) beta^2 = lambda^2 (1 - alpha), lambda^2 = q T^3 / sigma^2; (1,1)
+    alpha^2 = 2 beta - alpha beta - beta^2 / 6, so alpha = (-beta + sqrt(beta^2/3 + 8 beta)) / 2
+    and beta is the root in (0, 2) of beta^2 - lambda^2 (1 - alpha(beta)) (bisection). The
+    filtered covariance is then P11 = alpha sigma^2, P12 = beta sigma^2 / T,
+    P22 = alpha beta sigma^2 / (T^2 (1 - alpha)) - q T / 2."""
+    lam2 = q * T**3 / sigma**2
+
+    def alpha(b):
+        return (-b + math.sqrt(b * b / 3.0 + 8.0 * b)) / 2.0
+
+    lo, hi = 0.0, 2.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid * mid - lam2 * (1.0 - alpha(mid)) > 0.0:
+            hi = mid
+        else:
+            lo = mid
+    b = 0.5 * (lo + hi)
+    a = alpha(b)
+    s2 = sigma**2
+    P = np.array([[a * s2, b * s2 / T],
+                  [b * s2 / T, a * b * s2 / (T * T * (1.0 - a)) - q * T / 2.0]])
+    return a, b, P
+
+
+def _square_plots(m: int, t: float, z: np.ndarray, sigma: float) -> RadarPlots:
+    cov = np.zeros((m, 2, 2))
+    cov[:, 0, 0] = cov[:, 1, 1] = sigma**2
+    return RadarPlots(valid=np.ones(m, dtype=bool), t_s=t, north_m=z[:, 0].copy(),
+                      east_m=z[:, 1].copy(), cov=cov, range_m=np.full(m, np.nan),
+                      bearing_rad=np.full(m, np.nan))
+
+
+@pytest.mark.parametrize(("q", "T", "sigma"), [(0.001, 2.5, 22.7), (0.01, 2.5, 20.0),
+                                               (0.1, 1.0, 50.0)])
+def test_covariance_converges_to_the_closed_form_steady_state(q, T, sigma) -> None:
+    """Plots every T with R = sigma^2 I: the track covariance converges to the closed-form
+    steady state of the alpha-beta filter on each axis, with no cross-axis terms; the closed
+    form agrees with scipy's discrete Riccati solver."""
+    scipy_linalg = pytest.importorskip("scipy.linalg")
+    a, b, P_ss = _cv_steady_state(q, T, sigma)
+    F = np.array([[1.0, T], [0.0, 1.0]])
+    Q = q * np.array([[T**3 / 3, T**2 / 2], [T**2 / 2, T]])
+    M = scipy_linalg.solve_discrete_are(F.T, np.array([[1.0], [0.0]]), Q,
+                                        np.array([[sigma**2]]))
+    np.testing.assert_allclose(P_ss, M - np.outer(M[:, 0], M[0]) / (M[0, 0] + sigma**2),
+                               rtol=1e-8)
+    assert a == pytest.approx(M[0, 0] / (M[0, 0] + sigma**2), rel=1e-10)
+    assert b / T == pytest.approx(M[1, 0] / (M[0, 0] + sigma**2), rel=1e-8)
+    t_par = tracker.build([{"accel_psd_m2ps3": q}])
+    obs = np.zeros(1, dtype=np.int64)
+    state = tracker.init(1)
+    rng = np.random.default_rng(50)
+    for k in range(1500):
+        t = k * T
+        state = tracker.step(t_par, state, obs, t,
+                             _square_plots(1, t, rng.normal(0.0, sigma, (1, 2)), sigma))
+    P = state.P[0]
+    for axis in range(2):
+        idx = [axis, axis + 2]
+        np.testing.assert_allclose(P[np.ix_(idx, idx)], P_ss, rtol=1e-8)
+    np.testing.assert_array_equal(P[np.ix_([0, 2], [1, 3])], 0.0)
+
+
+@pytest.mark.parametrize("q_truth", [0.01, 0.0])
+def test_estimate_error_of_a_cv_target_matches_the_steady_state(q_truth: float) -> None:
+    """4000 pairs, plots every 2.5 s with sd 20 m, filter q = 0.01: after 250 scans the error
+    covariance (both axes pooled) is, for truth from the filter's own model, the closed-form
+    P; for a constant-velocity target (no acceleration), the solution C of
+    C = A C A^T + sigma^2 K K^T with A = (I - K H) F of the steady gains (smaller than P).
+    Errors are unbiased."""
+    scipy_linalg = pytest.importorskip("scipy.linalg")
+    q, T, sigma, m = 0.01, 2.5, 20.0, 4000
+    a, b, P_ss = _cv_steady_state(q, T, sigma)
+    F = np.array([[1.0, T], [0.0, 1.0]])
+    K = np.array([[a], [b / T]])
+    A = (np.eye(2) - K @ np.array([[1.0, 0.0]])) @ F
+    want = (P_ss if q_truth else
+            scipy_linalg.solve_discrete_lyapunov(A, sigma**2 * (K @ K.T)))
+    rng = np.random.default_rng(51)
+    x = np.concatenate([rng.uniform(-5e3, 5e3, (m, 2)), rng.normal(0.0, 8.0, (m, 2))], axis=1)
+    F4, Q4 = _F_Q(T, q)
+    chol = np.linalg.cholesky(Q4) if q_truth else np.zeros((4, 4))
+    t_par = tracker.build([{"accel_psd_m2ps3": q, "gate_probability": 1.0 - 1e-12}])
+    obs = np.zeros(m, dtype=np.int64)
+    state = tracker.init(m)
+    for k in range(251):
+        t = k * T
+        if k:
+            x = x @ F4.T + rng.standard_normal((m, 4)) @ chol.T
+        z = x[:, :2] + rng.normal(0.0, sigma, (m, 2))
+        state = tracker.step(t_par, state, obs, t, _square_plots(m, t, z, sigma))
+    e = state.x - x
+    pooled = np.concatenate([e[:, [0, 2]], e[:, [1, 3]]])  # (2m, 2): position, velocity
+    n = pooled.shape[0]
+    got = pooled.T @ pooled / n
+    se = np.sqrt((np.outer(np.diag(want), np.diag(want)) + want**2) / n)
+    assert np.all(np.abs(got - want) < 4 * se), (got, want)
+    assert np.all(np.abs(pooled.mean(axis=0)) < 4 * np.sqrt(np.diag(want) / n))
+    if not q_truth:
+        assert want[0, 0] < 0.9 * P_ss[0, 0]  # the two cases differ: the test tells them apart
+
+
+def test_batch_of_pairs_equals_one_pair_at_a_time() -> None:
+    """40 pairs of five observers with different settings (q, coast, gates, failures,
+    latency compensation, sensor switches), radar plots with gross errors and AIS reports up
+    to 12 s late over 120 steps: one call over all pairs gives, field by field and bit for
+    bit, what 40 calls over one pair each give (the compiled loop has no cross-pair
+    state)."""
+    rng = np.random.default_rng(52)
+    n_obs, m = 5, 40
+    cfgs = [{"accel_psd_m2ps3": float(rng.choice([0.001, 0.05])),
+             "coast_s": 6.0 if k % 2 else 30.0,
+             "max_gate_failures": int(rng.integers(1, 4)),
+             "gate_probability": float(rng.choice([0.99, 0.9999])),
+             "latency_compensation": bool(k != 1), "use_radar": bool(k != 2),
+             "use_ais": bool(k != 3)} for k in range(n_obs)]
+    t_par = tracker.build(cfgs)
+    obs = rng.integers(0, n_obs, m)
+    p0, v = rng.uniform(-3000, 3000, (m, 2)), rng.uniform(-8, 8, (m, 2))
+    batch = tracker.init(m)
+    single = [tracker.init(1) for _ in range(m)]
+    fields_ais = ("valid", "stamp_s", "north_m", "east_m", "sog_mps", "cog_rad", "heading_rad")
+    deletions = rejections = 0
+    for step in range(120):
+        t = float(step)
+        cov = np.zeros((m, 2, 2))
+        cov[:, 0, 0] = cov[:, 1, 1] = rng.uniform(100, 900, m)
+        z = p0 + v * t + rng.normal(0, 20, (m, 2))
+        z[rng.random(m) < 0.05] += 3000.0
+        plots = RadarPlots(valid=rng.random(m) < 0.5, t_s=t, north_m=z[:, 0], east_m=z[:, 1],
+                           cov=cov, range_m=np.full(m, np.nan), bearing_rad=np.full(m, np.nan))
+        stamp = t - rng.uniform(0, 12, m)
+        pos = p0 + v * stamp[:, None] + rng.normal(0, 5, (m, 2))
+        rep = ais.AisReports(valid=rng.random(m) < 0.3, stamp_s=stamp, north_m=pos[:, 0],
+                             east_m=pos[:, 1], sog_mps=np.hypot(v[:, 0], v[:, 1]),
+                             cog_rad=np.arctan2(v[:, 1], v[:, 0]), heading_rad=np.zeros(m))
+        was_active = batch.active.copy()
+        batch = tracker.step(t_par, batch, obs, t, plots, rep)
+        deletions += int((was_active & ~batch.active).sum())
+        rejections += int((batch.gate_failures > 0).sum())
+        for k in range(m):
+            s = slice(k, k + 1)
+            pk = RadarPlots(valid=plots.valid[s], t_s=t, north_m=z[s, 0], east_m=z[s, 1],
+                            cov=cov[s], range_m=plots.range_m[s], bearing_rad=plots.bearing_rad[s])
+            rk = ais.AisReports(*(getattr(rep, f)[s] for f in fields_ais))
+            single[k] = tracker.step(t_par, single[k], obs[s], t, pk, rk)
+    for f in ("x", "P", "t_s", "active", "gate_failures", "n_updates", "hist_n", "hist_start",
+              "hist"):
+        np.testing.assert_array_equal(getattr(batch, f),
+                                      np.concatenate([getattr(s, f) for s in single]), f)
+    assert deletions > 0 and rejections > 0  # deletion and gating paths were taken
+    assert batch.n_updates.max() > 50
+
+
+def _ais_at_nis(state, t_par, stamp: float, nis: float) -> ais.AisReports:
+    """An AIS report stamped ``stamp`` (>= the track's time) whose innovation against the
+    textbook prediction has the given NIS (4 dof), direction fixed in the state space."""
+    F, Q = _F_Q(stamp - state.t_s[0], t_par.q_m2ps3[0])
+    x, P = F @ state.x[0], F @ state.P[0] @ F.T + Q
+    # R depends on SOG/COG: iterate so that the report's own R is the one used
+    u = np.array([0.5, -0.3, 0.6, 0.55])
+    z = x.copy()
+    for _ in range(30):
+        sog, cog = float(np.hypot(z[2], z[3])), float(np.arctan2(z[3], z[2]))
+        _, R = _ais_z_r(z[0], z[1], sog, cog, t_par.ais_sigma_position_m[0],
+                        t_par.ais_sigma_velocity_mps[0])
+        S = P + R
+        z = x + math.sqrt(nis / (u @ np.linalg.solve(S, u))) * u
+    return _one_report(stamp, z[0], z[1], float(np.hypot(z[2], z[3])),
+                       float(np.arctan2(z[3], z[2])))
+
+
+@pytest.mark.parametrize(("factor", "accepted"), [(0.99, True), (1.01, False)])
+def test_ais_gate_is_the_four_dof_quantile(factor: float, accepted: bool) -> None:
+    """AIS reports are gated with the chi-square quantile of 4 degrees of freedom (not 2):
+    a report at NIS 0.99 g4 is used, at 1.01 g4 rejected (g4 = 23.51 at p = 0.9999, over
+    twice g2 = 18.42, so a 2-dof gate would reject both)."""
+    t_par = tracker.build([{}])
+    g4 = float(t_par.gate4[0])
+    assert g4 == pytest.approx(23.5127, abs=1e-3) and g4 > float(t_par.gate2[0])
+    state, _ = _plot_track(2.5 * np.arange(30), np.random.default_rng(53), t_par=t_par)
+    t = state.t_s[0] + 1.0
+    new = tracker.step(t_par, state, np.zeros(1, dtype=np.int64), t + 2.0,
+                       ais=_ais_at_nis(state, t_par, t, factor * g4))
+    assert (new.n_updates[0] == state.n_updates[0] + 1) == accepted
+    assert new.gate_failures[0] == (0 if accepted else 1)
+
+
+@pytest.mark.parametrize("coast", [5.0, 12.5, 30.0])
+def test_deletion_exactly_after_coast_seconds_without_accepted_measurement(coast) -> None:
+    """Last accepted plot at t = 10; with steps of 0.5 s the track lives while
+    t - 10 <= coast and is gone at the first step beyond; rejected plots (gross errors)
+    in between do not keep it alive, and it holds its state while coasting."""
+    t_par = tracker.build([{"coast_s": coast, "max_gate_failures": 1000}])
+    obs = np.zeros(1, dtype=np.int64)
+    state, _ = _plot_track(np.arange(11.0), np.random.default_rng(54), t_par=t_par)
+    held = state.copy()
+    t = 10.0
+    while True:
+        t += 0.5
+        state = tracker.step(t_par, state, obs, t, _plot(1, t, 1e5, 1e5))  # always gated
+        if not state.active[0]:
+            break
+        np.testing.assert_array_equal(state.x, held.x)
+        assert state.t_s[0] == 10.0
+    assert t == 10.0 + coast + 0.5
+    assert state.n_updates[0] == 0 and state.gate_failures[0] == 0
+
+
+def test_ais_only_track_coast_counts_from_the_report_stamp() -> None:
+    """An AIS-only track is held at its report's time stamp: a report stamped 4 s, received
+    at 7 s (3 s latency), keeps a 10 s coast track to t = 14 and deletes it at 14.5."""
+    t_par = tracker.build([{"coast_s": 10.0}])
+    obs = np.zeros(1, dtype=np.int64)
+    state = tracker.step(t_par, tracker.init(1), obs, 7.0,
+                         ais=_one_report(4.0, 100.0, 0.0, 5.0, 0.0))
+    assert state.active[0] and state.t_s[0] == 4.0
+    for t in np.arange(7.5, 14.01, 0.5):
+        state = tracker.step(t_par, state, obs, float(t))
+        assert state.active[0], t
+    state = tracker.step(t_par, state, obs, 14.5)
+    assert not state.active[0]
+
+
+@pytest.mark.parametrize("p", [0.5, 0.9, 0.99, 0.9999, 1.0 - 1e-9])
+@pytest.mark.parametrize("dof", [2, 4, 6])
+def test_chi2_quantile_against_scipy(p: float, dof: int) -> None:
+    stats = pytest.importorskip("scipy.stats")
+    assert tracker.chi2_quantile_even(p, dof) == pytest.approx(stats.chi2.ppf(p, dof),
+                                                               rel=1e-9)
+
+
+@pytest.mark.parametrize("dof", [0, 3, -2])
+def test_chi2_quantile_rejects_odd_or_nonpositive_dof(dof: int) -> None:
+    with pytest.raises(ValueError, match="dof"):
+        tracker.chi2_quantile_even(0.9, dof)
+
+
+def test_real_sensors_with_late_ais_equal_time_order_processing() -> None:
+    """Radar (2.5 s scans, p_detect 0.8) and AIS (3 s latency, so reports arrive after one or
+    two newer plots; p_receive 0.9) from the sensor modules feed the tracker for 150 s:
+    every track equals the textbook filter run on the same plots and reports sorted by
+    time stamp (at most two newer measurements: always the exact reprocessing)."""
+    n_pairs = 12
+    truth = straight_targets(n_pairs, seed=55, r_nm=(1.0, 4.0), speed=(3.0, 12.0))
+    n = 2 * n_pairs
+    obs, tgt = np.arange(n_pairs), np.arange(n_pairs, n)
+    r_par = radar.build([{"p_detect": 0.8}] * n)
+    a_par = ais.build([{"latency_s": 3.0, "p_receive": 0.9}] * n)
+    t_par = tracker.build([{"gate_probability": 1.0 - 1e-12}] * n)
+    q, sv0 = t_par.q_m2ps3[0], t_par.init_speed_sigma_mps[0]
+    sp, sv = t_par.ais_sigma_position_m[0], t_par.ais_sigma_velocity_mps[0]
+    r_state, a_state, state = radar.init(r_par), ais.init(a_par, n_pairs), tracker.init(n_pairs)
+    r_streams, tx, rx = (independent_streams(n_pairs, 56), independent_streams(n, 57),
+                         independent_streams(n_pairs, 58))
+    meas: list[list] = [[] for _ in range(n_pairs)]
+    late = 0
+    for k in range(151):
+        t = float(k)
+        if k:
+            truth.pos += truth.vel
+        x = truth.x8()
+        r_state, plots = radar.step(r_par, r_state, t, obs, tgt, x, x[NORTH], x[EAST], x[PSI],
+                                    r_streams)
+        a_state, rep = ais.step(a_par, a_state, t, obs, tgt, x, np.zeros((2, n)), tx, rx)
+        for p in np.flatnonzero(rep.valid):
+            z, R = _ais_z_r(rep.north_m[p], rep.east_m[p], rep.sog_mps[p], rep.cog_rad[p], sp,
+                            sv)
+            late += any(e[0] > rep.stamp_s[p] for e in meas[p])
+            meas[p].append((float(rep.stamp_s[p]), z, R))
+        for p in np.flatnonzero(plots.valid):
+            meas[p].append((t, np.array([plots.north_m[p], plots.east_m[p]]), plots.cov[p]))
+        state = tracker.step(t_par, state, obs, t, plots, rep)
+    assert late > 2 * n_pairs  # out-of-sequence use really happened
+    for p in range(n_pairs):
+        ordered = sorted(meas[p], key=lambda e: e[0])
+        x_tb, P_tb = _textbook(ordered, q, sv0)
+        assert state.n_updates[p] == len(ordered)
+        np.testing.assert_allclose(state.x[p], x_tb, rtol=1e-9, atol=1e-8)
+        np.testing.assert_allclose(state.P[p], P_tb, rtol=1e-7, atol=1e-10)
+
+
+@pytest.mark.parametrize(("factor", "accepted"), [(0.99, True), (1.01, False)])
+def test_late_report_is_gated_against_the_estimate_at_its_stamp(factor, accepted) -> None:
+    """Plots every 2.5 s to t = 20; a report stamped 18.5 s arrives at 21 s. Processing in
+    time order would gate it against the estimate after the 17.5 s plot predicted to 18.5 s:
+    the reprocessing does the same (NIS 0.99 g4 used, 1.01 g4 rejected, the track then as it
+    was)."""
+    t_par = tracker.build([{}])
+    obs = np.zeros(1, dtype=np.int64)
+    rng = np.random.default_rng(57)
+    times = 2.5 * np.arange(9)  # 0 .. 20
+    state = before = tracker.init(1)
+    for t in times:
+        plot = _plot(1, t, 7.0 * t + 20 * rng.standard_normal(), 20 * rng.standard_normal())
+        state = tracker.step(t_par, state, obs, t, plot)
+        if t == 17.5:
+            before = state.copy()
+    rep = _ais_at_nis(before, t_par, 18.5, factor * float(t_par.gate4[0]))
+    new = tracker.step(t_par, state, obs, 21.0, ais=rep)
+    assert (new.n_updates[0] == state.n_updates[0] + 1) == accepted
+    if not accepted:
+        assert new.gate_failures[0] == 1
+        np.testing.assert_array_equal(new.x, state.x)
+        np.testing.assert_array_equal(new.P, state.P)
+    else:
+        assert new.gate_failures[0] == 0 and new.t_s[0] == 20.0

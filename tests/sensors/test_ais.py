@@ -237,7 +237,8 @@ def _reference_transmit(params, state, t, x, current, draws, anchored):
                        np.minimum(state.next_tx_s, state.last_tx_s + interval), state.next_tx_s)
     sent = params.enabled & (t >= pending - 1e-9)
     nxt = pending + interval
-    nxt = np.where(nxt <= t + 1e-9, t + interval, nxt)
+    behind = nxt <= t + 1e-9  # the schedule restarts from now
+    nxt = np.where(behind, t + interval, nxt)
     sp = params.sigma_position_m
     north, east = ais.quantise_position(x[NORTH] + sp * draws[:, 0], x[EAST] + sp * draws[:, 1],
                                         params.east_step_m)
@@ -250,7 +251,8 @@ def _reference_transmit(params, state, t, x, current, draws, anchored):
     buf_t, buf = state.buf_t_s.copy(), state.buf.copy()
     buf_t[rows, head[rows]] = t
     buf[rows, head[rows]] = fields[rows]
-    return (np.where(sent, nxt, pending), np.where(sent, pending, state.last_tx_s), head, buf_t,
+    last = np.where(behind, t, pending)
+    return (np.where(sent, nxt, pending), np.where(sent, last, state.last_tx_s), head, buf_t,
             buf), sent
 
 
@@ -522,3 +524,179 @@ def test_config_errors_name_the_key(cfg, key) -> None:
     with pytest.raises(InputError) as err:
         ais.build([{}, cfg])
     assert err.value.key == key
+
+
+# ---------------------------------------------------------------- schedule changes, content
+
+
+def _sent_steps(params, speed_kn, rate, anchored, steps, dt=1.0, current=None):
+    """Step indices at which ship 0 reports; ``speed_kn``, ``rate`` and ``anchored`` are
+    functions of the step index."""
+    x = np.zeros((N_STATE, 1))
+    cur = np.zeros((2, 1)) if current is None else np.asarray(current, dtype=float)
+    state, streams, sent_at = ais.init(params, 0), independent_streams(1), []
+    for k in range(steps):
+        x[U, 0], x[R, 0] = speed_kn(k) * KN, rate(k)
+        state, sent = ais.transmit(params, state, k * dt, x, cur, streams,
+                                   np.array([anchored(k)]))
+        if sent[0]:
+            sent_at.append(k)
+    return sent_at
+
+
+def test_rate_increase_after_a_long_gap_sends_no_burst() -> None:
+    """A ship at anchor reports every 3 min; it weighs anchor and sails at 10 kn from t = 30 s
+    (10 s interval). The pending report is pulled forward to 0 + 10 s, already past, so it
+    goes at once (t = 30); the station then reports every 10 s: 40, 50 (the pulled-forward
+    schedule 10, 20, 30 never happened and is not replayed one report per step)."""
+    params = ais.build([{}])
+    got = _sent_steps(params, lambda k: 0.0 if k < 30 else 10.0, lambda k: 0.0,
+                      lambda k: k < 30, 60)
+    assert got == [0, 30, 40, 50]
+
+
+def test_turn_starting_late_in_the_interval_keeps_the_turning_rate() -> None:
+    """10 kn, report at 0, turning from t = 9 (interval 10 s -> 3 1/3 s): the report pulled to
+    3.33 s goes at 9; after it the reports are one turning interval apart, each on the first
+    1 s step at or after its time, so no two are closer than 3.33 - 1 = 2.33 s, and
+    [9, 29] holds at most 1 + 20 / 3.33 = 7 reports."""
+    params = ais.build([{}])
+    got = _sent_steps(params, lambda k: 10.0, lambda k: TURN if k >= 9 else 0.0,
+                      lambda k: False, 30)
+    assert got[:2] == [0, 9]
+    assert min(np.diff(got[1:])) >= 10.0 / 3.0 - 1.0
+    assert len([k for k in got if k >= 9]) <= 7
+
+
+def test_speed_up_pulls_the_pending_report_forward_into_the_future() -> None:
+    """10 kn (10 s) with a report at 0, then 15 kn (6 s) from t = 3: the pending report moves
+    from 10 to 0 + 6 = 6 and the reports follow every 6 s: 0, 6, 12, 18, 24."""
+    params = ais.build([{}])
+    got = _sent_steps(params, lambda k: 10.0 if k < 3 else 15.0, lambda k: 0.0,
+                      lambda k: False, 25)
+    assert got == [0, 6, 12, 18, 24]
+
+
+def test_slowing_down_keeps_the_pending_report_then_lengthens() -> None:
+    """15 kn (6 s) with reports at 0 and 6, then 10 kn (10 s) from t = 7: the report already
+    scheduled at 12 is kept (only a shorter interval moves it), the next is 12 + 10 = 22."""
+    params = ais.build([{}])
+    got = _sent_steps(params, lambda k: 15.0 if k < 7 else 10.0, lambda k: 0.0,
+                      lambda k: False, 33)
+    assert got == [0, 6, 12, 22, 32]
+
+
+@pytest.mark.parametrize(("factor", "expected"), [(1.0, [0, 10]), (-1.0, [0, 10]),
+                                                  (1.0 + 1e-9, [0, 4, 7, 10]),
+                                                  (-(1.0 + 1e-9), [0, 4, 7, 10])])
+def test_changing_course_threshold_is_strict_and_either_way(factor, expected) -> None:
+    """``turn_rate_degps`` 2: a rate of turn of exactly 2 deg/s (either way) is not changing
+    course (10 s at 10 kn); a hair above is (3 1/3 s: reports at 0, 3.33 -> 4, 6.67 -> 7, 10)."""
+    params = ais.build([{"turn_rate_degps": 2.0}])
+    rate = factor * float(params.turn_rate_radps[0])
+    got = _sent_steps(params, lambda k: 10.0, lambda k: rate, lambda k: False, 12)
+    assert got == expected
+
+
+def test_first_report_time_is_not_pulled_forward_by_a_turn() -> None:
+    """Before the first report there is no last report to count an interval from: a turning
+    ship with ``first_report_s`` 8 sends first at 8, then every 3 1/3 s (8, 11.33 -> 12,
+    14.67 -> 15, 18)."""
+    params = ais.build([{"first_report_s": 8.0}])
+    got = _sent_steps(params, lambda k: 10.0, lambda k: TURN, lambda k: False, 19)
+    assert got == [8, 12, 15, 18]
+
+
+@pytest.mark.parametrize(("current_n", "expected"), [(0.3, [0, 6, 12]), (-0.3, [0, 10])])
+def test_schedule_follows_speed_over_ground_in_a_current(current_n, expected) -> None:
+    """13.8 kn through the water heading north; a 0.3 m/s (0.583 kn) current from astern makes
+    14.38 kn over the ground (> 14 kn: 6 s), from ahead 13.22 kn (10 s)."""
+    params = ais.build([{"sigma_velocity_mps": 0.0}])
+    got = _sent_steps(params, lambda k: 13.8, lambda k: 0.0, lambda k: False, 13,
+                      current=[[current_n], [0.0]])
+    assert got == expected
+
+
+def test_report_content_by_hand_in_a_current_at_latitude_60() -> None:
+    """No noise; ship at (10 m, 10 m) heading 000 at 10 kn through the water in a 1 m/s east
+    current, ``ref_latitude_deg`` 60 (east step 0.1852 cos 60 = 0.0926 m):
+    north 10 / 0.1852 = 53.996 -> 54 steps = 10.0008 m; east 10 / 0.0926 = 107.99 -> 108 steps
+    = 10.0008 m; SOG hypot(5.1444, 1) = 5.2407 m/s = 10.187 kn -> 10.2 kn; COG
+    atan2(1, 5.1444) = 11.001 deg -> 11.0 deg; heading 000 -> 0."""
+    params = ais.build([{"sigma_position_m": 0.0, "sigma_velocity_mps": 0.0,
+                         "sigma_heading_deg": 0.0, "ref_latitude_deg": 60.0}])
+    x = np.zeros((N_STATE, 1))
+    x[NORTH], x[EAST], x[U] = 10.0, 10.0, 10.0 * KN
+    state, sent = ais.transmit(params, ais.init(params, 0), 0.0, x, np.array([[0.0], [1.0]]),
+                               independent_streams(1))
+    assert sent[0]
+    north, east, sog, cog, hdg = state.buf[0, state.head[0]]
+    assert north == pytest.approx(54 * 0.1852, abs=1e-9)
+    assert east == pytest.approx(108 * 0.0926, abs=1e-9)
+    assert sog == pytest.approx(10.2 * KN, abs=1e-12)
+    assert math.degrees(cog) == pytest.approx(11.0, abs=1e-9)
+    assert hdg == 0.0
+
+
+def test_reception_range_is_the_receivers() -> None:
+    """Ship 0 hears to 5 NM, ship 1 to 20 NM, 10 NM apart: 1 hears 0, 0 does not hear 1."""
+    params = ais.build([{"max_range_nm": 5.0, "latency_s": 0.0},
+                        {"max_range_nm": 20.0, "latency_s": 0.0}])
+    x = np.zeros((N_STATE, 2))
+    x[EAST, 1] = 10.0 * 1852.0
+    obs, tgt = directed_pairs(np.array([0]), np.array([1]))
+    _, rep = ais.step(params, ais.init(params, 2), 0.0, obs, tgt, x, np.zeros((2, 2)),
+                      independent_streams(2), independent_streams(2, 1))
+    assert rep.valid.tolist() == [False, True]  # 0 <- 1 out of range; 1 <- 0 heard
+    assert rep.stamp_s[1] == 0.0 and np.isnan(rep.stamp_s[0])
+
+
+def test_reports_never_heard_still_draw_one_number_each() -> None:
+    """``p_receive`` 0: nothing is ever received, yet every report that arrives takes one
+    normal from the pair's stream (module docstring), so after N arrivals the stream stands
+    where N draws would leave it. A 30 kn target reports every 2 s: 10 reports in 0..19 s."""
+    params = ais.build([{"p_receive": 0.0, "latency_s": 1.0}] * 2)
+    x = np.zeros((N_STATE, 2))
+    x[U, 1], x[NORTH, 1] = 30.0 * KN, 500.0
+    obs, tgt = np.array([0]), np.array([1])
+    state, tx, rx = ais.init(params, 1), independent_streams(2, 8), independent_streams(1, 9)
+    rx0 = rx.copy()
+    arrived = 0
+    for k in range(21):
+        state, rep = ais.step(params, state, float(k), obs, tgt, x, np.zeros((2, 2)), tx, rx)
+        assert not rep.valid[0]
+        arrived += int(k >= 1 and (k - 1) % 2 == 0)  # stamps 0, 2, ... arrive 1 s later
+    assert arrived == 10
+    np.testing.assert_array_equal(peek_normals(rx, 1)[0, 0], peek_normals(rx0, 11)[0, 10])
+
+
+def test_delivered_stamps_increase_and_match_the_transmitter_buffer() -> None:
+    """Three transmitters with latencies 0, 2.5 and 7 s heard by one receiver over 60 s of
+    0.5 s steps: per pair the delivered stamps strictly increase, each is a time at which that
+    target sent, it arrived no earlier than stamp + latency and within one step of it (no
+    report is lost with p_receive 1 and 2-10 s intervals longer than the step)."""
+    lat = [0.0, 2.5, 7.0]
+    params = ais.build([{"latency_s": 0.0}] + [{"latency_s": v} for v in lat])
+    x = np.zeros((N_STATE, 4))
+    x[U, 1:] = np.array([30.0, 18.0, 8.0]) * KN
+    x[EAST, 1:] = [300.0, 600.0, 900.0]
+    obs, tgt = np.zeros(3, dtype=np.int64), np.array([1, 2, 3])
+    state, tx, rx = ais.init(params, 3), independent_streams(4, 10), independent_streams(3, 11)
+    sent_at: list[list[float]] = [[], [], [], []]
+    got: list[list[tuple[float, float]]] = [[], [], []]
+    for k in range(121):
+        t = 0.5 * k
+        state, sent = ais.transmit(params, state, t, x, np.zeros((2, 4)), tx)
+        for i in np.flatnonzero(sent):
+            sent_at[i].append(t)
+        state, rep = ais.receive(params, state, t, obs, tgt, x, rx)
+        for p in np.flatnonzero(rep.valid):
+            got[p].append((t, float(rep.stamp_s[p])))
+    for p in range(3):
+        stamps = [s for _, s in got[p]]
+        assert np.all(np.diff(stamps) > 0)
+        assert set(stamps) <= set(sent_at[p + 1])
+        for t_rx, s in got[p]:
+            assert s + lat[p] <= t_rx + 1e-9 < s + lat[p] + 0.5
+        # every report whose arrival time has come was delivered
+        assert stamps == [s for s in sent_at[p + 1] if s + lat[p] <= 60.0 + 1e-9]

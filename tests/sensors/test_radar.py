@@ -446,3 +446,131 @@ def test_a_minimum_range_beyond_the_maximum_is_refused():
     assert err.value.key == "radar[1].min_range_m"
     p = radar.build([{"min_range_m": 1852.0, "max_range_nm": 1.0}])
     assert p.min_range_m[0] == p.max_range_m[0] == 1852.0
+
+
+# ---------------------------------------------------------------- converted covariance, limits
+
+
+def test_converted_covariance_matches_a_monte_carlo_of_the_polar_noise() -> None:
+    """20000 observers at one geometry (target 8 km at true bearing 030, own heading 070,
+    antenna 40 m forward and 3 m to starboard), range sd 25 m, bearing sd 0.5 deg, each with
+    its own navigation error drawn from the heading variance (0.3 deg)^2 and position
+    covariance [[16, 6], [6, 9]] m^2 passed to ``measure``: the sample covariance of the plot
+    errors equals the converted-measurement covariance within sampling error (standard error
+    of a sample covariance: sqrt((S_ii S_jj + S_ij^2) / N)); the mean error is the conversion
+    bias r (1 - exp(-s^2/2)) = 0.3 m, below the sampling noise."""
+    n = 20000
+    r, b, psi = 8000.0, math.radians(30.0), math.radians(70.0)
+    x = np.zeros((N_STATE, 2 * n))
+    x[PSI, :n] = psi
+    x[NORTH, n:], x[EAST, n:] = r * math.cos(b), r * math.sin(b)
+    params = radar.build([{"sigma_range_m": 25.0, "sigma_bearing_deg": 0.5, "p_detect": 1.0,
+                           "antenna_x_m": 40.0, "antenna_y_m": 3.0}] * (2 * n))
+    rng = np.random.default_rng(40)
+    var_psi = math.radians(0.3) ** 2
+    p_own = np.array([[16.0, 6.0], [6.0, 9.0]])
+    d_pos = rng.standard_normal((2 * n, 2)) @ np.linalg.cholesky(p_own).T
+    est = (x[NORTH] + d_pos[:, 0], x[EAST] + d_pos[:, 1],
+           x[PSI] + math.sqrt(var_psi) * rng.standard_normal(2 * n))
+    obs = np.arange(n)
+    plots = _measure(params, x, obs, obs + n, seed=41, est=est,
+                     own_heading_var_rad2=np.full(2 * n, var_psi),
+                     own_pos_cov_m2=np.broadcast_to(p_own, (2 * n, 2, 2)))
+    assert plots.valid.all()
+    e = np.stack([plots.north_m - x[NORTH, n:], plots.east_m - x[EAST, n:]], axis=1)
+    want = plots.cov.mean(axis=0)
+    got = np.cov(e.T)
+    se = np.sqrt((np.outer(np.diag(want), np.diag(want)) + want**2) / n)
+    assert np.all(np.abs(got - want) < 4 * se), (got, want)
+    assert np.all(np.abs(e.mean(axis=0)) < 4 * np.sqrt(np.diag(want) / n))
+    # the geometry makes the ellipse strongly tilted: the test sees the off-diagonal term
+    assert abs(want[0, 1]) > 0.5 * math.sqrt(want[0, 0] * want[1, 1])
+
+
+def test_converted_covariance_is_the_finite_difference_jacobian() -> None:
+    """``J`` of the docstring is the derivative of (r, b) -> p_a + r (cos(psi + b),
+    sin(psi + b)): a central difference of that map at the measured range and bearing, put
+    through diag(sigma_r^2, sigma_b^2 + var_psi), gives the reported covariance."""
+    x, obs, tgt = _scene(30, seed=42)
+    params = radar.build([{"sigma_range_m": 30.0, "sigma_bearing_deg": 0.7,
+                           "p_detect": 1.0}] * 60)
+    var_psi = np.linspace(0.0, 1e-4, 60)
+    plots = _measure(params, x, obs, tgt, seed=43, own_heading_var_rad2=var_psi)
+    assert plots.valid.all()
+
+    def to_chart(k, rng_m, brg):
+        t = x[PSI, obs[k]] + brg
+        return np.array([x[NORTH, obs[k]] + rng_m * math.cos(t),
+                         x[EAST, obs[k]] + rng_m * math.sin(t)])
+
+    for k in range(30):
+        rr, bb = plots.range_m[k], plots.bearing_rad[k]
+        hr, hb = 1e-3, 1e-7
+        J = np.stack([(to_chart(k, rr + hr, bb) - to_chart(k, rr - hr, bb)) / (2 * hr),
+                      (to_chart(k, rr, bb + hb) - to_chart(k, rr, bb - hb)) / (2 * hb)], axis=1)
+        D = np.diag([30.0**2, math.radians(0.7) ** 2 + var_psi[obs[k]]])
+        np.testing.assert_allclose(plots.cov[k], J @ D @ J.T, rtol=1e-5,
+                                   atol=1e-6 * plots.cov[k].max())
+        # the plot itself is that map at the measured range and bearing
+        np.testing.assert_allclose([plots.north_m[k], plots.east_m[k]], to_chart(k, rr, bb),
+                                   atol=1e-6)
+
+
+def test_range_limits_are_measured_from_the_antenna() -> None:
+    """Antenna 50 m forward of the reference point, heading 000, min 40 m: a target 60 m ahead
+    of the reference point is 10 m from the antenna (not plotted), one 30 m astern is 80 m
+    from it (plotted). Max 1 NM: a target 1 NM + 30 m ahead is 1 NM - 20 m from the antenna
+    (plotted), one 1 NM - 30 m astern is 1 NM + 20 m from it (not plotted)."""
+    ahead = [60.0, -30.0, NM + 30.0, -(NM - 30.0)]
+    n_pairs = len(ahead)
+    x = np.zeros((N_STATE, 2 * n_pairs))
+    x[NORTH, n_pairs:] = ahead
+    params = radar.build([{"p_detect": 1.0, "sigma_range_m": 0.0, "sigma_bearing_deg": 0.0,
+                           "antenna_x_m": 50.0, "min_range_m": 40.0,
+                           "max_range_nm": 1.0}] * (2 * n_pairs))
+    obs = np.arange(n_pairs)
+    plots = _measure(params, x, obs, obs + n_pairs)
+    assert plots.valid.tolist() == [False, True, True, False]
+    np.testing.assert_allclose(plots.range_m[1:3], [80.0, NM - 20.0])
+    # the plot lands on the target: antenna position plus the measured polar vector
+    np.testing.assert_allclose(plots.north_m[1:3], [-30.0, NM + 30.0], atol=1e-9)
+
+
+def test_detections_over_scans_are_independent_bernoulli_draws() -> None:
+    """One pair scanned 4000 times (p_detect 0.5, one scan per 2.5 s step) through its single
+    stream: the detection rate is 0.5 within 4 standard errors and detection at one scan does
+    not predict the next (P(d_k and d_k+1) = 0.25; overlapping pairs share a draw, so the
+    variance of their mean is (3/16 + 2 (1/8 - 1/16)) / N = (5/16) / N)."""
+    params = radar.build([{"p_detect": 0.5}] * 2)
+    x = np.zeros((N_STATE, 2))
+    x[EAST, 1] = 3000.0
+    obs, tgt = np.array([0]), np.array([1])
+    state, streams = radar.init(params), independent_streams(1, 44)
+    hits = []
+    for k in range(4000):
+        state, plots = radar.step(params, state, 2.5 * k, obs, tgt, x, x[NORTH], x[EAST], x[PSI],
+                                  streams)
+        hits.append(bool(plots.valid[0]))
+    h = np.array(hits)
+    assert abs(h.mean() - 0.5) < 4 * math.sqrt(0.25 / h.size)
+    both = (h[1:] & h[:-1]).mean()
+    assert abs(both - 0.25) < 4 * math.sqrt(5.0 / 16.0 / h.size)
+
+
+def test_scan_due_is_pure_and_counts_one_period_per_revolution() -> None:
+    """``scan_due`` returns a new state and leaves the old one as it was; with steps of 0.7 s
+    and a 2.5 s period the scans over 700 s number 700 / 2.5 = 280 (+1 for t = 0), each the
+    first step at or after its scheduled time k * 2.5."""
+    params = radar.build([{"scan_period_s": 2.5}])
+    state = radar.init(params)
+    before = state.next_scan_s.copy()
+    new, due = radar.scan_due(params, state, 0.0)
+    np.testing.assert_array_equal(state.next_scan_s, before)
+    assert due[0] and new.next_scan_s[0] == 2.5
+    state, times = radar.init(params), []
+    for k in range(1001):
+        state, due = radar.scan_due(params, state, 0.7 * k)
+        if due[0]:
+            times.append(k)
+    assert len(times) == 281
+    assert times == [math.ceil(2.5 * j / 0.7 - 1e-9) for j in range(281)]

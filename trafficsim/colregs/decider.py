@@ -448,7 +448,9 @@ class Decider:
         if ships.size == 0:
             return
         start = np.isnan(self.base_course_rad[ships])
-        course_now = np.arctan2(own_vel[1], own_vel[0])
+        # the course over ground, the heading where the ship barely moves (features module)
+        course_now = np.where(np.hypot(own_vel[0], own_vel[1]) < features.COURSE_MIN_SPEED_MPS,
+                              own_state[2], np.arctan2(own_vel[1], own_vel[0]))
         self.base_course_rad[ships[start]] = course_now[ships[start]]
         slot = np.full(n, -1, dtype=np.int64)
         slot[ships] = np.arange(ships.size)

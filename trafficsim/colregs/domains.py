@@ -194,7 +194,8 @@ def covering(kind: int, prm: tuple[float, float, float, float], x: float,
 @kernel
 def ray_distance(kind: int, prm: tuple[float, float, float, float], ux: float,
                  uy: float) -> float:
-    """Distance from own ship to the boundary along the unit direction ``(ux, uy)``.
+    """Distance from own ship to the boundary along the unit direction ``(ux, uy)`` (for any
+    other direction vector, in units of its length).
 
     Positive root of ``((r ux - cx)/a)^2 + ((r uy - cy)/b)^2 = 1`` for the piece whose sector
     holds the direction; own ship is inside the ellipse (constant term <= 0), so one root is >= 0.

@@ -289,10 +289,10 @@ def _features_loop(kind: int, own_n: np.ndarray, own_e: np.ndarray, own_vn: np.n
             out[BCT, i] = math.inf
             out[BCR, i] = math.inf
 
-        if own_sog > STOPPED_MPS:
+        if own_sog >= STOPPED_MPS:
             out[SPEED_RATIO, i] = oth_sog / own_sog
         else:
-            out[SPEED_RATIO, i] = math.inf if oth_sog > STOPPED_MPS else 1.0
+            out[SPEED_RATIO, i] = math.inf if oth_sog >= STOPPED_MPS else 1.0
         out[OWN_SPEED, i] = own_sog * _PER_KN
         out[OTHER_SPEED, i] = oth_sog * _PER_KN
 
@@ -300,9 +300,8 @@ def _features_loop(kind: int, own_n: np.ndarray, own_e: np.ndarray, own_vn: np.n
         overtaking = ((abs(bearing_deg) > ABAFT_BEAM_DEG and oth_sog > own_sog)
                       or (abs(aspect) > ABAFT_BEAM_DEG and own_sog > oth_sog))
         prm = domains.ship_params(kind, own_len[i], own_sog, overtaking)
-        if rng > 0.0:
-            inv = 1.0 / rng
-            dom = domains.ray_distance(kind, prm, x * inv, y * inv)
+        if rng > 0.0:  # (along (x, y) itself: the sector of a point on an edge is inside's)
+            dom = rng * domains.ray_distance(kind, prm, x, y)
         else:
             dom = domains.ray_distance(kind, prm, 1.0, 0.0)
         out[DOMAIN, i] = dom * _PER_NM

@@ -18,7 +18,8 @@ Transmission (per ship, :func:`transmit`):
   step at or after ``next_tx_s``; the next is one interval after the *scheduled* time (so the mean
   interval is exact whatever the step), and when the required interval shortens (the ship starts
   to turn or speeds up) the pending report is pulled forward to one new interval after the last
-  one, as the station increases its rate at once.
+  one, as the station increases its rate at once; where that time has passed already, the
+  report goes out now and the schedule restarts from it (no burst to catch up).
 * The schedule follows the ship's true speed over ground and rate of turn (what the station's
   own sensors tell it; their noise would move a ship across a bin boundary only when it sails
   at a boundary speed).
@@ -443,8 +444,10 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
             next_tx[i] = pending
             continue
         nxt = pending + interval
-        next_tx[i] = t_s + interval if nxt <= t_s + 1e-9 else nxt
-        last_tx[i] = pending
+        if nxt <= t_s + 1e-9:  # the schedule fell behind (a shorter interval, pulled into the
+            next_tx[i], last_tx[i] = t_s + interval, t_s  # past): it restarts from now
+        else:
+            next_tx[i], last_tx[i] = nxt, pending
         if not ground:
             c, s = math.cos(psi), math.sin(psi)
             vn, ve = u * c - v * s + cn, u * s + v * c + ce
