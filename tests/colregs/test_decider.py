@@ -601,7 +601,7 @@ def test_colregs_network_has_no_blind_spot(ships):
 # Records and determinism
 # --------------------------------------------------------------------------------------------
 
-RECORD_COLUMNS = ["t_s", "ship", "other", "rules", "path", "decided_own_role",
+RECORD_COLUMNS = ["t_s", "ship", "other", "rules", "rules_sha1", "path", "decided_own_role",
                   "decided_encounter", "decided_other_role", "decided_own_manoeuvre",
                   "course_order_deg", *FEATURES]
 

@@ -374,3 +374,54 @@ def test_the_timeline_lists_exactly_the_recorded_changes(decided_run):
     blocks = _sections(explain_run(run, "own"))
     assert [b[0] for b in blocks] == [f"t = {rec['t_s'][rows[last]]:g} s, own about TS1 "
                                       "(colregs.yaml):"]
+
+
+def _copied_rules_run(folder: Path, with_digest: bool) -> tuple[Path, Path]:
+    """The hand-written decisions of ROWS against a copy of small.yaml (b's rows dropped),
+    with the digest column a run writes or, as an older version wrote them, without."""
+    from trafficsim.colregs.network import rules_digest
+
+    rules = folder / "small.yaml"
+    rules.write_text(SMALL.read_text())
+    rows = [(*r[:3], rules, *r[4:]) for r in ROWS if r[1] == "own"]
+    cols = _columns(rows)
+    if with_digest:
+        cols["rules_sha1"] = [rules_digest([str(rules)])] * len(rows)
+    write_parquet(folder / "decisions.parquet", cols)
+    return folder, rules
+
+
+def test_a_rules_file_edited_after_the_run_is_refused(tmp_path):
+    """A parameter edit still leads along the recorded path but would show a look-ahead the
+    ship never used: the digest recorded with the decisions tells, and the error names the
+    file."""
+    run, rules = _copied_rules_run(tmp_path, with_digest=True)
+    assert "look_ahead_min" in explain_run(run, "own")
+    rules.write_text(rules.read_text().replace("look_ahead_min: 20", "look_ahead_min: 25"))
+    with pytest.raises(InputError, match="changed since the run") as err:
+        explain_run(run, "own")
+    assert err.value.path == str(rules)
+
+
+def test_without_a_digest_a_path_the_rules_no_longer_hold_is_refused(tmp_path):
+    """An older run folder (no digest): a renamed node, or a test that no longer leads along
+    the recorded path, is the same InputError rather than a KeyError or ValueError."""
+    run, rules = _copied_rules_run(tmp_path, with_digest=False)
+    text = rules.read_text()
+    rules.write_text(text.replace("classify", "sort_out"))
+    with pytest.raises(InputError, match="changed since the run"):
+        explain_run(run, "own")
+    rules.write_text(text.replace("safe_nm: 1.0", "safe_nm: 0.1"))  # watch no longer holds
+    with pytest.raises(InputError, match="changed since the run"):
+        explain_run(run, "own")
+
+
+def test_a_run_records_the_digest_of_its_rules(rogue_run):
+    """Every decision row of a run carries the digest of the rules files it decided by."""
+    from trafficsim.colregs.network import rules_digest
+    from trafficsim.colregs.rulefile import parse_file
+    from trafficsim.colregs.vocabulary import VOCABULARY
+
+    _, rec = rogue_run
+    by_file = {r: rules_digest(parse_file(r, VOCABULARY).files) for r in set(rec["rules"])}
+    assert rec["rules_sha1"] == [by_file[r] for r in rec["rules"]]

@@ -497,17 +497,20 @@ class Decider:
 
     def records(self, names: Sequence[str]) -> dict[str, list | np.ndarray]:
         """Every recorded decision step as columns, one row per step and directed pair of a
-        deciding ship: time, ship, other ship, rules file, the path of nodes (names joined by
+        deciding ship: time, ship, other ship, rules file and the digest of its files
+        (:func:`~trafficsim.colregs.network.rules_digest`), the path of nodes (names joined by
         ``>``), the role, encounter, expected role and manoeuvre after the step
         (``decided_*``), the ship's course order, and every feature as the network saw it."""
         rows = np.flatnonzero(self.ship_net[self.obs] >= 0)
         k = len(self.history)
+        digests = [network.rules_digest(net.rules.files) for net in self.networks]
         cols: dict[str, list | np.ndarray] = {
             "t_s": np.repeat([h[0] for h in self.history], rows.size),
             "ship": [names[i] for i in self.obs[rows]] * k,
             "other": [names[i] for i in self.tgt[rows]] * k,
             "rules": [str(self.networks[self.ship_net[i]].rules.path)
                       for i in self.obs[rows]] * k,
+            "rules_sha1": [digests[self.ship_net[i]] for i in self.obs[rows]] * k,
         }
         paths: list[str] = []
         for _, _, path, _, _ in self.history:

@@ -72,7 +72,8 @@ def explain_run(run_dir: Path, ship: str, at_s: float | None = None) -> str:
     the last decision step at or before ``at_s``.
 
     Raises:
-        InputError: no decisions file, unknown ship, or a time before the first decision.
+        InputError: no decisions file, unknown ship, a time before the first decision, or a
+            rules file changed since the run (its explanation would show other rules).
     """
     cols = _read(Path(run_dir))
     ships = sorted(set(cols["ship"].tolist()))
@@ -99,11 +100,20 @@ def explain_run(run_dir: Path, ship: str, at_s: float | None = None) -> str:
         if rules not in nets:
             nets[rules] = network.load(rules, VOCABULARY)
         net = nets[rules]
+        changed = InputError("changed since the run: the explanation would show rules the "
+                             "ships did not decide by (restore the file, or run again)",
+                             path=rules)
+        if "rules_sha1" in cols and cols["rules_sha1"][k] != network.rules_digest(
+                net.rules.files):
+            raise changed
         names = [n for n in str(cols["path"][k]).split(">") if n]
-        path = [net.node_index(n) for n in names]
         feats = np.array([float(cols[f][k]) for f in FEATURES])
+        try:  # (a run folder of an older version: no digest, the replay is the test)
+            text = network.explain(net, [net.node_index(n) for n in names], feats)
+        except (KeyError, ValueError):
+            raise changed from None
         out.append("")
         out.append(f"t = {cols['t_s'][k]:g} s, {ship} about {cols['other'][k]} "
                    f"({Path(rules).name}):")
-        out.append(network.explain(net, path, feats))
+        out.append(text)
     return "\n".join(out)

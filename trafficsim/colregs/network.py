@@ -277,6 +277,12 @@ def load(path: str | os.PathLike[str], vocabulary: Vocabulary) -> Network:
 _LOADED: dict[tuple[str, int], tuple[Vocabulary, Network, tuple]] = {}
 
 
+def rules_digest(files: Sequence[str]) -> str:
+    """SHA-1 (hex) of the contents of a rule set's files (``RuleSet.files``), to tell later
+    whether the rules a run decided by are still those on disk."""
+    return hashlib.sha1(b"".join(sig or b"-" for sig in _signatures(files))).hexdigest()
+
+
 def _signatures(files: Sequence[str]) -> tuple:
     """Digest of each file's content; None for one that cannot be read."""
     out = []
