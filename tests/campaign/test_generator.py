@@ -663,3 +663,23 @@ def test_encounters_do_not_depend_on_the_spec_keys_that_are_not_draws(tmp_path):
                 leg = math.hypot(u.route_m[0, 0] - u.north_m, u.route_m[0, 1] - u.east_m)
                 duration = 1200.0 if u is s else 3600.0
                 assert leg == pytest.approx(1.5 * duration * u.speed_mps + NM)
+
+
+def test_no_two_ships_of_a_multi_ship_encounter_start_in_an_unavoidable_collision(tmp_path):
+    """Every pair of other ships starts at least the spec's largest DCPA (1 NM) apart, and a
+    pair closing to less than that does so no sooner than the spec's least TCPA (10 min):
+    checked by stepping the straight tracks (0.5 s) over the first 10 min, not by the closed
+    form the generator uses."""
+    spec = _spec(tmp_path, extra="encounter_types: {multi: 1}\nmulti_ships: [5, 5]\n"
+                                 "dcpa_nm: [0, 1]\ntcpa_min: [10, 30]", n=60)
+    t = np.arange(0.0, 600.0, 0.5)
+    for index in range(60):
+        others = draw(spec, index).ships[1:]
+        for k, a in enumerate(others):
+            for b in others[k + 1:]:
+                (an, ae), (bn, be) = _velocity(a), _velocity(b)
+                rng = np.hypot(b.north_m - a.north_m + (bn - an) * t,
+                               b.east_m - a.east_m + (be - ae) * t)
+                assert rng[0] >= NM, (index, a.name, b.name)
+                assert rng.min() >= NM * (1 - 1e-9) or rng.argmin() == t.size - 1, (
+                    index, a.name, b.name, rng.min())

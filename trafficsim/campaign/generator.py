@@ -13,6 +13,8 @@ coming up faster from more than 22.5 degrees abaft the other's beam (relative be
 ``reciprocal_deg``) and each ship sees the other ahead or nearly ahead (Rule 14(b); within 10
 degrees of the bow, its ``head_on_bearing_deg``), crossing otherwise, give-way when the other
 ship is on the own ship's starboard side. Head-on draws are within 6 degrees of reciprocal.
+In a multi-ship encounter each further ship must also leave the others placed before it that
+much room (:func:`_clear_of`), so that no two ships start in a collision nobody can avoid.
 
 Every ship sails a straight route along its initial course, long enough for the whole run.
 All draws come from the encounter's own stream (purpose ``"encounter"``), so encounter ``k``
@@ -139,6 +141,25 @@ def _route(north: float, east: float, psi: float, length_m: float) -> np.ndarray
     return np.array([[north + length_m * math.cos(psi), east + length_m * math.sin(psi)]])
 
 
+def _clear_of(placed: list[tuple[tuple[float, float], tuple[float, float]]],
+              pos: tuple[float, float], vel: tuple[float, float], spec: CampaignSpec) -> bool:
+    """Whether another ship starting at ``pos`` with velocity ``vel`` (m, m/s) leaves every
+    other ship ``placed`` before it as much room as the spec gives the own ship: at least the
+    spec's largest DCPA apart at the start, and a pair closing to less than that no sooner than
+    the spec's least TCPA (a multi-ship encounter must not start in a collision no one can
+    avoid)."""
+    room, least_s = NM * spec.dcpa_nm[1], 60.0 * spec.tcpa_min[0]
+    for (n, e), (vn, ve) in placed:
+        pn, pe, dvn, dve = n - pos[0], e - pos[1], vn - vel[0], ve - vel[1]
+        if math.hypot(pn, pe) < room:
+            return False
+        v2 = dvn * dvn + dve * dve
+        t = -(pn * dvn + pe * dve) / v2 if v2 > 1e-12 else -1.0
+        if 0.0 < t < least_s and abs(pn * dve - pe * dvn) < room * math.sqrt(v2):
+            return False
+    return True
+
+
 def _ships(spec: CampaignSpec, pair_kinds: list[str], types: list[str],
            ship: Any, rng: np.random.Generator
            ) -> tuple[list[ShipSetup], list[float], list[float]] | None:
@@ -154,6 +175,7 @@ def _ships(spec: CampaignSpec, pair_kinds: list[str], types: list[str],
                         merge_sensors(ship(own_type).get("sensors"), _sensors(spec, rng)),
                         spec.sensors.filter if spec.sensors else "none", behaviour)]
     dcpas, tcpas = [], []
+    placed: list[tuple[tuple[float, float], tuple[float, float]]] = []  # other ships so far
     for k, pair_kind in enumerate(pair_kinds, start=1):
         for _ in range(TRIES_PER_SHIP):
             type_ = _weighted(spec.ship_types, types, rng)
@@ -168,10 +190,13 @@ def _ships(spec: CampaignSpec, pair_kinds: list[str], types: list[str],
                 continue
             rel_n = -wn * tcpa - dcpa * we / w
             rel_e = -we * tcpa + dcpa * wn / w
-            if classify(own_psi, psi, rel_n, rel_e, own_speed, speed) == pair_kind:
+            vel = (speed * math.cos(psi), speed * math.sin(psi))
+            if (classify(own_psi, psi, rel_n, rel_e, own_speed, speed) == pair_kind
+                    and _clear_of(placed, (rel_n, rel_e), vel, spec)):
                 break
         else:
             return None
+        placed.append(((rel_n, rel_e), vel))
         # (drawn whatever the policy and share, so that they change nothing else)
         u, rogue_kind = rng.random(), int(rng.integers(len(ROGUES)))
         rogue = spec.policy == "colregs" and u < spec.rogue_fraction
