@@ -321,3 +321,66 @@ def test_rps_for_speed_takes_a_different_speed_per_ship():
     got = b.rps_for_speed(fr * b.service_speed_mps)
     rps_service = [load_ship(t)["coefficients"]["rps_service"] for t in ("cargo", "container")]
     np.testing.assert_allclose(got, fr * rps_service, rtol=1e-12)
+
+
+# -- more per-ship tables ---------------------------------------------------------------------
+
+
+def test_ships_of_one_family_keep_their_own_coefficients_and_actuators():
+    """Two cargo variants and a container in one nomoto group: each params row is the
+    ship's own K', T', n3' (column order of NomotoParams), each actuator row its own limits."""
+    cargo = load_ship("cargo")
+    fast = {**cargo, "coefficients": {**cargo["coefficients"], "K_prime": 2.0, "n3_prime": 5.0},
+            "actuators": {**cargo["actuators"], "rudder_max_deg": 25.0}}
+    b = _batch([_setup("a", cargo), _setup("b", fast), _setup("c", "container")])
+    np.testing.assert_array_equal(b.params[:, 0], [3.858, 2.0,
+                                                   load_ship("container")["coefficients"]
+                                                   ["K_prime"]])
+    np.testing.assert_array_equal(b.params[:, 6], [72.06, 5.0,
+                                                   load_ship("container")["coefficients"]
+                                                   .get("n3_prime", 0.0)])
+    np.testing.assert_allclose(b.actuators[:, kernels.RUDDER_MAX],
+                               np.radians([35.0, 25.0, load_ship("container")["actuators"]
+                                           ["rudder_max_deg"]]), rtol=1e-15)
+    np.testing.assert_allclose(b.rudder_max_rad[:2], np.radians([35.0, 25.0]), rtol=1e-15)
+
+
+def test_catfish_rps_table_is_linear_in_speed_with_the_surge_balance_slope():
+    """Modular family: X_uu u^2 + X_nn (2 pi n)^2 = 0, so n = u / (2 pi sqrt(X_nn / -X_uu)),
+    capped at rps_max = 25.1 (9.83 kn is 1.105 of the 8.9 kn service speed); the initial rps
+    of a ship at 6 kn is that of 6 kn (the interpolation of a linear table is exact)."""
+    spec = load_ship("catfish")
+    c = spec["coefficients"]
+    slope = 1.0 / (2 * math.pi * math.sqrt(c["X_nn"] / -c["X_uu"]))
+    b = _batch([_setup("a", "catfish", speed=from_kn(6.0))])
+    want = np.minimum(SPEED_TABLE_FRACTIONS * from_kn(8.9) * slope, 25.1)
+    np.testing.assert_allclose(b.rps_table[0], want, rtol=1e-12, atol=1e-12)
+    assert b.x[RPS, 0] == pytest.approx(from_kn(6.0) * slope, rel=1e-12)
+
+
+def test_rps_for_speed_clamps_astern_and_very_fast_speeds_to_the_table_ends():
+    """Speeds below 0 give the 0-speed entry (0 rps), above 1.25 of service the last entry."""
+    b = _batch([_setup("a", "cargo"), _setup("b", "container")])
+    np.testing.assert_allclose(b.rps_for_speed(np.array([-3.0, -0.1])), b.rps_table[:, 0],
+                               rtol=0, atol=0)
+    np.testing.assert_allclose(b.rps_for_speed(5.0 * b.service_speed_mps), b.rps_table[:, -1],
+                               rtol=1e-15)
+    assert np.all(b.rps_table[:, 0] < 1e-12)
+
+
+def test_routes_given_as_lists_are_padded_like_arrays():
+    """A route as a list of [north, east] pairs is stored and padded with its last point."""
+    b = _batch([_setup("a", "cargo", route_m=[[0.0, 1.0], [2.0, 3.0]]),
+                _setup("b", "cargo", route_m=np.array([[9.0, 9.0], [8.0, 8.0], [7.0, 7.0],
+                                                       [6.0, 6.0]]))])
+    assert b.waypoints.shape == (2, 4, 2)
+    np.testing.assert_array_equal(b.waypoints[0], [[0.0, 1.0], [2.0, 3.0], [2.0, 3.0],
+                                                   [2.0, 3.0]])
+    np.testing.assert_array_equal(b.n_waypoints, [2, 4])
+
+
+def test_substeps_per_s_for_a_non_integer_ratio():
+    """max_dt_s = 0.3 s: 1 / 0.3 sub-steps per second (the engine rounds per step)."""
+    cargo = load_ship("cargo")
+    b = _batch([_setup("a", {**cargo, "integration": {"max_dt_s": 0.3}})])
+    assert b.substeps_per_s[0] == pytest.approx(1.0 / 0.3, rel=1e-15)

@@ -256,3 +256,111 @@ def test_peek_of_nothing_and_of_many():
     streams = independent_streams(3, 2)
     assert peek_normals(streams, 0).shape == (3, 0)
     np.testing.assert_array_equal(peek_normals(streams, 10), peek_normals(streams, 10))
+
+
+def _numpy_state(seed, key):
+    return [int(v) for v in np.random.SFC64(
+        np.random.SeedSequence(seed, spawn_key=key)).state["state"]["state"]]
+
+
+@pytest.mark.parametrize("seed,keys", [
+    (2**40 + 3, [(1, 2, 3)]),
+    (2**130 + 7, [(1, 2, 3), (0, 0, 0)]),
+    (5, [(2**33, 1, 2), (1, 2**32, 0)]),
+    (5, [(), (1,), (1, 2, 3, 4)]),
+    (2**64 - 1, [(2**32 - 1, 0, 14)]),
+])
+def test_seeding_of_multiword_seeds_keys_and_ragged_keys_is_numpys(seed, keys):
+    """Seeds and key elements beyond 32 bits, empty and ragged keys take the general path; the
+    states still equal numpy's SeedSequence + SFC64 seeding."""
+    from trafficsim.noise import seeded_states
+
+    out = seeded_states(seed, keys)
+    assert out.shape == (len(keys), 4) and out.dtype == np.uint64
+    for row, key in zip(out, keys, strict=True):
+        assert [int(v) for v in row] == _numpy_state(seed, key)
+
+
+def test_seeding_accepts_small_integer_key_arrays_and_refuses_negative_values():
+    """Keys as int8/uint32 arrays give numpy's states; a negative seed or key is refused."""
+    from trafficsim.noise import seeded_states
+
+    for dtype in (np.int8, np.uint32, np.int64):
+        out = seeded_states(9, np.array([[3, 1, 4]], dtype=dtype))
+        assert [int(v) for v in out[0]] == _numpy_state(9, (3, 1, 4))
+    with pytest.raises(ValueError, match=">= 0"):
+        seeded_states(-1, [(0, 0, 0)])
+    with pytest.raises(ValueError, match=">= 0"):
+        seeded_states(1, [(0, -2, 0)])
+
+
+def test_bank_uniforms_and_normals_pass_ks_against_scipy_with_the_right_moments():
+    """20 000 draws per kind: Kolmogorov-Smirnov p > 0.001 against U(0, 1) and N(0, 1); mean,
+    variance (1/12 and 1), skewness and excess kurtosis within 5 standard errors."""
+    from scipy import stats
+
+    n = 20_000
+    ubank = NoiseBank(3, [0] * 10, range(10), "waves", 1, kind="uniform")
+    zbank = NoiseBank(3, [0] * 10, range(10), "waves", 1)
+    u = np.concatenate([ubank.next().copy() for _ in range(n // 10)]).ravel()
+    z = np.concatenate([zbank.next().copy() for _ in range(n // 10)]).ravel()
+    assert u.min() >= 0.0 and u.max() < 1.0
+    assert stats.kstest(u, "uniform").pvalue > 1e-3
+    assert stats.kstest(z, "norm").pvalue > 1e-3
+    assert abs(u.mean() - 0.5) < 5 * math.sqrt(1 / 12 / n)
+    assert abs(u.var() - 1 / 12) < 5 * math.sqrt(1 / 180 / n)
+    assert abs(z.mean()) < 5 / math.sqrt(n)
+    assert abs(z.var() - 1.0) < 5 * math.sqrt(2 / n)
+    assert abs(stats.skew(z)) < 5 * math.sqrt(6 / n)
+    assert abs(stats.kurtosis(z)) < 5 * math.sqrt(24 / n)
+
+
+def test_new_banks_reproduce_exactly_and_rows_do_not_depend_on_the_draw_order():
+    """Two banks with the same keys draw identical numbers; numbers of one row do not depend on
+    how many other rows exist or on the bank's block length (a row is its own stream)."""
+    a = NoiseBank(12, [4, 4, 5], [0, 1, 0], "compass", 3, block_steps=5).next().copy()
+    bank1 = NoiseBank(12, [4, 4, 5], [0, 1, 0], "compass", 3, block_steps=5)
+    bank2 = NoiseBank(12, [5], [0], "compass", 3, block_steps=7)
+    s1 = np.stack([bank1.next().copy() for _ in range(23)])
+    s2 = np.stack([bank2.next().copy() for _ in range(23)])
+    np.testing.assert_array_equal(a, s1[0])
+    np.testing.assert_array_equal(s1[:, 2], s2[:, 0])
+    bank3 = NoiseBank(12, [4, 4, 5], [0, 1, 0], "compass", 3, block_steps=5)
+    np.testing.assert_array_equal(np.stack([bank3.next().copy() for _ in range(23)]), s1)
+
+
+def test_streams_of_all_purposes_ships_and_encounters_are_mutually_uncorrelated():
+    """Every purpose of two ships in two encounters (60 streams): off-diagonal sample
+    correlations of 4 000 normals stay within 5 standard errors, and the lag-1
+    autocorrelation of each stream within 5 standard errors of 0."""
+    from trafficsim.noise import PURPOSES
+
+    n = 4000
+    cols = []
+    for purpose in PURPOSES:
+        bank = NoiseBank(1, [0, 0, 1, 1], [0, 1, 0, 1], purpose, 1)
+        cols.append(np.concatenate([bank.next().copy() for _ in range(n)], axis=1))
+    x = np.concatenate(cols, axis=0)  # (60, n)
+    c = np.corrcoef(x)
+    off = c[~np.eye(len(c), dtype=bool)]
+    assert np.abs(off).max() < 5 / math.sqrt(n)
+    lag = np.array([np.corrcoef(r[:-1], r[1:])[0, 1] for r in x])
+    assert np.abs(lag).max() < 5 / math.sqrt(n)
+
+
+def test_independent_streams_are_the_keyed_streams_and_check_streams_refuses_bad_arrays():
+    """independent_streams(n, seed, purpose) are the states of keys (0, row, purpose): numpy's
+    generator for that key draws the same first uniform; check_streams refuses wrong shape,
+    dtype and non-contiguous arrays, naming the expected shape."""
+    from trafficsim.noise import check_streams, independent_streams
+
+    st = independent_streams(3, seed=8, purpose="ais")
+    for row in range(3):
+        assert [int(v) for v in st[row]] == [int(v) for v in generator(
+            8, 0, row, "ais").bit_generator.state["state"]["state"]]
+    first = uniform_from(st, 1)
+    assert first == generator(8, 0, 1, "ais").random()
+    check_streams(st, 3)
+    for bad in (st[:2], st.astype(np.int64), np.asfortranarray(st), [[0] * 4] * 3):
+        with pytest.raises(ValueError, match=r"\(3, 4\) uint64"):
+            check_streams(bad, 3)

@@ -149,3 +149,76 @@ def test_integral_removes_the_steady_error_of_a_constant_moment():
     pid = _nomoto_closed_loop(40.0, 40.0, 0.02, b, seconds=900.0)
     assert math.degrees(p_only[-1]) - 40.0 == pytest.approx(math.degrees(b / 2.0), rel=1e-3)
     assert abs(math.degrees(pid[-1]) - 40.0) < 0.01
+
+
+# --- hand calculations of the PID law ---------------------------------------------------------
+
+
+def test_one_step_by_hand():
+    """kp 2, ki 0.05 /s, kd 30 s; psi_d 95 deg, psi 90 deg, r 0.004 rad/s, integral 0.2 rad s,
+    dt 0.5 s: e = 5 deg = 0.0872665 rad inside the band, integral 0.2 + 0.0436332 = 0.2436332,
+    command 2 (0.0872665) + 0.05 (0.2436332) - 30 (0.004) = 0.1745329 + 0.0121817 - 0.12
+    = 0.0667146 rad (inside the 35 deg limit)."""
+    integ = np.array([0.2])
+    cmd = rudder_command(np.radians([95.0]), np.radians([90.0]), np.array([0.004]), integ,
+                         2.0, 30.0, 0.05, math.radians(35.0), 0.5)
+    e = math.radians(5.0)
+    assert integ[0] == pytest.approx(0.2 + 0.5 * e, rel=1e-12)
+    assert cmd[0] == pytest.approx(2 * e + 0.05 * (0.2 + 0.5 * e) - 0.12, rel=1e-12)
+    assert cmd[0] == pytest.approx(0.0667146, abs=1e-7)
+
+
+def test_integral_is_frozen_outside_the_band_while_the_command_saturates():
+    """A 40 deg error held for 200 steps: the integral keeps its value (no wind-up) and the
+    command sits at the limit; once the error is 4 deg it grows by e dt per step again, and
+    with ki = 0 the command is kp e alone."""
+    integ = np.array([0.05, 0.05])
+    rmax = math.radians(30.0)
+    for _ in range(200):
+        cmd = rudder_command(np.radians([40.0, -40.0]), np.zeros(2), np.zeros(2), integ,
+                             1.5, 10.0, 0.02, rmax, 1.0)
+        np.testing.assert_array_equal(cmd, [rmax, -rmax])
+    np.testing.assert_array_equal(integ, [0.05, 0.05])
+    e = math.radians(4.0)
+    for k in range(1, 4):
+        cmd = rudder_command(np.array([e, -e]), np.zeros(2), np.zeros(2), integ, 1.5, 10.0,
+                             0.02, rmax, 1.0)
+        np.testing.assert_allclose(integ, [0.05 + k * e, 0.05 - k * e], rtol=1e-12)
+    np.testing.assert_allclose(cmd, [1.5 * e + 0.02 * integ[0], -1.5 * e + 0.02 * integ[1]],
+                               rtol=1e-12)
+
+
+def test_derivative_acts_on_yaw_rate_so_a_setpoint_step_gives_no_kick():
+    """Derivative on the measured yaw rate, not on the error: stepping psi_d by 3 deg between
+    two calls at the same psi and r changes the command by exactly kp x 3 deg (ki = 0), and
+    changing r alone by 0.01 rad/s changes it by -kd x 0.01."""
+    base_args = dict(kp=0.8, kd_s=25.0, ki_per_s=0.0, rudder_max_rad=1.0, dt=1.0)
+    a = rudder_command(np.radians([10.0]), np.radians([12.0]), np.array([0.002]), np.zeros(1),
+                       **base_args)
+    b = rudder_command(np.radians([13.0]), np.radians([12.0]), np.array([0.002]), np.zeros(1),
+                       **base_args)
+    c = rudder_command(np.radians([13.0]), np.radians([12.0]), np.array([0.012]), np.zeros(1),
+                       **base_args)
+    assert b[0] - a[0] == pytest.approx(0.8 * math.radians(3.0), rel=1e-9)
+    assert c[0] - b[0] == pytest.approx(-25.0 * 0.01, rel=1e-9)
+
+
+def test_saturation_clips_exactly_at_each_ships_own_limit_whatever_drives_it():
+    """Proportional, integral or damping term alone beyond the limit: the command is exactly
+    +-rudder_max of that ship; just inside the limit it is passed through unchanged."""
+    rmax = np.radians([10.0, 20.0, 35.0, 35.0])
+    integ = np.array([0.0, 50.0, 0.0, 0.0])
+    cmd = rudder_command(np.radians([30.0, 0.0, 0.0, 0.0]), np.zeros(4),
+                         np.array([0.0, 0.0, 0.5, -0.01]), integ, 1.0, np.array([0, 0, 10, 10.0]),
+                         np.array([0.0, 0.1, 0.0, 0.0]), rmax, 1.0)
+    np.testing.assert_array_equal(cmd[:3], [rmax[0], rmax[1], -rmax[2]])
+    assert cmd[3] == pytest.approx(0.1, rel=1e-12) and cmd[3] < rmax[3]
+
+
+def test_zero_time_step_leaves_the_integral_and_gives_the_pd_command():
+    """dt = 0: e dt = 0, so the integral keeps its value and ki integral uses it."""
+    integ = np.array([0.3])
+    cmd = rudder_command(np.radians([2.0]), np.zeros(1), np.zeros(1), integ, 1.0, 0.0, 0.1,
+                         1.0, 0.0)
+    assert integ[0] == 0.3
+    assert cmd[0] == pytest.approx(math.radians(2.0) + 0.03, rel=1e-12)

@@ -373,3 +373,95 @@ def test_build_rejects_bad_settings_naming_the_key(cfg: dict, match: str) -> Non
     when only one ship of several is wrong."""
     with pytest.raises(ValueError, match=match):
         adaptive.build([{}, cfg], "gnss")
+
+
+def test_estimate_converges_to_a_correlated_anisotropic_r_of_an_optimal_filter() -> None:
+    """A 2-D random-walk Kalman filter with the true (correlated, anisotropic) R: over a long
+    window the Myers-Tapley estimate from its innovations and H P- H^T is that R, to the
+    sampling error of about 2 000 innovations (averaged over 20 independent ships)."""
+    rng = np.random.default_rng(31)
+    n, steps, q = 20, 2000, 0.3
+    R = np.array([[4.0, 1.5], [1.5, 2.0]])
+    LR = np.linalg.cholesky(R)
+    params = adaptive.build([{"window_steps": steps}] * n, "gnss")
+    st = adaptive.start(params, np.broadcast_to(np.eye(2), (n, 2, 2)))
+    truth = np.zeros((n, 2))
+    x = np.zeros((n, 2))
+    P = np.broadcast_to(np.eye(2) * 10.0, (n, 2, 2)).copy()
+    for _ in range(steps):
+        truth += rng.normal(0.0, math.sqrt(q), (n, 2))
+        z = truth + rng.standard_normal((n, 2)) @ LR.T
+        Pm = P + q * np.eye(2)
+        nu = z - x
+        S = Pm + R
+        K = Pm @ np.linalg.inv(S)
+        x = x + np.einsum("nij,nj->ni", K, nu)
+        P = Pm - K @ Pm
+        st = adaptive.step(params, st, nu, Pm, np.ones(n, bool))
+    mean_R = st.R.mean(axis=0)
+    # the sample covariance of S (about 6 m^2 per entry) over 40 000 innovations: +-0.1 m^2
+    np.testing.assert_allclose(mean_R, R, atol=0.15)
+    np.testing.assert_allclose(st.R, np.swapaxes(st.R, -1, -2))
+
+
+def test_vectorised_ships_with_own_settings_equal_each_ship_alone() -> None:
+    """Ships with different windows, min_samples, floors and invalid steps stepped together give
+    each ship's estimate as when it runs alone (the shared buffer is as long as the longest
+    window)."""
+    rng = np.random.default_rng(37)
+    cfgs = [{"window_steps": 5, "min_samples": 2, "floor_sigma_m": 0.5},
+            {"window_steps": 12}, {"window_steps": 3, "min_samples": 3, "floor_sigma_m": 2.0}]
+    n = len(cfgs)
+    both = adaptive.build(cfgs, "gnss")
+    st = adaptive.start(both, np.broadcast_to(np.eye(2) * 9.0, (n, 2, 2)))
+    alone = [adaptive.build([c], "gnss") for c in cfgs]
+    sts = [adaptive.start(a, np.eye(2)[None] * 9.0) for a in alone]
+    for k in range(40):
+        nu = rng.normal(0.0, 3.0, (n, 2))
+        hph = np.broadcast_to(np.diag([0.5, 0.2]), (n, 2, 2)) * (1 + 0.1 * k)
+        valid = rng.random(n) > 0.3
+        st = adaptive.step(both, st, nu, hph, valid)
+        for i in range(n):
+            sts[i] = adaptive.step(alone[i], sts[i], nu[i:i + 1], hph[i:i + 1], valid[i:i + 1])
+            np.testing.assert_allclose(st.R[i], sts[i].R[0], rtol=1e-9, atol=1e-12)
+
+
+def test_scalar_group_estimate_by_hand() -> None:
+    """A compass group (m = 1), window 4, min 3: after innovations 1, 2, 6 (H P H^T 0.5 each)
+    the estimate is var([1, 2, 6]) - 0.5 = 7 - 0.5; after five steps the window holds
+    [2, 6, 3, 5]: var 10/3 minus the mean H P H^T."""
+    p = adaptive.build([{"window_steps": 4, "min_samples": 3, "floor_sigma_deg": 0.01}],
+                       "compass")
+    st = adaptive.start(p, np.full((1, 1, 1), 9.0))
+    hph = [0.5, 0.5, 0.5, 1.0, 1.5]
+    for i, v in enumerate([1.0, 2.0]):
+        st = adaptive.step(p, st, np.array([[v]]), np.array([[[hph[i]]]]), np.array([True]))
+        assert st.R[0, 0, 0] == 9.0  # prior kept until 3 samples
+    st = adaptive.step(p, st, np.array([[6.0]]), np.array([[[0.5]]]), np.array([True]))
+    # mean 3, squares 4 + 1 + 9 = 14, / 2 = 7
+    assert st.R[0, 0, 0] == pytest.approx(7.0 - 0.5)
+    for v, h in ((3.0, 1.0), (5.0, 1.5)):
+        st = adaptive.step(p, st, np.array([[v]]), np.array([[[h]]]), np.array([True]))
+    # window [2, 6, 3, 5]: mean 4, squares 4 + 4 + 1 + 1 = 10, / 3; H P H^T mean 3.5 / 4
+    assert st.R[0, 0, 0] == pytest.approx(10.0 / 3.0 - 3.5 / 4.0)
+    # a huge H P H^T drives the estimate to the floor, in rad^2
+    st = adaptive.step(p, st, np.array([[4.0]]), np.array([[[1e6]]]), np.array([True]))
+    assert st.R[0, 0, 0] == pytest.approx(math.radians(0.01) ** 2)
+
+
+def test_build_rejects_unknown_group_and_keys_of_another_group() -> None:
+    """A floor key of another group is an unknown key; an unknown group is refused."""
+    with pytest.raises(ValueError, match="floor_sigma_m"):
+        adaptive.build([{"floor_sigma_m": 1.0}], "compass")
+    with pytest.raises(ValueError, match="group"):
+        adaptive.build([{}], "radar")
+    p = adaptive.build([{"window_steps": 7}], "log")
+    assert p.min_samples.tolist() == [3] and p.floor_var[0] == pytest.approx(1e-4)
+
+
+def test_empty_batch_starts_and_steps() -> None:
+    """No ships: start and step give empty states, as the filters feeding them do."""
+    p = adaptive.build([], "gnss")
+    st = adaptive.start(p, np.zeros((0, 2, 2)))
+    st = adaptive.step(p, st, np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0, bool))
+    assert st.R.shape == (0, 2, 2)

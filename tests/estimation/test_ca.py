@@ -275,3 +275,75 @@ def test_build_keeps_the_ship_order_and_accepts_zero_process_noise() -> None:
 def test_build_rejects_nan(key: str) -> None:
     with pytest.raises(ValueError):
         ca.build([{key: float("nan")}])
+
+
+def test_run_vectorised_over_series_with_own_parameters_equals_one_series_at_a_time() -> None:
+    """Series with different T, sigma_R, sigma_a and alpha, and gaps at different samples,
+    filtered together equal each series filtered alone."""
+    rng = np.random.default_rng(21)
+    p = ca.CAParams.of(4, [2.0, 1.0, 0.5, 3.0], [3.0, 1.0, 0.2, 5.0], [0.05, 0.2, 0.0, 0.1],
+                       [1 / 30, 0.1, 0.5, 0.0])
+    z = np.cumsum(rng.normal(0.0, 4.0, (4, 60)), axis=1)
+    z[0, 10:15] = np.nan
+    z[2, 30] = np.nan
+    z[3, 2:] = np.nan
+    together = ca.run(p, z)
+    for i in range(4):
+        one = ca.CAParams(p.dt_s[i:i + 1], p.sigma_meas[i:i + 1], p.sigma_acc[i:i + 1],
+                          p.alpha_per_s[i:i + 1])
+        alone = ca.run(one, z[i:i + 1])
+        for a, b in zip(together, alone, strict=True):
+            np.testing.assert_allclose(a[i], b[0], rtol=1e-12, atol=1e-12)
+
+
+def test_gap_predicts_only_and_the_innovation_is_nan_there() -> None:
+    """At a missing sample the estimate is Phi times the previous one and P the predicted one;
+    the innovation there is NaN, elsewhere it is Z - H X(k|k-1)."""
+    p = ca.CAParams.of(1, T, 2.0, 0.1, 0.1)
+    z = np.array([[0.0, 10.0, 21.0, np.nan, np.nan, 52.0, 60.0]])
+    r = ca.run(p, z)
+    phi = ca.transition(p.dt_s)[0]
+    for k in (3, 4):
+        np.testing.assert_allclose(r.x[0, k], phi @ r.x[0, k - 1], rtol=1e-14)
+        np.testing.assert_allclose(r.p[0, k], r.p_pred[0, k], rtol=1e-14)
+        assert np.isnan(r.innovation[0, k])
+    for k in (2, 5, 6):
+        assert r.innovation[0, k] == pytest.approx(z[0, k] - r.x_pred[0, k, 0])
+        assert r.innovation_var[0, k] == pytest.approx(r.p_pred[0, k, 0, 0] + 4.0)
+    # the variance of the position grows through the gap and drops at the next fix
+    assert r.p[0, 3, 0, 0] < r.p[0, 4, 0, 0]
+    assert r.p[0, 5, 0, 0] < r.p[0, 4, 0, 0]
+
+
+def test_nees_on_the_filters_own_model_is_chi_square() -> None:
+    """Truth drawn from the model with the printed start: the NEES of X(k) over many independent
+    series at a few well separated samples lies in the 99 % chi-square interval (3 dof)."""
+    from scipy import stats
+
+    rng = np.random.default_rng(8)
+    p = ca.CAParams.of(400, T, 3.0, 0.2, 0.1)
+    truth = consistent_truth(p, 81, rng)
+    z = truth[..., 0] + rng.normal(0.0, 3.0, truth.shape[:2])
+    r = ca.run(p, z)
+    total = 0.0
+    for k in (20, 50, 80):
+        e = r.x[:, k] - truth[:, k]
+        total += np.einsum("mi,mi->", e, np.linalg.solve(r.p[:, k], e[..., None])[..., 0])
+    dof = 3 * 3 * p.m
+    assert stats.chi2.ppf(0.005, dof) < total < stats.chi2.ppf(0.995, dof)
+
+
+def test_update_with_a_rejected_finite_measurement_reports_its_innovation_only() -> None:
+    """A finite measurement rejected by ``accept`` leaves the prediction and its covariance, but
+    its innovation and variance are still reported (for the gate's statistics)."""
+    p = ca.CAParams.of(2, T, 1.0, 0.1, 0.1)
+    xp = np.array([[5.0, 1.0, 0.0], [7.0, -1.0, 0.1]])
+    pp = np.broadcast_to(np.diag([4.0, 1.0, 0.1]), (2, 3, 3)).copy()
+    up = ca.update(p, xp, pp, np.array([9.0, 8.0]), accept=np.array([False, True]))
+    np.testing.assert_array_equal(up.x[0], xp[0])
+    np.testing.assert_array_equal(up.p[0], pp[0])
+    np.testing.assert_allclose(up.innovation, [4.0, 1.0])
+    np.testing.assert_allclose(up.innovation_var, [5.0, 5.0])
+    # accepted: gain P H^T / S = [4, 0, 0] / 5 (diagonal P), position 7 + 0.8 * 1
+    np.testing.assert_allclose(up.x[1], [7.8, -1.0, 0.1])
+    np.testing.assert_allclose(up.p[1], np.diag([0.8, 1.0, 0.1]))

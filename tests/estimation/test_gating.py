@@ -332,3 +332,71 @@ def test_chi2_quantile_agrees_with_scipy_and_the_trackers_even_quantile() -> Non
     for p, dof in ((0.0, 2), (1.0, 2), (0.5, 0)):
         with pytest.raises(ValueError):
             gating.chi2_quantile(p, dof)
+
+
+def test_nis_gate_on_gaussian_innovations_rejects_its_nominal_fraction() -> None:
+    """Innovations drawn with a correlated covariance S: the normalised distance equals the norm
+    of the Cholesky-whitened innovation, and the fraction beyond sqrt(chi2_quantile(0.99, 2))
+    is 1 % within binomial 4-sigma bounds."""
+    rng = np.random.default_rng(47)
+    n = 40_000
+    S = np.array([[9.0, 4.0], [4.0, 3.0]])
+    L = np.linalg.cholesky(S)
+    nu = rng.standard_normal((n, 2)) @ L.T
+    d = gating.normalised_distance(nu, np.broadcast_to(S, (n, 2, 2)))
+    white = np.linalg.solve(L, nu.T).T
+    np.testing.assert_allclose(d, np.linalg.norm(white, axis=1), rtol=1e-10)
+    thr = math.sqrt(gating.chi2_quantile(0.99, 2))
+    frac = np.mean(d > thr)
+    assert abs(frac - 0.01) < 4 * math.sqrt(0.01 * 0.99 / n)
+
+
+@pytest.mark.parametrize("factor,max_rej", [(2.0, 3), (3.0, 2), (1.5, 4)])
+def test_a_jump_up_to_the_widest_window_is_taken_without_restart(factor: float,
+                                                                max_rej: int) -> None:
+    """A genuine jump of exactly threshold * factor^(max_rejections - 1) is accepted at the
+    max_rejections-th fix with no restart; one a little farther restarts there instead."""
+    thr = 50.0
+    p = gating.build([{"window_diameter_m": 2 * thr, "reopen_factor": factor,
+                       "max_rejections": max_rej}] * 2)
+    widest = thr * factor ** (max_rej - 1)
+    d = np.array([widest, widest * 1.001])
+    rej = gating.init_state(2)
+    for i in range(max_rej - 1):
+        g = gating.gate(p, d, rej)
+        assert not g.accept.any() and not g.restart.any()
+        assert g.rejections.tolist() == [i + 1, i + 1]
+        rej = g.rejections
+    g = gating.gate(p, d, rej)
+    assert g.accept.tolist() == [True, False]
+    assert g.restart.tolist() == [False, True]
+    assert g.rejections.tolist() == [0, 0]
+    np.testing.assert_allclose(g.window, widest)
+
+
+def test_missing_measurements_keep_the_rejection_count_and_window() -> None:
+    """NaN distances neither accept nor reject: the consecutive count and thus the widened
+    window survive a gap."""
+    p = gating.build([{"window_diameter_m": 20.0}])
+    g = gating.gate(p, np.array([50.0]), gating.init_state(1))
+    for _ in range(3):
+        g2 = gating.gate(p, np.array([np.nan]), g.rejections)
+        assert not g2.accept[0] and not g2.restart[0]
+        assert g2.rejections[0] == 1 and g2.window[0] == 20.0
+    g3 = gating.gate(p, np.array([19.0]), g2.rejections)
+    assert g3.accept[0] and g3.window[0] == 20.0  # 10 m radius doubled once
+
+
+def test_build_gate_sigma_takes_precedence_and_marks_a_normalised_gate() -> None:
+    """gate_sigma wins over window_diameter_m and marks the gate as not in metres; the window
+    diameter gives a radius of half of it (default 100 m -> 50 m)."""
+    p = gating.build([{"gate_sigma": 3.0, "window_diameter_m": 80.0}, {}, {"window_diameter_m":
+                                                                          50.0}])
+    np.testing.assert_array_equal(p.threshold, [3.0, 50.0, 25.0])
+    assert p.metres.tolist() == [False, True, True]
+    np.testing.assert_array_equal(p.reopen_factor, 2.0)
+    np.testing.assert_array_equal(p.max_rejections, 3)
+    for bad in ({"gate_sigma": 0.0}, {"reopen_factor": 0.5}, {"max_rejections": 0},
+                {"window_diameter_m": -1.0}):
+        with pytest.raises(ValueError, match="gate needs"):
+            gating.build([bad])

@@ -289,3 +289,77 @@ def test_restart_forgets_the_history() -> None:
 def test_build_rejects_nan_gain() -> None:
     with pytest.raises(ValueError):
         linefit.build([{"gain": float("nan")}])
+
+
+@pytest.mark.parametrize("course_deg", [0.0, 33.0, 90.0, 200.0, 315.0])
+def test_unbiased_rule_tracks_a_straight_run_exactly_across_gaps(course_deg: float) -> None:
+    """Noise-free fixes at constant velocity: with A = n/(n-1) the line prediction is exactly
+    the next position, so every estimate is the truth, also through missing fixes (where the
+    estimate is the prediction and is pushed into the history)."""
+    n_pts, steps, d = 4, 30, 7.0
+    c = np.radians(course_deg)
+    k = np.arange(steps)
+    truth = np.stack([100.0 + d * k * np.cos(c), -50.0 + d * k * np.sin(c)], axis=-1)[None]
+    z = truth.copy()
+    z[0, [6, 7, 8, 15]] = np.nan
+    p = linefit.build([{"n_points": n_pts, "extrapolation": "unbiased"}])
+    out = linefit.run(p, z)
+    np.testing.assert_allclose(out.estimate, truth, atol=1e-8)
+    assert np.all(np.isnan(out.prediction[0, :n_pts]))
+    np.testing.assert_allclose(out.prediction[0, n_pts:], truth[0, n_pts:], atol=1e-8)
+
+
+def test_prediction_is_translation_equivariant_and_swaps_with_the_axes() -> None:
+    """Shifting every fix by a constant shifts the prediction by it; exchanging north and east
+    exchanges the prediction's components (the abscissa choice follows the spread)."""
+    rng = np.random.default_rng(41)
+    p = linefit.build([{"n_points": 5}] * 6)
+    hist = np.cumsum(rng.normal(0.0, 20.0, (6, 5, 2)), axis=1)
+    st = linefit.LineFitState(hist, np.full(6, 5, dtype=np.int64))
+    base = linefit.predict(p, st)
+    shift = np.array([1234.5, -987.0])
+    moved = linefit.predict(p, linefit.LineFitState(hist + shift, st.count))
+    np.testing.assert_allclose(moved, base + shift, rtol=1e-12, atol=1e-8)
+    swapped = linefit.predict(p, linefit.LineFitState(hist[..., ::-1].copy(), st.count))
+    np.testing.assert_allclose(swapped, base[:, ::-1], rtol=1e-12, atol=1e-8)
+
+
+def test_prediction_equals_numpy_polyfit_on_the_smaller_spread_axis() -> None:
+    """The prediction is numpy's least-squares line through the last n points (ordinate the axis
+    of smaller spread) evaluated at first + A (last - first) along the other axis."""
+    rng = np.random.default_rng(43)
+    n_pts = 6
+    p = linefit.build([{"n_points": n_pts}])
+    for _ in range(20):
+        pts = np.column_stack([np.arange(n_pts) * rng.normal(0, 10), np.arange(n_pts)
+                               * rng.normal(0, 10)]) + rng.normal(0.0, 2.0, (n_pts, 2))
+        pred = linefit.predict(p, linefit.LineFitState(pts[None], np.array([n_pts])))[0]
+        ix = int(np.argmax(pts.var(axis=0)))
+        iy = 1 - ix
+        slope, icept = np.polyfit(pts[:, ix], pts[:, iy], 1)
+        x = pts[0, ix] + (1 + 1 / n_pts) * (pts[-1, ix] - pts[0, ix])
+        assert pred[ix] == pytest.approx(x)
+        assert pred[iy] == pytest.approx(slope * x + icept, abs=1e-8)
+
+
+def test_iterate_gain_broadcasts_and_reaches_the_fixed_point() -> None:
+    """Eqs 6.6-6.8 iterated over a grid of A and M converge to K = 1 - 1/A^2 and P = K M."""
+    a = np.array([[1.1], [1.25], [1.5]])
+    m = np.array([[1.0, 100.0, 2500.0]])
+    k, pvar = linefit.iterate_gain(a, m, cycles=2000)
+    assert k.shape == (3, 3)
+    np.testing.assert_allclose(k, np.broadcast_to(linefit.steady_gain(a), (3, 3)), rtol=1e-9)
+    np.testing.assert_allclose(pvar, k * m, rtol=1e-9)
+    with pytest.raises(ValueError, match="extrapolation"):
+        linefit.growth_factor(4, "linear")
+    with pytest.raises(ValueError, match="n_points"):
+        linefit.build([{"n_points": 1}])
+
+
+def test_empty_batch_runs_to_empty_outputs() -> None:
+    """No ships: build, init_state and run give empty arrays, as the other filters do."""
+    p = linefit.build([])
+    st = linefit.init_state(p)
+    assert st.history.shape[0] == 0
+    out = linefit.run(p, np.zeros((0, 5, 2)))
+    assert out.estimate.shape == (0, 5, 2) and out.accepted.shape == (0, 5)

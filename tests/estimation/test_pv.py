@@ -612,3 +612,135 @@ def test_single_ship_and_empty_batch():
     st = pv.step(empty, pv.init(empty, np.zeros(0), np.zeros(0)), np.zeros(0), np.zeros(0))
     assert st.x.shape == (0, 4) and st.P.shape == (0, 2, 2, 2)
     assert pv.nees(st, np.zeros((0, 4))).shape == (0,)
+
+
+def _textbook_axis_step(x, P, z, ok, sigma, sp, dt):
+    """One 2-state [p, v] Kalman cycle with explicit matrices, Joseph-form update."""
+    F = np.array([[1.0, dt], [0.0, 1.0]])
+    Q = sp * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    H = np.array([[1.0, 0.0]])
+    x, P = F @ x, F @ P @ F.T + Q
+    if ok:
+        S = H @ P @ H.T + sigma**2
+        K = P @ H.T / S
+        x = x + (K * (z - H @ x)).ravel()
+        IKH = np.eye(2) - K @ H
+        P = IKH @ P @ IKH.T + sigma**2 * K @ K.T
+    return x, P
+
+
+def test_vectorised_ships_with_own_parameters_and_outages_equal_per_axis_textbook_loops():
+    """Ships with different sigma, S_p, dt and different outage patterns filtered together equal
+    a per-ship, per-axis textbook filter (explicit F, Q, H, Joseph update) run one by one."""
+    rng = np.random.default_rng(11)
+    cfg = [{"sigma_m": 2.0, "sp_m2ps3": 0.01, "dt_s": 1.0},
+           {"sigma_m": 0.5, "sp_m2ps3": 0.1, "dt_s": 0.5},
+           {"sigma_m": 5.0, "sp_m2ps3": 0.001, "dt_s": 2.0}]
+    p = pv.build(cfg)
+    st = pv.init(p, [0.0, 10.0, -5.0], [1.0, 2.0, 3.0], [1.0, 0.0, -2.0], [0.5, 3.0, 0.0],
+                 sigma_pos_m=[3.0, 1.0, 6.0], sigma_vel_mps=[2.0, 5.0, 1.0])
+    ref = [[(st.x[i, [a, a + 2]].copy(), st.P[i, a].copy()) for a in (0, 1)] for i in range(3)]
+    for k in range(40):
+        z = rng.normal(0.0, 30.0, (3, 2))
+        valid = np.array([k % 5 != 0, k < 10 or k > 25, True])
+        z[~valid] = np.nan
+        st = pv.step(p, st, z[:, 0], z[:, 1], valid)
+        for i, c in enumerate(cfg):
+            for a in (0, 1):
+                ref[i][a] = _textbook_axis_step(*ref[i][a], z[i, a], valid[i], c["sigma_m"],
+                                                c["sp_m2ps3"], c["dt_s"])
+    for i in range(3):
+        for a in (0, 1):
+            np.testing.assert_allclose(st.x[i, [a, a + 2]], ref[i][a][0], rtol=1e-10, atol=1e-9)
+            np.testing.assert_allclose(st.P[i, a], ref[i][a][1], rtol=1e-9, atol=1e-12)
+
+
+def test_nis_of_a_long_run_on_the_filters_own_model_is_chi_square():
+    """Truth drawn from the filter's model (white acceleration of density S_p): the summed
+    normalised innovation squared over ships and cycles lies in the two-sided 99 % chi-square
+    interval with 2 dof per fix (innovations are white); the NEES, summed over ships at cycles 50
+    cycles apart (nearly independent errors), in the interval with 4 dof per sample."""
+    from scipy import stats
+
+    rng = np.random.default_rng(5)
+    n, steps, sigma, sp, dt = 200, 100, 2.0, 0.05, 1.0
+    p = pv.build([{"sigma_m": sigma, "sp_m2ps3": sp, "dt_s": dt}] * n)
+    Q = sp * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    L = np.linalg.cholesky(Q)
+    truth = np.zeros((n, 4))
+    truth[:, 2:] = rng.normal(0.0, 3.0, (n, 2))
+    st = pv.init(p, truth[:, 0], truth[:, 1], truth[:, 2], truth[:, 3], converged=True)
+    st = pv.PVState(x=st.x + rng.multivariate_normal(np.zeros(4), pv.full_covariance(st)[0], n),
+                    P=st.P)
+    nis = nees = 0.0
+    for k in range(1, steps + 1):
+        for a in (0, 1):
+            w = rng.standard_normal((n, 2)) @ L.T
+            truth[:, a] += dt * truth[:, a + 2] + w[:, 0]
+            truth[:, a + 2] += w[:, 1]
+        z = truth[:, :2] + rng.normal(0.0, sigma, (n, 2))
+        pred = pv.predict(p, st)
+        s = pred.P[:, :, 0, 0] + sigma**2
+        nis += np.sum((z - pred.x[:, :2]) ** 2 / s)
+        st = pv.update(p, pred, z[:, 0], z[:, 1])
+        if k % 50 == 0:
+            nees += pv.nees(st, truth).sum()
+    dof = n * steps
+    assert stats.chi2.ppf(0.005, 2 * dof) < nis < stats.chi2.ppf(0.995, 2 * dof)
+    assert stats.chi2.ppf(0.005, 4 * 2 * n) < nees < stats.chi2.ppf(0.995, 4 * 2 * n)
+
+
+def test_outage_covariance_grows_as_the_propagated_steady_state_then_reconverges():
+    """During an outage of k cycles P = F^k P_inf F^kT + sum_j F^j Q F^jT (matrix powers); at
+    the first fix after it the gain exceeds the steady gain, and it is back to the steady gain
+    after 30 fixes."""
+    sigma, sp, dt, k = 2.0, 0.01, 1.0, 12
+    p = pv.build([{"sigma_m": sigma, "sp_m2ps3": sp, "dt_s": dt}])
+    st = pv.init(p, 0.0, 0.0, converged=True)
+    F = np.array([[1.0, dt], [0.0, 1.0]])
+    Q = sp * np.array([[dt**3 / 3, dt**2 / 2], [dt**2 / 2, dt]])
+    P_inf = pv.steady_state_covariance(sigma, sp, dt)
+    for _ in range(k):
+        st = pv.step(p, st, np.nan, np.nan, valid=False)
+    Fk = np.linalg.matrix_power(F, k)
+    expected = Fk @ P_inf @ Fk.T + sum(np.linalg.matrix_power(F, j) @ Q
+                                       @ np.linalg.matrix_power(F, j).T for j in range(k))
+    np.testing.assert_allclose(st.P[0, 0], expected, rtol=1e-12)
+    np.testing.assert_allclose(st.P[0, 1], expected, rtol=1e-12)
+    k_inf = pv.steady_state_gain(sigma, sp, dt)
+    assert np.all(pv.gain(p, pv.predict(p, st))[0, 0] > k_inf)
+    for _ in range(30):
+        st = pv.step(p, st, 0.0, 0.0)
+    np.testing.assert_allclose(pv.gain(p, pv.predict(p, st))[0, 0], k_inf, rtol=1e-3)
+
+
+@pytest.mark.parametrize("lam", [1e-3, 0.05, 2.0, 1e3])
+def test_steady_state_gain_equals_iterating_the_recursion(lam: float):
+    """Running predict/update with fixes from a huge initial covariance until it stops changing
+    gives the closed-form steady gain and covariance, for tracking indices far apart."""
+    sigma, dt = 1.5, 2.0
+    sp = (lam * sigma) ** 2 / dt**3
+    p = pv.build([{"sigma_m": sigma, "sp_m2ps3": sp, "dt_s": dt}])
+    st = pv.init(p, 0.0, 0.0, sigma_pos_m=1e3, sigma_vel_mps=1e3)
+    for _ in range(20000 if lam < 0.01 else 500):
+        st = pv.step(p, st, 0.0, 0.0)
+    np.testing.assert_allclose(pv.gain(p, pv.predict(p, st))[0, 1],
+                               pv.steady_state_gain(sigma, sp, dt), rtol=1e-6)
+    np.testing.assert_allclose(st.P[0, 1], pv.steady_state_covariance(sigma, sp, dt),
+                               rtol=1e-6)
+
+
+def test_init_broadcasts_scalars_and_full_covariance_is_symmetric_block_diagonal():
+    """Scalar initial values broadcast to every ship; the 4x4 covariance puts each axis block
+    at (N, vN) and (E, vE) with zero north-east coupling."""
+    p = pv.build([{}, {}])
+    st = pv.init(p, 1.0, 2.0, 3.0, 4.0, sigma_pos_m=5.0, sigma_vel_mps=0.5)
+    np.testing.assert_array_equal(st.x, [[1.0, 2.0, 3.0, 4.0]] * 2)
+    st = pv.predict(p, st)
+    full = pv.full_covariance(st)
+    np.testing.assert_array_equal(full, np.swapaxes(full, 1, 2))
+    assert np.all(full[:, [0, 0, 2, 2], [1, 3, 1, 3]] == 0.0)
+    # one predict of diag(25, 0.25) over 1 s with S_p 0.01: P_pp = 25 + 0.25 + 0.01/3
+    np.testing.assert_allclose(full[:, 0, 0], 25.0 + 0.25 + 0.01 / 3)
+    np.testing.assert_allclose(full[:, 0, 2], 0.25 + 0.005)
+    np.testing.assert_allclose(full[:, 3, 3], 0.25 + 0.01)

@@ -322,3 +322,97 @@ def test_body_velocities_rows_equal_single_records_and_rotation_identities() -> 
     d = np.mod(both["course_rad"] - both["psi_rad"] + np.pi, 2 * np.pi) - np.pi
     np.testing.assert_allclose(np.angle(np.exp(1j * (both["drift_rad"] - d))), 0.0, atol=1e-12)
     assert np.all(np.abs(both["drift_rad"]) <= np.pi)
+
+
+def test_rts_vectorised_over_series_equals_one_series_at_a_time() -> None:
+    """Series with their own parameters and gaps smoothed together equal each smoothed alone
+    (the batched solve and its pseudo-inverse fallback act per series)."""
+    rng = np.random.default_rng(4)
+    p = ca.CAParams.of(3, [2.0, 1.0, 0.5], [3.0, 1.0, 0.5], [0.05, 0.3, 0.1], [1 / 30, 0.1, 1.0])
+    z = np.cumsum(rng.normal(0.0, 3.0, (3, 50)), axis=1)
+    z[1, 20:24] = np.nan
+    together = smoother.smooth_ca(p, z)
+    for i in range(3):
+        one = ca.CAParams(p.dt_s[i:i + 1], p.sigma_meas[i:i + 1], p.sigma_acc[i:i + 1],
+                          p.alpha_per_s[i:i + 1])
+        alone = smoother.smooth_ca(one, z[i:i + 1])
+        np.testing.assert_allclose(together.x[i], alone.x[0], rtol=1e-10, atol=1e-10)
+        np.testing.assert_allclose(together.p[i], alone.p[0], rtol=1e-10, atol=1e-12)
+
+
+def test_smoothed_nees_on_the_filters_own_model_is_chi_square() -> None:
+    """Truth drawn from the filter's model: the NEES of X(k|N) over many series at separated
+    samples (early, middle and last) lies in the 99 % chi-square interval (3 dof each)."""
+    from scipy import stats
+
+    rng = np.random.default_rng(9)
+    p = ca.CAParams.of(400, T, 3.0, 0.2, 0.1)
+    truth = consistent_truth(p, 61, rng)
+    z = truth[..., 0] + rng.normal(0.0, 3.0, truth.shape[:2])
+    s = smoother.smooth_ca(p, z)
+    total = 0.0
+    for k in (3, 30, 60):
+        e = s.x[:, k] - truth[:, k]
+        total += np.einsum("mi,mi->", e, np.linalg.solve(s.p[:, k], e[..., None])[..., 0])
+    dof = 3 * 3 * p.m
+    assert stats.chi2.ppf(0.005, dof) < total < stats.chi2.ppf(0.995, dof)
+
+
+def test_smoothed_covariance_never_exceeds_the_filtered_one_and_ends_equal() -> None:
+    """P(k|N) <= P(k) in the Loewner order at every sample (more data never hurts), with
+    equality at the last sample; smoothed covariances are symmetric."""
+    rng = np.random.default_rng(2)
+    p = ca.CAParams.of(2, T, [3.0, 1.0], [0.05, 0.5], 0.1)
+    z = np.cumsum(rng.normal(0.0, 2.0, (2, 40)), axis=1)
+    z[0, 15:20] = np.nan
+    f = ca.run(p, z)
+    s = smoother.smooth_ca(p, z)
+    np.testing.assert_array_equal(s.p[:, -1], f.p[:, -1])
+    np.testing.assert_allclose(s.p, np.swapaxes(s.p, -1, -2), rtol=1e-13, atol=1e-15)
+    diff = f.p[:, 1:] - s.p[:, 1:]
+    eig = np.linalg.eigvalsh(0.5 * (diff + np.swapaxes(diff, -1, -2)))
+    assert eig.min() > -1e-9 * np.abs(f.p[:, 1:]).max()
+
+
+def test_rts_of_a_scalar_random_walk_equals_the_two_filter_formula() -> None:
+    """For a scalar random walk the smoothed variance at k is the harmonic combination of the
+    forward filter's P(k) and a backward information filter over the later samples
+    (Fraser-Potter): 1/P(k|N) = 1/P(k) + 1/B(k), B from the samples after k predicted back."""
+    q, r, n = 0.5, 2.0, 12
+    z = np.linspace(0.0, 5.0, n) + np.sin(np.arange(n))
+    x = np.zeros((1, n, 1))
+    pf = np.zeros((1, n, 1, 1))
+    xp = np.full((1, n, 1), np.nan)
+    pp = np.full((1, n, 1, 1), np.nan)
+    x[0, 0, 0], pf[0, 0, 0, 0] = z[0], r
+    for k in range(1, n):
+        xp[0, k, 0], pp[0, k, 0, 0] = x[0, k - 1, 0], pf[0, k - 1, 0, 0] + q
+        g = pp[0, k, 0, 0] / (pp[0, k, 0, 0] + r)
+        x[0, k, 0] = xp[0, k, 0] + g * (z[k] - xp[0, k, 0])
+        pf[0, k, 0, 0] = (1 - g) * pp[0, k, 0, 0]
+    s = smoother.rts(x, pf, xp, pp, np.ones((1, 1, 1)))
+    for k in range(n - 1):
+        info, mean_info = 0.0, 0.0  # backward filter over samples k+1..n-1, at time k
+        for j in range(n - 1, k, -1):
+            info, mean_info = info + 1 / r, mean_info + z[j] / r
+            var = 1 / info + q  # predicted one step back
+            info, mean_info = 1 / var, (mean_info / info) / var
+        ps = 1 / (1 / pf[0, k, 0, 0] + info)
+        xs = ps * (x[0, k, 0] / pf[0, k, 0, 0] + mean_info)
+        assert s.p[0, k, 0, 0] == pytest.approx(ps, rel=1e-12)
+        assert s.x[0, k, 0] == pytest.approx(xs, rel=1e-12, abs=1e-12)
+
+
+def test_unwrap_finite_of_an_empty_record_is_empty_like_numpy_unwrap() -> None:
+    """An empty 1-D record unwraps to an empty record, as np.unwrap does."""
+    assert np.unwrap(np.zeros(0)).shape == (0,)
+    assert smoother.unwrap_finite(np.zeros(0)).shape == (0,)
+
+
+def test_course_is_below_two_pi_for_a_tiny_westward_velocity() -> None:
+    """A northward track drifting 1e-17 m per sample west: the course is north, in [0, 2 pi)
+    like every course of the package (:func:`trafficsim.sensors.wrap_2pi`)."""
+    k = np.arange(20.0)
+    out = smoother.body_velocities(3.0 * k, -1e-17 * k, np.zeros(20), 1.0)
+    assert np.all(out["ve_mps"] < 0.0)
+    assert np.all((out["course_rad"] >= 0.0) & (out["course_rad"] < 2 * np.pi))

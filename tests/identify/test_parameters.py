@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from trafficsim.errors import InputError
-from trafficsim.identify.parameters import BOUNDS, DEFAULT_FIT, Parametrisation
+from trafficsim.identify.parameters import BOUNDS, DEFAULT_FIT, Parametrisation, default_bounds
 from trafficsim.identify.replay import model_rows
 from trafficsim.ships.base import families
 from trafficsim.ships.library import load_ship
@@ -152,3 +152,44 @@ def test_rows_pack_the_candidates_like_hand_edited_ship_files() -> None:
         np.testing.assert_array_equal(rows.params[i], ref.params[0])
         assert rows.codes[i] == ref.codes[0] and rows.max_dt_s[i] == ref.max_dt_s[0]
     assert not np.array_equal(rows.params[0], rows.params[1])
+
+
+@pytest.mark.parametrize("ship", ["cargo", "bulk_carrier", "kvlcc2"])
+def test_rows_at_the_base_values_are_the_base_ship(ship: str) -> None:
+    """Packing the base ship's own values of the default subset gives exactly the base ship's
+    row (nothing else changes when a candidate equals the start)."""
+    spec = load_ship(ship)
+    p = Parametrisation.of(spec)
+    x = np.array([spec["coefficients"][n] for n in p.names], dtype=float)
+    assert np.all((p.lower <= x) & (x <= p.upper))
+    np.testing.assert_array_equal(p.initial(), x)
+    rows = p.rows(np.vstack([x, x]))
+    base_row = model_rows([spec])
+    np.testing.assert_array_equal(rows.params, np.repeat(base_row.params, 2, axis=0))
+
+
+def test_changing_one_fitted_value_changes_only_the_packed_row_of_that_candidate() -> None:
+    """Three candidates, the second with T' doubled: rows 0 and 2 equal the base ship's,
+    row 1 differs; the base spec held by the parametrisation keeps its value."""
+    spec = load_ship("cargo")
+    p = Parametrisation.of(spec, ["K_prime", "T_prime"])
+    x = p.initial()
+    thetas = np.vstack([x, x * [1.0, 2.0], x])
+    rows = p.rows(thetas)
+    base_row = model_rows([spec]).params[0]
+    np.testing.assert_array_equal(rows.params[0], base_row)
+    np.testing.assert_array_equal(rows.params[2], base_row)
+    assert not np.array_equal(rows.params[1], base_row)
+    assert p.spec["coefficients"]["T_prime"] == spec["coefficients"]["T_prime"]
+
+
+def test_one_sided_user_bounds_and_clipping_at_them() -> None:
+    """User bounds (K' in [3, inf)) replace the defaults; a base value below the lower bound
+    starts at the bound; bounds of the other fitted names stay the defaults."""
+    spec = load_ship("cargo")
+    k = spec["coefficients"]["K_prime"]
+    p = Parametrisation.of(spec, ["K_prime", "T_prime"], {"K_prime": (k + 1.0, INF)})
+    assert p.lower[0] == k + 1.0 and p.upper[0] == INF
+    assert (p.lower[1], p.upper[1]) == default_bounds("nomoto", "T_prime")
+    assert p.initial()[0] == k + 1.0
+    assert p.initial()[1] == spec["coefficients"]["T_prime"]

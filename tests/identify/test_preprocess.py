@@ -291,3 +291,128 @@ def test_too_short_runs_are_refused() -> None:
     (k,) = preprocess.smooth_runs([_trial(t[:4], north_m=t[:4], heading_deg=t[:4])], 100.0,
                                   4.0)
     assert k.trial.n == 4
+
+
+def _textbook_rts(z: np.ndarray, dt: float, sigma_r: float, sigma_a: float, alpha: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """One series, plain loops: CA Kalman filter started from two samples, NaN skipped, then
+    the RTS smoother with explicit inverses; sample 0 by the backward model prediction."""
+    phi = np.array([[1.0, dt, dt * dt / 2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    q = 2 * alpha * sigma_a**2 * np.array([[dt**5 / 20, dt**4 / 8, dt**3 / 6],
+                                           [dt**4 / 8, dt**3 / 3, dt**2 / 2],
+                                           [dt**3 / 6, dt**2 / 2, dt]])
+    n, r = z.size, sigma_r**2
+    xf, pf = np.zeros((n, 3)), np.zeros((n, 3, 3))
+    xp, pp = np.zeros((n, 3)), np.zeros((n, 3, 3))
+    xf[1] = [z[1], (z[1] - z[0]) / dt, 0.0]
+    pf[1] = [[r, r / dt, 0.0], [r / dt, 2 * r / dt**2, 0.0], [0.0, 0.0, 0.0]]
+    h = np.array([1.0, 0.0, 0.0])
+    for k in range(2, n):
+        xp[k] = phi @ xf[k - 1]
+        pp[k] = phi @ pf[k - 1] @ phi.T + q
+        if np.isfinite(z[k]):
+            gain = pp[k] @ h / (h @ pp[k] @ h + r)
+            xf[k] = xp[k] + gain * (z[k] - xp[k, 0])
+            pf[k] = (np.eye(3) - np.outer(gain, h)) @ pp[k]
+        else:
+            xf[k], pf[k] = xp[k], pp[k]
+    xs, ps = xf.copy(), pf.copy()
+    for k in range(n - 2, 0, -1):
+        a = pf[k] @ phi.T @ np.linalg.inv(pp[k + 1])
+        xs[k] = xf[k] + a @ (xs[k + 1] - xp[k + 1])
+        ps[k] = pf[k] + a @ (ps[k + 1] - pp[k + 1]) @ a.T
+    back = np.linalg.inv(phi)
+    xs[0] = back @ xs[1]
+    ps[0] = back @ (ps[1] + q) @ back.T
+    return xs, ps
+
+
+def test_smoother_equals_a_textbook_rts_smoother_with_gaps() -> None:
+    """A turning track with white noise of known size (1.5 m, 0.3 deg) and a masked gap: the
+    smoothed position, heading, u, v, r and sigma_r are those of a loop-by-loop CA filter and
+    RTS smoother run on each axis, with u, v the ground velocity turned into the body frame;
+    and the smoothed track is closer to the truth than the measurements."""
+    rng = np.random.default_rng(11)
+    dt, n = 2.0, 90
+    t = dt * np.arange(n)
+    r_true = np.radians(0.4)
+    psi_true = np.radians(20.0) + r_true * t
+    speed, radius = 6.0, 6.0 / r_true
+    north_true = radius * (np.sin(psi_true) - np.sin(psi_true[0]))
+    east_true = radius * (np.cos(psi_true[0]) - np.cos(psi_true))
+    north = north_true + rng.normal(0.0, 1.5, n)
+    east = east_true + rng.normal(0.0, 1.5, n)
+    heading = np.degrees(psi_true) + rng.normal(0.0, 0.3, n)
+    north[40:44] = np.nan
+    heading[60:62] = np.nan
+    trial = _trial(t, north_m=north, east_m=east, heading_deg=np.mod(heading, 360.0))
+    s = dict(sigma_pos_m=1.5, sigma_heading_rad=np.radians(0.3), sigma_acc_mps2=0.05,
+             sigma_yaw_acc_radps2=5e-4, alpha_per_s=0.04)
+    (k,) = preprocess.smooth_runs([trial], 100.0, speed,
+                                  preprocess.SmootherSettings(mask_repeats=False, **s))
+    xn, _ = _textbook_rts(north, dt, s["sigma_pos_m"], s["sigma_acc_mps2"], s["alpha_per_s"])
+    xe, _ = _textbook_rts(east, dt, s["sigma_pos_m"], s["sigma_acc_mps2"], s["alpha_per_s"])
+    xh, ph = _textbook_rts(np.radians(heading), dt, s["sigma_heading_rad"],
+                           s["sigma_yaw_acc_radps2"], s["alpha_per_s"])
+    sm = k.smooth
+    np.testing.assert_allclose(sm["north_m"], xn[:, 0], rtol=1e-9, atol=1e-7)
+    np.testing.assert_allclose(sm["east_m"], xe[:, 0], rtol=1e-9, atol=1e-7)
+    np.testing.assert_allclose(sm["psi_rad"], xh[:, 0], rtol=1e-9, atol=1e-10)
+    np.testing.assert_allclose(sm["r_radps"], xh[:, 1], rtol=1e-7, atol=1e-11)
+    np.testing.assert_allclose(sm["sigma_r_radps"], np.sqrt(ph[:, 1, 1]), rtol=1e-7)
+    c, si = np.cos(xh[:, 0]), np.sin(xh[:, 0])
+    np.testing.assert_allclose(sm["u_mps"], xn[:, 1] * c + xe[:, 1] * si, atol=1e-8)
+    np.testing.assert_allclose(sm["v_mps"], -xn[:, 1] * si + xe[:, 1] * c, atol=1e-8)
+    inner = slice(5, -5)
+    err_pos = np.hypot(sm["north_m"] - north_true, sm["east_m"] - east_true)[inner]
+    assert np.sqrt(np.mean(err_pos**2)) < 0.6 * 1.5 * np.sqrt(2.0)
+    assert np.sqrt(np.mean((sm["u_mps"][inner] - speed) ** 2)) < 0.15
+    assert np.sqrt(np.mean((sm["r_radps"][inner] - r_true) ** 2)) < 0.1 * r_true
+
+
+def test_resampling_a_series_with_a_gap_inside_irregular_times() -> None:
+    """Irregular samples with a missing north at 3.1 s: the grid point at 3 s interpolates
+    between the finite samples at 2.2 s and 4.0 s (0.8 s and 1 s away, within one interval),
+    east is unaffected; a grid point more than one interval from the nearest finite north
+    sample is NaN even when other series have data there."""
+    t = np.array([0.0, 1.1, 2.2, 3.1, 4.0, 5.2, 6.0])
+    north = 10.0 * t
+    north[3] = np.nan
+    east = -2.0 * t
+    trial = _trial(t, north_m=north, east_m=east)
+    out = preprocess.resample_uniform(trial, 1.0)
+    np.testing.assert_array_equal(out.t_s, np.arange(7.0))
+    np.testing.assert_allclose(out.north_m, 10.0 * out.t_s)
+    np.testing.assert_allclose(out.east_m, -2.0 * out.t_s)
+    north2 = north.copy()
+    north2[2:5] = np.nan  # finite at 1.1 and 5.2 only: grid 3 is 1.9 s and 2.2 s away
+    out2 = preprocess.resample_uniform(_trial(t, north_m=north2, east_m=east), 1.0)
+    np.testing.assert_array_equal(np.isnan(out2.north_m),
+                                  [False, False, False, True, True, False, False])
+    assert np.all(np.isfinite(out2.east_m))
+
+
+def test_repeats_straddling_a_missing_sample_are_not_masked() -> None:
+    """A NaN between two equal headings is not a repeat (a comparison with NaN is False); only
+    exact equality with the immediately previous sample counts."""
+    t = np.arange(8.0)
+    heading = np.array([0.0, 1.0, np.nan, 1.0, 2.0, 2.0 + 1e-9, 3.0, 4.0])
+    out, counts = preprocess.mask_repeats(_trial(t, heading_deg=heading, north_m=t))
+    assert counts == {"position": 0, "heading": 0}
+    assert int(np.isnan(out.psi_rad).sum()) == 1
+
+
+def test_repeats_are_masked_before_decimation() -> None:
+    """0.5 s data worked at 1 s: a position repeated at sample 4 (equal to sample 3, which
+    decimation drops) is masked, because masking comes first; after decimation sample 4 is
+    sample 2 of the working run and differs from its new predecessor (sample 2 of the data),
+    so masking afterwards would have missed it."""
+    t = np.arange(0.0, 20.0, 0.5)
+    north = 4.0 * t
+    north[4] = north[3]
+    trial = _trial(t, north_m=north, heading_deg=0.2 * t)
+    (k,) = preprocess.smooth_runs([trial], 100.0, 4.0, dt_s=1.0)
+    assert k.dt_s == 1.0 and k.repeats_masked == {"position": 1, "heading": 0}
+    assert np.isnan(k.trial.north_m[2]) and np.isnan(k.trial.east_m[2])
+    assert np.isfinite(k.smooth["north_m"][2])
+    assert k.smooth["north_m"][2] == pytest.approx(8.0, abs=0.05)

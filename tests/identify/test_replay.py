@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from trafficsim.errors import DataError
 from trafficsim.identify import preprocess, replay
 from trafficsim.io.trialdata import from_arrays
 from trafficsim.ships import base, kernels, manoeuvres
@@ -426,3 +427,81 @@ def test_missing_wind_direction_interpolated_across_north() -> None:
     win = replay.windows_from_runs([run], None, use_wind=True)
     middle = np.degrees(win.env[0, 1, 3]) % 360.0
     assert min(middle, 360.0 - middle) < 1e-6
+
+
+@pytest.mark.parametrize("ship", ["cargo", "bulk_carrier", "kvlcc2"])
+def test_replay_equals_the_engine_step_with_actuators_at_rest(ship: str) -> None:
+    """Rudder and propeller held at constant values and the engine's steering gear and
+    propeller states already there (their lags then have nothing to do): the replay equals
+    ``base.step`` of the engine, step by step with the same sub-steps, for a steady turn;
+    the engine wraps its heading, the replay does not."""
+    spec = load_ship(ship)
+    family = base.families()[spec["model"]]
+    params = family.build([spec])
+    act = base.Actuators.from_specs([spec])
+    speed = spec["service_speed_kn"] * 1852 / 3600
+    rudder, rps = np.radians(20.0), 0.8 * float(spec["actuators"]["rps_max"])
+    n, dt = 60, 2.0
+    x = np.zeros((8, 1))
+    x[:, 0] = [50.0, -20.0, np.radians(350.0), speed, 0.0, 0.0, rudder, rps]
+    win = replay.Windows(x.copy(), np.tile([rudder, rps], (1, n, 1)), np.zeros((1, n, 4)),
+                         np.array([dt]), np.array([n]), np.full((1, n, 6), np.nan),
+                         np.zeros(1, int), np.zeros(1), ("w",))
+    models = replay.model_rows([spec])
+    sub = int(replay.substeps(models, win)[0, 0])
+    out, diverged = replay.simulate(models, win)
+    assert not diverged.any()
+    engine = [x[:6, 0].copy()]
+    for _ in range(n - 1):
+        x = base.step(family, params, act, x, np.array([rudder]), np.array([rps]), base.Env(),
+                      dt, substeps=sub)
+        engine.append(x[:6, 0].copy())
+    engine = np.array(engine)
+    engine[:, 2] = np.unwrap(engine[:, 2])
+    np.testing.assert_allclose(out[0, 0], engine, rtol=1e-9, atol=1e-8)
+    assert out[0, 0, -1, 2] - out[0, 0, 0, 2] > np.radians(20.0)  # it did turn (past north)
+
+
+def test_windows_at_two_seconds_with_a_horizon_not_a_multiple_of_the_interval() -> None:
+    """31 s horizon at 2 s sampling: round(31 / 2) = 16 intervals, 17 samples per window; a
+    61-sample run gives windows at samples 0, 16, 32 (17, 17, 17) and a last piece of 13
+    samples (12 intervals >= 8, half a horizon): kept; targets hold the smoothed outputs."""
+    run = _run("r", 61, dt=2.0)
+    win = replay.windows_from_runs([run], 31.0)
+    np.testing.assert_array_equal(win.n_samples, [17, 17, 17, 13])
+    np.testing.assert_array_equal(win.t0_s, [0.0, 32.0, 64.0, 96.0])
+    np.testing.assert_array_equal(win.x0[0], 10 * win.t0_s)
+    for i in range(win.w):
+        s = round(win.t0_s[i] / 2.0)
+        c = win.n_samples[i]
+        np.testing.assert_array_equal(win.target[i, :c, 0], run.smooth["north_m"][s:s + c])
+        assert np.all(np.isnan(win.target[i, c:]))
+    np.testing.assert_array_equal(win.dt_s, 2.0)
+
+
+def test_no_runs_give_no_window_and_a_short_run_is_one_window() -> None:
+    """No runs: the documented DataError; two samples and a horizon longer than the run: the
+    whole run is one window (the first piece is always kept)."""
+    for horizon in (10.0, None):
+        with pytest.raises(DataError, match="no replay window"):
+            replay.windows_from_runs([], horizon)
+    win = replay.windows_from_runs([_run("two", 2)], 100.0)
+    assert win.w == 1 and win.n_samples[0] == 2
+
+
+def test_replay_is_linear_interpolation_of_the_inputs_not_a_hold() -> None:
+    """A rudder ramp sampled every 2 s equals the same ramp sampled every 1 s (first-order hold
+    reproduces a linear input exactly); both use 0.5 s RK4 steps, so the 1 s replay's every
+    other sample is the 2 s replay to rounding."""
+    spec = dict(load_ship("cargo"), integration={"max_dt_s": 0.5})
+    speed = spec["service_speed_kn"] * 1852 / 3600
+    out = []
+    for dt, n in ((2.0, 31), (1.0, 61)):
+        t = dt * np.arange(n)
+        inputs = np.stack([np.radians(0.5) * t, np.full(n, 1.5)], axis=-1)[None]
+        x0 = np.zeros((8, 1))
+        x0[3] = speed
+        win = replay.Windows(x0, inputs, np.zeros((1, n, 4)), np.array([dt]), np.array([n]),
+                             np.full((1, n, 6), np.nan), np.zeros(1, int), np.zeros(1), ("w",))
+        out.append(replay.simulate(replay.model_rows([spec]), win)[0][0, 0])
+    np.testing.assert_allclose(out[0], out[1][::2], rtol=1e-9, atol=1e-9)

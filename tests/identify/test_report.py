@@ -246,3 +246,37 @@ def test_convergence_plot_normalises_by_the_final_values(tmp_path: Path,
     np.testing.assert_allclose(t_line, [-0.5, -0.75, -1.0, -0.975])
     monkeypatch.undo()
     plt.close(fig)
+
+
+def test_markdown_numbers_are_the_validation_results_recomputed() -> None:
+    """The standard-manoeuvre table of a real ship (cargo at 12 kn, from
+    ``validation.standard_manoeuvres``): each index cell reads back as the manoeuvre's own
+    value to the 4 digits shown, each IMO row's pass column is value <= limit, and the
+    advance in ship lengths is advance / L."""
+    from trafficsim.identify import validation
+    from trafficsim.ships import manoeuvres
+    from trafficsim.ships.library import load_ship
+
+    spec = load_ship("cargo")
+    man = validation.standard_manoeuvres(spec, 12.0)
+    rep = _report()
+    rep["validation"]["standard_manoeuvres"] = man
+    lines = report.markdown(rep).splitlines()
+    start = lines.index("## Standard manoeuvres of the identified ship")
+    rows = [ln.strip("|").split("|") for ln in lines[start + 4:] if ln.startswith("| ")]
+    cells = {(r[0].strip(), r[1].strip()): [c.strip() for c in r[2:]] for r in rows}
+    _, direct = manoeuvres.turning_circle(spec, 35.0, 12.0)
+    for key in ("advance_m", "transfer_m", "tactical_diameter_m"):
+        assert float(cells[("turning_35_starboard", key)][0]) == pytest.approx(
+            direct[key], rel=5e-4)
+    L = spec["particulars"]["length_m"]
+    adv = cells[("turning_35_starboard", "advance_L")]
+    assert float(adv[0]) == pytest.approx(direct["advance_m"] / L, rel=5e-4)
+    for (name, key), (value, limit, passed) in cells.items():
+        if limit:
+            c = man[name]["imo"][key]
+            assert float(value) == pytest.approx(c["value"], rel=5e-4)
+            assert passed == ("yes" if float(c["value"]) <= float(c["limit"]) else "NO")
+    zz = man["zigzag_10_10"]["indices"]
+    assert float(cells[("zigzag_10_10", "first_overshoot_deg")][0]) == pytest.approx(
+        zz["first_overshoot_deg"], rel=5e-4)

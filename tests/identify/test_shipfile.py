@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from trafficsim.errors import ShipLibraryError
+from trafficsim.identify import replay
 from trafficsim.identify.shipfile import _value, number, render, text, write_ship_file
 from trafficsim.io.yamlio import parse_yaml
 from trafficsim.ships.library import known_ships, load_ship
@@ -117,3 +119,45 @@ def test_rewriting_the_same_path_returns_the_new_ship(tmp_path: Path) -> None:
     second = write_ship_file(tmp_path / "s.yaml", changed, "second", "d", "s",
                              {"K_prime": (9.0, 0.1)})
     assert second["name"] == "second" and second["coefficients"]["K_prime"] == 9.0
+
+
+def test_fitted_full_precision_values_give_the_same_model(tmp_path: Path) -> None:
+    """Coefficients as a least-squares fit returns them (full double precision, e.g. 1/3):
+    written with ten significant digits and read back, they differ by at most 5e-10
+    relative (half a unit in the tenth digit), and the loaded ship replays like the fitted
+    spec to that precision."""
+    spec = load_ship("bulk_carrier")
+    fitted = {"a1": -1.0 / 3.0, "b1": -2.0 / 7.0, "c2": -np.pi / 10.0, "c3": 1e-3 / 3.0}
+    spec = {**spec, "coefficients": {**spec["coefficients"], **fitted}}
+    loaded = write_ship_file(tmp_path / "fit.yaml", spec, "fit", "d", "s",
+                             {k: (v, 0.01) for k, v in fitted.items()})
+    for key, v in fitted.items():
+        assert loaded["coefficients"][key] == pytest.approx(v, rel=5e-10, abs=0.0)
+    rng = np.random.default_rng(0)
+    n = 40
+    x0 = np.zeros((8, 1))
+    x0[3] = 6.0
+    inputs = np.stack([np.radians(np.cumsum(rng.normal(0, 2, n))).clip(-0.6, 0.6),
+                       np.full(n, 1.4)], axis=-1)[None]
+    win = replay.Windows(x0, inputs, np.zeros((1, n, 4)), np.array([2.0]), np.array([n]),
+                         np.full((1, n, 6), np.nan), np.zeros(1, int), np.zeros(1), ("w",))
+    out, _ = replay.simulate(replay.model_rows([spec, loaded]), win)
+    np.testing.assert_allclose(out[1], out[0], rtol=1e-7, atol=1e-6)
+
+
+def test_written_file_layout_and_no_leftover_temporary_files(tmp_path: Path) -> None:
+    """Extra particulars follow length, beam, draught in alphabetical order; empty autopilot or
+    sensors are not written; the folder holds only the ship file after the atomic write."""
+    spec = load_ship("cargo")
+    parts = {**spec["particulars"], "zeta_m": 1.0, "alpha_m": 2.0}
+    spec = {**spec, "particulars": parts, "autopilot": {}, "sensors": None}
+    loaded = write_ship_file(tmp_path / "c.yaml", spec, "c", "d", "s", {})
+    body = (tmp_path / "c.yaml").read_text()
+    keys = [ln.split(":")[0].strip() for ln in body.splitlines() if ln.startswith("  ")
+            and ln.split(":")[0].strip() in parts]
+    rest = sorted(k for k in parts if k not in ("length_m", "beam_m", "draught_m"))
+    assert keys == ["length_m", "beam_m", "draught_m", *rest]
+    assert "autopilot:" not in body and "sensors:" not in body
+    assert [p.name for p in tmp_path.iterdir()] == ["c.yaml"]
+    assert parse_yaml(body).data["particulars"]["alpha_m"] == 2.0
+    assert loaded["coefficients"] == pytest.approx(spec["coefficients"], rel=1e-10)

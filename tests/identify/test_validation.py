@@ -265,3 +265,118 @@ def test_standard_manoeuvres_and_imo_criteria() -> None:
     for m in out.values():
         for c in m["imo"].values():
             assert c["pass"] == (c["value"] <= c["limit"])
+
+
+# --- hand-worked trajectories ---------------------------------------------------------------
+
+def test_turning_indices_of_a_circle_sampled_coarsely_interpolate_between_samples() -> None:
+    """Circle of radius 300 m to starboard from heading 0, sampled every 7 deg of turn: at
+    90 deg the along/across coordinates are interpolated linearly in heading change between
+    the samples at 84 and 91 deg; the result equals that interpolation worked by hand."""
+    R = 300.0
+    theta = np.radians(np.arange(0.0, 200.0, 7.0))
+    north, east = R * np.sin(theta), R * (1 - np.cos(theta))
+    t = 10.0 * np.arange(theta.size)
+    got = validation.turning_indices(t, north, east, theta)
+    # 90 deg lies between 84 (index 12) and 91 (index 13): weight 6/7 of the way
+    w = 6.0 / 7.0
+    a84, a91 = np.radians(84.0), np.radians(91.0)
+    assert got["advance_m"] == pytest.approx(R * ((1 - w) * np.sin(a84) + w * np.sin(a91)))
+    assert got["transfer_m"] == pytest.approx(
+        R * ((1 - w) * (1 - np.cos(a84)) + w * (1 - np.cos(a91))))
+    assert got["time_to_90_s"] == pytest.approx(120.0 + w * 10.0)
+    # 180 deg between 175 (index 25) and 182 (index 26): weight 5/7
+    w2 = 5.0 / 7.0
+    a175, a182 = np.radians(175.0), np.radians(182.0)
+    assert got["tactical_diameter_m"] == pytest.approx(
+        R * ((1 - w2) * (1 - np.cos(a175)) + w2 * (1 - np.cos(a182))))
+    assert got["tactical_diameter_m"] == pytest.approx(2 * R, rel=2e-3)
+
+
+def test_turning_indices_do_not_depend_on_position_heading_or_side() -> None:
+    """The same circle translated, rotated by 250 deg (heading carried across north, so the
+    unwrapped heading passes 360) and mirrored to port gives the same indices."""
+    R, r = 420.0, 0.008
+    t = np.arange(0.0, 450.0, 2.0)
+    theta = r * t
+    along, across = R * np.sin(theta), R * (1 - np.cos(theta))
+    ref = validation.turning_indices(t, along, across, theta)
+    for psi0, side in ((np.radians(250.0), 1.0), (np.radians(250.0), -1.0)):
+        c, s = np.cos(psi0), np.sin(psi0)
+        a, b = along, side * across
+        got = validation.turning_indices(t, 1e4 + a * c - b * s, -3e3 + a * s + b * c,
+                                         psi0 + side * theta)
+        assert got == pytest.approx(ref, rel=1e-9)
+
+
+def test_zigzag_overshoots_are_those_read_off_the_track() -> None:
+    """20/20 zig-zag of the cargo ship from ``standard_manoeuvres``: the first overshoot is
+    the largest heading change past +20 deg before the heading swings back below 0, the
+    second the largest past -20 deg before it comes back above 0 (read off the track by
+    zero crossings, not by the rudder reversals the manoeuvre code uses); the initial turning
+    time is when the change first reaches 20 deg."""
+    spec = load_ship("cargo")
+    out = validation.standard_manoeuvres(spec, 12.0)
+    track, _ = manoeuvres.zigzag(spec, 20.0, 20.0, 12.0)
+    change = np.degrees(np.unwrap(np.radians(track["heading_deg"])))
+    change -= change[0]
+    t = track["t_s"]
+    peak1 = int(np.argmax(change > 20.0))
+    down = peak1 + int(np.argmax(change[peak1:] < 0.0))
+    first = change[:down].max() - 20.0
+    up = down + int(np.argmax(change[down:] > 0.0))
+    second = -change[down:up].min() - 20.0
+    ind = out["zigzag_20_20"]["indices"]
+    assert ind["first_overshoot_deg"] == pytest.approx(first, abs=0.05)
+    assert ind["second_overshoot_deg"] == pytest.approx(second, abs=0.05)
+    i = int(np.argmax(change >= 20.0))
+    t20 = np.interp(20.0, change[i - 1:i + 1], t[i - 1:i + 1])
+    assert ind["initial_turning_time_s"] == pytest.approx(t20 - t[0], abs=0.5)
+    assert first > 0.0 and second > 0.0
+
+
+def test_compare_manoeuvres_of_a_ship_with_itself_is_zero_error() -> None:
+    """The identified ship equal to the reference: every finite index has error 0 %, and the
+    reference and identified values are the manoeuvres' own."""
+    spec = load_ship("cargo")
+    man = validation.standard_manoeuvres(spec, 12.0)
+    cmp_ = validation.compare_manoeuvres(man, man)
+    for name, rows in cmp_.items():
+        for key, row in rows.items():
+            assert row["reference"] == row["identified"] or math.isnan(row["reference"])
+            if math.isfinite(row["reference"]) and row["reference"] != 0.0:
+                assert row["error_pct"] == 0.0, (name, key)
+            assert row["reference"] == pytest.approx(man[name]["indices"][key], nan_ok=True)
+
+
+def test_prediction_errors_of_a_perfect_model_are_zero(bulk_windows) -> None:
+    """Targets equal to the model's own replay: every RMS and end-of-window error is 0 and no
+    window diverges."""
+    spec, win, sim = bulk_windows
+    win = dataclasses.replace(win, target=sim.copy())
+    out = validation.prediction_errors(replay.model_rows([spec]), ("m",), win)
+    for e in out["m"].values():
+        for key in ("u_rms_mps", "v_rms_mps", "r_rms_degps", "heading_rms_deg",
+                    "end_position_rms_m", "end_position_max_m"):
+            assert e[key] == 0.0, key
+        assert e["diverged_windows"] == 0
+
+
+def test_prediction_end_error_uses_each_windows_own_last_sample(bulk_windows) -> None:
+    """A short last window (fewer samples than the padding): its end error is read at its own
+    last sample, not at the padded end (which is NaN)."""
+    spec, win, sim = bulk_windows
+    short, last = 3, 99
+    n_samples = win.n_samples.copy()
+    n_samples[short] = last + 1
+    target = sim.copy()
+    target[short, last + 1:] = np.nan
+    target[short, last, 0] += 6.0
+    target[short, last, 1] -= 8.0
+    win = dataclasses.replace(win, target=target, n_samples=n_samples)
+    sel = np.zeros(win.w, dtype=bool)
+    sel[short] = True
+    out = validation.prediction_errors(replay.model_rows([spec]), ("m",), win.subset(sel))
+    e = out["m"]["all"]
+    assert e["end_position_max_m"] == pytest.approx(10.0, rel=1e-9)
+    assert e["u_rms_mps"] == 0.0

@@ -344,3 +344,61 @@ def test_a_failed_run_aborted_leaves_no_live_gif_behind(tiny_scenario, tmp_path)
     assert len(_files(tmp_path / "frames")) == 1  # the unfinished GIF, under a temporary name
     live.abort()
     assert _files(tmp_path / "frames") == []
+
+
+@pytest.mark.parametrize("fmt, size, fps, every_s", [
+    ("jpeg", (160, 120), 10.0, None), ("mp4", (161, 121), 10.0, None),
+    ("gif", (160, 120), 1000.0, None), ("gif", (160, 120), math.nan, None),
+    ("png", (160, 120), 10.0, 12.0), ("png", (160, 120), 10.0, -5.0)])
+def test_bad_options_are_one_line_input_errors_before_any_file(synthetic_run, tmp_path, fmt,
+                                                               size, fps, every_s):
+    """Each refusal is an InputError whose text is one line starting with the flag, and the
+    output folder is not even created."""
+    run = synthetic_run(_ships(), 4)
+    with pytest.raises(InputError) as err:
+        render_run(run, tmp_path / "out", fmt, every_s=every_s,
+                   options=FrameOptions(size_px=size), fps=fps)
+    text = str(err.value)
+    assert "\n" not in text and text.startswith(f"{err.value.key}: ")
+    assert err.value.key in ("--format", "--size", "--fps", "--every-s")
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_unknown_ship_to_follow_is_refused_before_any_file(synthetic_run, tmp_path):
+    run = synthetic_run(_ships(), 4)
+    with pytest.raises(InputError) as err:
+        render_run(run, tmp_path / "out", "gif",
+                   options=FrameOptions(size_px=(160, 120), follow="zz"))
+    assert err.value.key == "--follow" and "\n" not in str(err.value)
+    assert "'zz'" in err.value.message and "a, b" in err.value.message
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("n_records, record_s, every_s", [
+    (10, 2.5, 7.5), (11, 2.5, 7.5), (9, 0.1, 0.3), (1, 5.0, 5.0), (25, 5.0, None)])
+def test_frame_count_and_times_of_every_s(synthetic_run, tmp_path, drawn, n_records,
+                                          record_s, every_s):
+    """Frames at 0, every_s, 2 every_s ... up to the last record: ceil(n_records / stride)
+    frames with stride = every_s / record period (7.5 / 2.5 = 3: 10 records give 4 frames,
+    times 0, 7.5, 15, 22.5)."""
+    run = synthetic_run(_ships(), n_records, every_s=record_s)
+    done = render_run(run, tmp_path / "png", "png", every_s=every_s, options=SMALL)
+    stride = 1 if every_s is None else round(every_s / record_s)
+    count = -(-n_records // stride)
+    step = record_s if every_s is None else every_s
+    assert done.frames == count == len(done.paths)
+    np.testing.assert_allclose(drawn["times"], step * np.arange(count), atol=1e-9)
+
+
+def test_a_gif_export_lasts_frames_over_fps(synthetic_run, tmp_path):
+    """Twelve records every 5 s, a frame every 10 s: six frames at 4 fps, 250 ms each,
+    1.5 s in all, each 160 x 120."""
+    run = synthetic_run(_ships(), 12)
+    done = render_run(run, tmp_path, "gif", every_s=10.0, options=SMALL, fps=4.0)
+    with Image.open(done.paths[0]) as image:
+        assert image.n_frames == 6 == done.frames and image.size == (160, 120)
+        total = 0
+        for k in range(6):
+            image.seek(k)
+            total += image.info["duration"]
+    assert total == 1500

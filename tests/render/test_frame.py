@@ -168,3 +168,71 @@ def test_followed_ship_is_drawn_at_the_chart_centre_with_panel_and_legend(synthe
     for k in (0, 10, 19):
         assert _pixel(renderer.array(k), view.origin_x_px, view.origin_y_px) == \
             st.ship_colour(1)
+
+
+def test_a_followed_hull_is_at_the_centre_pointing_along_its_heading(synthetic_run):
+    """Following 'a' (heading 60 deg, 250 m x 40 m) at 0.25 NM in 320 x 240 px: 463 m over
+    120 px. At every frame the point 0.35 L ahead along the heading is in the ship's colour,
+    three beams to port (bearing 330 deg, away from the labels on the right) is sea; the
+    other ship sits at its offset from 'a' divided by the scale."""
+    ships = [Ship("a", 0.0, 0.0, 60.0, speed_kn=12.0, length_m=250.0, beam_m=40.0),
+             Ship("b", 150.0, -250.0, 60.0, speed_kn=12.0, length_m=250.0, beam_m=40.0)]
+    options = FrameOptions(size_px=(320, 240), follow="a", range_nm=0.25, legend=False,
+                           panel=False, domains=False)
+    renderer = Renderer(load_run(synthetic_run(ships, 8)), options)
+    scale = 0.25 * NM / 120.0
+    assert renderer.view.m_per_px == pytest.approx(scale)
+    psi = np.radians(60.0)
+    for k in (0, 4, 7):
+        frame = renderer.array(k)
+        for north, east, colour in (
+                (0.35 * 250.0 * np.cos(psi), 0.35 * 250.0 * np.sin(psi), st.ship_colour(0)),
+                (120.0 * np.cos(psi - np.pi / 2), 120.0 * np.sin(psi - np.pi / 2), st.SEA),
+                (150.0, -250.0, st.ship_colour(1))):
+            x, y = 160.0 + east / scale, 120.0 - north / scale
+            assert _pixel(frame, x, y) == colour, (k, north, east)
+
+
+def test_a_fixed_view_draws_a_moving_hull_where_its_record_puts_it(synthetic_run):
+    """A ship sailing south-west at 15 kn: at each frame its hull centre (the record's
+    position through the fitted view, computed by hand) is in its colour, and its position
+    of the first record is no longer (only the 2 px track is left there, in the same colour,
+    so the pixel two beams off the old hull centre is sea)."""
+    ships = [Ship("a", 0.0, 0.0, 225.0, speed_kn=15.0, length_m=200.0, beam_m=40.0)]
+    data = load_run(synthetic_run(ships, 40, every_s=10.0))
+    renderer = Renderer(data, BARE)
+    v = renderer.view
+    # 390 s at 15 kn is 3009.9 m south-west: spans 2128.3 m each way, 0.88 * 300 px high
+    span = 15.0 * 1852.0 / 3600.0 * 390.0 / np.sqrt(2.0)
+    assert v.m_per_px == pytest.approx(span / 264.0)
+    assert (v.centre_north_m, v.centre_east_m) == pytest.approx((-span / 2, -span / 2))
+    for k in (0, 20, 39):
+        n, e = data.north_m[k, 0], data.east_m[k, 0]
+        x, y = _metres_to_px(n, e, -span / 2, -span / 2, v.m_per_px, (200.0, 150.0))
+        assert _pixel(renderer.array(k), x, y) == st.ship_colour(0)
+    frame = renderer.array(39)
+    beam = 2.0 * 40.0 / v.m_per_px  # north-west of the start, off the track
+    assert _pixel(frame, 200.0 + 132.0 - beam / np.sqrt(2), 150.0 - 132.0 - beam / np.sqrt(2)) \
+        == st.SEA
+
+
+@pytest.mark.parametrize(("t_s", "text"), [(59.5, "0:01:00"), (3599.6, "1:00:00"),
+                                           (86399.0, "23:59:59"), (90000.0, "25:00:00"),
+                                           (0.49, "0:00:00")])
+def test_clock_rounds_to_the_second_and_carries(t_s, text):
+    """Seconds round first, then carry into minutes and hours (3599.6 s is one hour, not
+    0:59:60); hours do not wrap at a day."""
+    assert clock(t_s) == text
+
+
+def test_the_array_is_the_rgb_bytes_row_by_row(synthetic_run):
+    """``array(k)[y, x]`` is the pixel ``(x, y)`` of the surface ``draw(k)`` returns, and
+    ``rgb(k)`` the same rows packed (top row first)."""
+    renderer = Renderer(load_run(synthetic_run([Ship("a", 0.0, 0.0, 30.0, 8.0)], 3)),
+                        FrameOptions(size_px=(90, 70), legend=False, panel=False))
+    surf = renderer.draw(2)
+    pixels = [tuple(surf.get_at((x, y)))[:3] for y in (0, 35, 69) for x in (0, 44, 89)]
+    arr = renderer.array(2)
+    assert [tuple(int(c) for c in arr[y, x]) for y in (0, 35, 69) for x in (0, 44, 89)] == \
+        pixels
+    assert renderer.rgb(2) == arr.tobytes()

@@ -593,3 +593,69 @@ def test_text_cache_drops_the_least_recently_used(pg):
     assert text.render("a", st.INK) is a
     assert text.render("b", st.INK) is not b
 
+
+
+# -- lines to points far off the view -----------------------------------------------------------
+
+def _far_leg(pg, kind):
+    """A leg from (0, 0) to (10 km N, 20 km E) at 0.01 m/px from pixel (100, 100): the far end
+    is 2,000,000 px east and 1,000,000 px north, beyond the clip."""
+    surf = _sea(pg)
+    view = _view(0.01)
+    if kind == "route":
+        data = _data(0.0, 0.0, routes=[np.array([[10000.0, 20000.0]])])
+        layers.draw_routes(pg, surf, view, STYLE, data)
+    else:
+        data = _data([[0.0], [10000.0]], [[0.0], [20000.0]])
+        layers.draw_tracks(pg, surf, view, STYLE, data, 0, 1, False)
+    return surf
+
+
+@pytest.mark.parametrize("kind", [
+    "route",
+    pytest.param("track", marks=pytest.mark.xfail(
+        strict=True, reason="KNOWN: track segments are drawn from points clipped to CLIP_PX "
+        "per axis; only a record over 1e6 px from the view (22 km at 0.05 m/px) bends"))])
+def test_a_line_to_a_far_point_keeps_its_bearing(pg, kind):
+    """The leg climbs 1 px for every 2 px east (10 km north over 20 km east): at column 180
+    it passes row 100 - 80 / 2 = 60, and nothing is drawn near the 45-degree row 20 the
+    clipped end (1e6, -999900) would give."""
+    changed = _changed(pg, _far_leg(pg, kind))
+    near_true = changed[170:191, 50:71].any()
+    assert near_true and not changed[170:191, :40].any()
+
+
+@pytest.mark.parametrize("heading", [37.0, 251.0])
+def test_hull_and_speed_vector_move_with_the_ship_pixel_for_pixel(pg, heading):
+    """A ship 256 m east and 128 m south of another at 8 m/px is drawn 32 px right and 16 px
+    lower, the same pixels shifted (hull, outline and speed vector)."""
+    view = _view(8.0, (80.0, 90.0), (220, 220))
+    kw = dict(heading_deg=heading, vn=3.0 * math.cos(math.radians(heading)),
+              ve=3.0 * math.sin(math.radians(heading)), length_m=400.0, beam_m=64.0)
+    a, b = _sea(pg, 220, 220), _sea(pg, 220, 220)
+    layers.draw_hulls(pg, a, view, STYLE, _data(0.0, 0.0, **kw), 0)
+    layers.draw_hulls(pg, b, view, STYLE, _data(-128.0, 256.0, **kw), 0)
+    pa, pb = pg.surfarray.array3d(a), pg.surfarray.array3d(b)
+    np.testing.assert_array_equal(pb[32:, 16:], pa[:-32, :-16])
+    assert _changed(pg, a).sum() > 200
+
+
+def test_cpa_pairs_agree_with_brute_force_and_ignore_ship_order():
+    """DCPA and TCPA of three ships on straight tracks against the smallest distance found by
+    stepping every pair 0.05 s at a time over the horizon; listing the ships in reverse
+    order gives the same pairs (indices mapped back)."""
+    north = np.array([0.0, 1500.0, -400.0])
+    east = np.array([0.0, 900.0, 1200.0])
+    vn, ve = np.array([4.0, -3.0, 2.0]), np.array([1.0, -2.5, -3.5])
+    got = layers.cpa_pairs(_data([north], [east], vn=[vn], ve=[ve]), 0)
+    t = np.arange(0.0, layers.CPA_HORIZON_S, 0.05)
+    assert got
+    for i, j, dcpa, tcpa in got:
+        d = np.hypot(north[j] - north[i] + (vn[j] - vn[i]) * t,
+                     east[j] - east[i] + (ve[j] - ve[i]) * t)
+        assert dcpa == pytest.approx(d.min(), abs=0.01)
+        assert tcpa == pytest.approx(t[np.argmin(d)], abs=0.05)
+    rev = layers.cpa_pairs(_data([north[::-1]], [east[::-1]], vn=[vn[::-1]], ve=[ve[::-1]]), 0)
+    back = sorted((min(2 - i, 2 - j), max(2 - i, 2 - j), round(d, 6), round(t, 6))
+                  for i, j, d, t in rev)
+    assert back == sorted((i, j, round(d, 6), round(t, 6)) for i, j, d, t in got)

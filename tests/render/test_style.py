@@ -139,3 +139,22 @@ def test_gif_palette_pads_with_its_last_colour():
     np.testing.assert_array_equal(palette[distinct:], np.repeat(palette[distinct - 1:distinct],
                                                                 256 - distinct, axis=0))
     assert len({tuple(c) for c in palette[:distinct].tolist()}) == distinct
+
+
+@pytest.mark.parametrize("k", range(len(st.SHIPS)))
+def test_derived_colours_lie_between_the_ship_and_their_target(k):
+    """The estimate is 0.45 of the way to black (each channel within half a step of 0.55 of
+    the ship's); the domain 0.5 of the way to the sea: each channel between the two ends."""
+    ship = st.ship_colour(k)
+    for c, e in zip(ship, st.estimate_colour(k), strict=True):
+        assert abs(e - 0.55 * c) <= 0.5 + 1e-9 and e <= c
+    for c, d, s in zip(ship, st.domain_colour(k), st.SEA, strict=True):
+        assert min(c, s) <= d <= max(c, s) and abs(d - (c + s) / 2) <= 0.5
+
+
+def test_gif_palette_indices_of_style_colours_are_distinct():
+    """Each distinct style colour has its own palette entry (a GIF pixel's index names one
+    colour): the first entries are the style colours without repeats."""
+    palette = [tuple(c) for c in st.gif_palette().tolist()]
+    distinct = list(dict.fromkeys(palette))
+    assert palette[:len(distinct)] == distinct

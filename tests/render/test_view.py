@@ -139,3 +139,71 @@ def test_scale_bar_boundaries(m_per_px, target, expected):
     length, label = nice_length_m(m_per_px, target)
     assert (length, label) == (pytest.approx(expected[0]), expected[1])
     assert length <= max(m_per_px * target, 1.0)  # never longer than asked (bar fits)
+
+
+@given(st.floats(-5000.0, 5000.0), st.floats(-5000.0, 5000.0))
+def test_metres_of_a_pixel_map_back_to_that_pixel(x_px, y_px):
+    """``to_m`` then ``to_px`` returns the pixel coordinates (the two are inverses both ways)."""
+    view = View(640, 480, -321.0, 987.0, 3.25, 310.5, 201.0)
+    n, e = view.to_m(x_px, y_px)
+    x, y = view.to_px(n, e)
+    assert x == pytest.approx(x_px, abs=1e-9) and y == pytest.approx(y_px, abs=1e-9)
+
+
+def test_follow_range_reaches_the_nearer_edge_only():
+    """Range 1000 m in a 300 x 200 px frame: the nearer edges are top and bottom, 100 px from
+    the centre (150, 100), so 10 m/px; 1000 m north is row 0, 1000 m south row 200, while
+    1000 m east is only column 250 (the wider side shows more)."""
+    view = follow(1000.0, 300, 200).centred_on(-40.0, 70.0)
+    assert view.m_per_px == 10.0
+    x, y = view.to_px(np.array([960.0, -1040.0, -40.0]), np.array([70.0, 70.0, 1070.0]))
+    np.testing.assert_allclose(x, [150.0, 150.0, 250.0])
+    np.testing.assert_allclose(y, [0.0, 200.0, 100.0])
+
+
+def test_points_of_any_shape_are_the_floors_of_to_px():
+    """``points`` of ``(n, 6)`` arrays (hull outlines) is ``(n, 6, 2)``, each entry the floor of
+    the float pixel, checked point by point."""
+    view = View(100, 100, 3.0, -7.0, 2.5, 50.0, 50.0)
+    rng = np.random.default_rng(4)
+    north, east = rng.uniform(-200, 200, (3, 6)), rng.uniform(-200, 200, (3, 6))
+    pts = view.points(north, east)
+    assert pts.shape == (3, 6, 2) and pts.dtype == np.int64
+    for i in range(3):
+        for j in range(6):
+            x = 50.0 + (east[i, j] + 7.0) / 2.5
+            y = 50.0 - (north[i, j] - 3.0) / 2.5
+            assert pts[i, j].tolist() == [int(np.floor(x)), int(np.floor(y))]
+
+
+def test_fit_of_one_point_centres_it_at_the_smallest_extent():
+    """A lone ship at (1234 N, -567 E) in 400 x 200 px: the 1 NM extent over 0.88 * 200 px
+    (the tighter side), the ship on the frame's middle pixel corner (200, 100)."""
+    view = fit(np.array([1234.0]), np.array([-567.0]), 400, 200)
+    assert view.m_per_px == pytest.approx(NM / 176.0)
+    x, y = view.to_px(np.array([1234.0]), np.array([-567.0]))
+    assert (float(x[0]), float(y[0])) == (200.0, 100.0)
+
+
+@given(st.lists(st.tuples(coords, coords), min_size=1, max_size=20), coords, coords)
+def test_fit_moves_with_the_points_and_keeps_its_scale(points, dn, de):
+    """Shifting every point by (dn, de) shifts the view's centre by the same and leaves the
+    scale, so every point keeps its pixel."""
+    north, east = np.array(points).T
+    a = fit(north, east, 300, 200)
+    b = fit(north + dn, east + de, 300, 200)
+    assert b.m_per_px == pytest.approx(a.m_per_px, rel=1e-9)
+    assert b.centre_north_m == pytest.approx(a.centre_north_m + dn, abs=1e-6)
+    assert b.centre_east_m == pytest.approx(a.centre_east_m + de, abs=1e-6)
+    xa, ya = a.to_px(north, east)
+    xb, yb = b.to_px(north + dn, east + de)
+    np.testing.assert_allclose(xb, xa, atol=1e-6)
+    np.testing.assert_allclose(yb, ya, atol=1e-6)
+
+
+def test_fit_swapping_the_axes_swaps_the_frame():
+    """North/east points in a w x h frame and the same points with north and east swapped in
+    an h x w frame need the same scale (one scale for both axes)."""
+    north, east = np.array([0.0, 3000.0, 500.0]), np.array([-800.0, 4000.0, 100.0])
+    assert fit(north, east, 500, 300).m_per_px == pytest.approx(
+        fit(east, north, 300, 500).m_per_px)

@@ -274,3 +274,95 @@ def test_open_writer_kinds(tmp_path):
     with pytest.raises(ValueError, match="unknown format 'bmp'"):
         open_writer("bmp", tmp_path, "x", (4, 2), 96.0, 5.0)
     assert list(tmp_path.iterdir()) == [tmp_path / "p"]
+
+
+@pytest.mark.parametrize(("fps", "n"), [(4.0, 5), (3.0, 3), (0.5, 2)])
+def test_gif_plays_for_frames_times_the_delay(tmp_path, fps, n):
+    """A GIF of ``n`` frames lasts ``n`` times its rounded delay (1 / fps in hundredths):
+    4 fps 250 ms, 3 fps 330 ms, 0.5 fps 2000 ms; every frame keeps the size (9 x 5)."""
+    size = (9, 5)
+    writer = GifWriter(tmp_path / "d.gif", size, fps)
+    for k in range(n):
+        writer.write(bytes(st.ship_colour(k)) * (9 * 5))
+    writer.close()
+    delay = {4.0: 250, 3.0: 330, 0.5: 2000}[fps]
+    with Image.open(tmp_path / "d.gif") as image:
+        assert image.n_frames == n
+        total = 0
+        for k in range(n):
+            image.seek(k)
+            assert image.size == size
+            assert image.convert("RGB").getpixel((4, 2)) == st.ship_colour(k)
+            total += image.info["duration"]
+    assert total == n * delay
+
+
+def test_mp4_has_the_frames_size_and_duration_asked(tmp_path):
+    """Six 32 x 16 frames at 12 fps: 0.5 s of video, 12 fps, six frames read back."""
+    import imageio_ffmpeg
+
+    writer = Mp4Writer(tmp_path / "v.mp4", (32, 16), 12.0)
+    for k in range(6):
+        writer.write(bytes([40 * k]) * (32 * 16 * 3))
+    assert writer.close() == [tmp_path / "v.mp4"]
+    reader = imageio_ffmpeg.read_frames(str(tmp_path / "v.mp4"))
+    meta = next(reader)
+    assert tuple(meta["size"]) == (32, 16) and meta["fps"] == pytest.approx(12.0)
+    assert meta["duration"] == pytest.approx(0.5, abs=0.09)
+    frames = [np.frombuffer(f, dtype=np.uint8) for f in reader]
+    assert len(frames) == 6
+    assert [float(f.mean()) for f in frames] == pytest.approx([0, 40, 80, 120, 160, 200],
+                                                              abs=3.0)
+
+
+def test_write_png_replaces_a_file_whole_and_leaves_it_when_encoding_fails(tmp_path):
+    """Writing over an existing PNG gives the new picture and no temporary file; pixels of the
+    wrong length fail before anything is written, so the old picture stays."""
+    path = tmp_path / "f.png"
+    first = np.full((2, 3, 3), 10, dtype=np.uint8)
+    second = np.full((2, 3, 3), 200, dtype=np.uint8)
+    write_png(path, first.tobytes(), (3, 2), 96.0)
+    write_png(path, second.tobytes(), (3, 2), 96.0)
+    with Image.open(path) as image:
+        np.testing.assert_array_equal(np.asarray(image), second)
+    with pytest.raises(ValueError):
+        write_png(path, bytes(5), (3, 2), 96.0)
+    with Image.open(path) as image:
+        np.testing.assert_array_equal(np.asarray(image), second)
+    assert [p.name for p in tmp_path.iterdir()] == ["f.png"]
+
+
+def test_png_compression_levels_change_size_not_pixels():
+    """Levels 0 and 9 give the same decoded rows; level 0 stores them uncompressed (larger)."""
+    from trafficsim.render.writers import encode_png
+
+    rgb = np.zeros((40, 50, 3), dtype=np.uint8)
+    rgb[10:20, 5:45] = st.INK
+    fast, small = (encode_png(rgb.tobytes(), (50, 40), 96.0, level) for level in (0, 9))
+    assert len(fast) > 40 * (3 * 50 + 1) > len(small)
+    import io
+
+    for data in (fast, small):
+        with Image.open(io.BytesIO(data)) as image:
+            np.testing.assert_array_equal(np.asarray(image), rgb)
+
+
+def test_png_frames_get_the_permissions_of_a_plain_open(tmp_path):
+    """PNG frames, like the GIF and MP4 (``_TempTarget.commit``), are 0666 less the umask, so
+    other users (a web server showing a report) can read them."""
+    umask = os.umask(0)
+    os.umask(umask)
+    writer = PngFrames(tmp_path, (2, 2), 96.0)
+    writer.write(bytes(12))
+    (path,) = writer.close()
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask
+
+
+@pytest.mark.parametrize("kind", ["gif", "mp4"])
+def test_aborting_before_any_frame_leaves_nothing(tmp_path, kind):
+    """A writer opened and aborted at once (the first frame failed to draw) removes its
+    temporary file."""
+    writer = (GifWriter(tmp_path / "e.gif", (8, 8), 5.0) if kind == "gif"
+              else Mp4Writer(tmp_path / "e.mp4", (8, 8), 5.0))
+    writer.abort()
+    assert list(tmp_path.iterdir()) == []

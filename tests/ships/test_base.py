@@ -351,3 +351,61 @@ def test_register_adds_a_family_and_returns_it(monkeypatch):
     assert base.register(d) is d
     assert base.families()["dummy"] is d
     assert "mmg" in base.families()
+
+
+# -- steady rps against scipy, bisection precision, sub-steps ----------------------------------
+
+
+@pytest.mark.parametrize("name", ["catfish", "kvlcc2", "bulk_carrier", "cargo"])
+def test_steady_rps_for_speed_equals_brentq_on_the_surge_acceleration(name):
+    """scipy's brentq on du(u, n) = 0 (v = r = rudder = 0, calm water), evaluated through
+    ``accelerations``, gives the rps the compiled bisection returns, at 30, 60 and 90 % of the
+    service speed (all reachable for these ships)."""
+    from scipy.optimize import brentq
+
+    spec = load_ship(name)
+    fam = _family(spec)
+    speeds = np.array([0.3, 0.6, 0.9]) * from_kn(spec["service_speed_kn"])
+    got = base.steady_rps_for_speed(fam, fam.build([spec] * 3), Actuators.from_specs([spec] * 3),
+                                    speeds)
+    params1 = fam.build([spec])
+
+    def du(n, u):
+        x = np.zeros((base.N_STATE, 1))
+        x[U], x[RPS] = u, n
+        return base.accelerations(fam, params1, x, Env())[0][0]
+
+    for u, g in zip(speeds, got, strict=True):
+        root = brentq(du, 0.0, spec["actuators"]["rps_max"], args=(u,), xtol=1e-15, rtol=1e-15)
+        assert g == pytest.approx(root, rel=1e-10, abs=1e-12)
+
+
+def test_steady_rps_bisection_precision_follows_the_iteration_count():
+    """``iters`` halvings of [0, rps_max] leave the midpoint within rps_max / 2^(iters + 1)
+    of the root; 0 iterations give rps_max / 2 exactly."""
+    spec = load_ship("cargo")
+    fam = _family(spec)
+    params, act = fam.build([spec]), Actuators.from_specs([spec])
+    speed = np.array([from_kn(11.0)])
+    exact = 11.0 / 15.0 * spec["coefficients"]["rps_service"]
+    rmax = spec["actuators"]["rps_max"]
+    assert base.steady_rps_for_speed(fam, params, act, speed, iters=0)[0] == 0.5 * rmax
+    for iters in (1, 5, 12, 30):
+        got = base.steady_rps_for_speed(fam, params, act, speed, iters=iters)[0]
+        assert abs(got - exact) <= rmax / 2 ** (iters + 1) + 1e-15
+
+
+def test_step_with_substeps_equals_that_many_shorter_steps():
+    """``step(dt, substeps=m)`` is m RK4 steps of dt/m: the same state as m calls with dt/m
+    (a heading kept away from the 0/2 pi wrap)."""
+    spec = load_ship("catfish")
+    fam = _family(spec)
+    params, act = fam.build([spec] * 2), Actuators.from_specs([spec] * 2)
+    x0 = np.zeros((base.N_STATE, 2))
+    x0[PSI], x0[U], x0[RPS] = 1.0, [3.0, 4.0], [15.0, 20.0]
+    cmd_r, cmd_n = np.radians([20.0, -10.0]), np.array([18.0, 22.0])
+    one = base.step(fam, params, act, x0, cmd_r, cmd_n, Env(), 2.0, substeps=4)
+    many = x0.copy()
+    for _ in range(4):
+        many = base.step(fam, params, act, many, cmd_r, cmd_n, Env(), 0.5, substeps=1)
+    np.testing.assert_allclose(one, many, rtol=1e-13, atol=1e-13)

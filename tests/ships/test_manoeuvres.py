@@ -359,3 +359,150 @@ def test_an_approach_speed_not_above_zero_is_refused(speed_kn):
     with pytest.raises(InputError, match="above 0 kn") as info:
         manoeuvres.turning_circle(load_ship("cargo"), speed_kn=speed_kn)
     assert info.value.key == "speed_kn"
+
+
+# ---------------------------------------------------------------------------------------------
+# a drifting ship (response family) against scipy, mirror images, argument checks
+
+
+def _response_rhs(spec, rps, order_rad):
+    """[seed 001, eq 2] in the paper's units (deg, deg/s, rpm) with the module's two guards,
+    plus kinematics and the rate-limited first-order steering gear; SI state
+    (north, east, psi, u, v, r, rudder), engine held at ``rps``."""
+    c, a = spec["coefficients"], spec["actuators"]
+    fade_speed = c.get("rudder_fade_speed_mps", 1.0)
+    tau, rate = a["rudder_tau_s"], math.radians(a["rudder_rate_degps"])
+    n = 60.0 * rps
+
+    def rhs(t, s):
+        _, _, psi, u, v, r, d = s
+        rd, dd = math.degrees(r), math.degrees(d)
+        f = min(1.0, (u / fade_speed) ** 2)
+        du = (c["a1"] * u * abs(u) + c["a2"] * v * v + c["a3"] * rd * rd + c["a5"] * v * rd
+              + f * (c["a4"] * dd * dd + c["a6"] * v * dd + c["a7"] * rd * dd)
+              + c["a8"] * u * n + c["a9"] * n * n)
+        dv = c["b1"] * v + c["b2"] * rd + c["b4"] * u * rd + f * c["b3"] * dd
+        dr = math.radians(c["c1"] * v + c["c2"] * rd + f * c["c3"] * dd)
+        ddelta = min(max((order_rad - d) / tau, -rate), rate)
+        return [u * math.cos(psi) - v * math.sin(psi), u * math.sin(psi) + v * math.cos(psi),
+                r, du, dv, dr, ddelta]
+
+    return rhs
+
+
+def test_turning_indices_of_a_drifting_ship_agree_with_an_independent_integration():
+    """Bulk carrier (response family, it drifts and loses speed in the turn), 25 deg from
+    8 kn: advance, transfer, tactical diameter and the times to 90 and 180 deg equal those of
+    scipy's integration of the paper's polynomial in its own units, read at the exact
+    heading-change events; the speed loss is the ground speed at the end over the approach."""
+    spec = load_ship("bulk_carrier")
+    c = spec["coefficients"]
+    u0 = from_kn(8.0)
+    a1, a8, a9 = c["a1"], c["a8"], c["a9"]
+    rpm = u0 * (-a8 + math.sqrt(a8 * a8 - 4 * a1 * a9)) / (2 * a9)  # steady straight run
+    _, ind = manoeuvres.turning_circle(spec, rudder_deg=25.0, speed_kn=8.0, dt=0.5,
+                                       turns_deg=180.0)
+    events = []
+    for level in (90.0, 180.0):
+        def ev(t, s, level=level):
+            return s[2] - math.radians(level)
+        events.append(ev)
+    events[-1].terminal = True
+    sol = solve_ivp(_response_rhs(spec, rpm / 60.0, math.radians(25.0)), (0.0, 5000.0),
+                    [0.0, 0.0, 0.0, u0, 0.0, 0.0, 0.0], method="DOP853", rtol=1e-11,
+                    atol=1e-10, events=events)
+    (t90,), (t180,) = sol.t_events
+    (y90,), (y180,) = sol.y_events
+    assert ind["time_to_90_s"] == pytest.approx(t90, rel=1e-4)
+    assert ind["time_to_180_s"] == pytest.approx(t180, rel=1e-4)
+    assert ind["advance_m"] == pytest.approx(y90[0], rel=1e-4)
+    assert ind["transfer_m"] == pytest.approx(y90[1], rel=1e-4)
+    assert ind["tactical_diameter_m"] == pytest.approx(y180[1], rel=1e-4)
+    # the run stops on the first step at or beyond 180 deg: ground speed then over approach
+    assert ind["speed_loss_ratio"] == pytest.approx(math.hypot(y180[3], y180[4]) / u0,
+                                                    rel=1e-3)
+    assert ind["approach_speed_kn"] == pytest.approx(8.0, rel=1e-9)
+
+
+def test_zigzag_to_port_first_is_the_mirror_image_of_starboard_first():
+    """A symmetric ship (Nomoto container): the port-first 20/20 zig-zag gives the same
+    indices (measured to port) and the east coordinates of its track are negated."""
+    spec = load_ship("container")
+    tr_s, stbd = manoeuvres.zigzag(spec, rudder_deg=20.0, dt=0.5)
+    tr_p, port = manoeuvres.zigzag(spec, rudder_deg=-20.0, heading_deg=-20.0, dt=0.5)
+    for key in ("initial_turning_time_s", "initial_turning_distance_L", "first_overshoot_deg",
+                "second_overshoot_deg"):
+        assert port[key] == pytest.approx(stbd[key], rel=1e-9), key
+    assert port["rudder_deg"] == -20.0 and port["heading_deg"] == 20.0
+    np.testing.assert_allclose(tr_p["east_m"], -tr_s["east_m"], atol=1e-6)
+    np.testing.assert_allclose(tr_p["rudder_deg"], -tr_s["rudder_deg"], atol=1e-9)
+    # both sides meet the same IMO 20/20 criterion
+    crit_p = manoeuvres.imo_criteria("zigzag", port)["first_overshoot_deg"]
+    crit_s = manoeuvres.imo_criteria("zigzag", stbd)["first_overshoot_deg"]
+    assert (crit_p["limit"], crit_p["pass"]) == (crit_s["limit"], crit_s["pass"]) == (25.0, True)
+
+
+def test_zigzag_overshoots_read_independently_from_the_track():
+    """Overshoots recomputed from the heading and rudder columns alone: the rudder's sign
+    changes mark the reversals; the first overshoot is the heading's maximum between the first
+    two, the second the depth of its minimum between the second and third, beyond 10 deg."""
+    spec = load_ship("fishing")
+    track, ind = manoeuvres.zigzag(spec, rudder_deg=10.0, dt=0.25)
+    head = np.degrees(np.unwrap(np.radians(track["heading_deg"])))
+    head -= head[0]
+    rud = track["rudder_deg"]
+    flips = np.flatnonzero(np.diff(np.sign(rud - 0.0)[1:]) != 0) + 1  # rudder moves next step
+    # the command reverses one step before the actual rudder changes sign
+    rev = [np.flatnonzero(head >= 10.0)[0]]
+    rev.append(rev[0] + np.flatnonzero(head[rev[0]:] <= -10.0)[0])
+    rev.append(rev[1] + np.flatnonzero(head[rev[1]:] >= 10.0)[0])
+    assert flips.size >= 3
+    assert ind["first_overshoot_deg"] == pytest.approx(head[rev[0]:rev[1] + 1].max() - 10.0,
+                                                       abs=1e-9)
+    assert ind["second_overshoot_deg"] == pytest.approx(-head[rev[1]:rev[2] + 1].min() - 10.0,
+                                                        abs=1e-9)
+    t = track["t_s"]
+    i = rev[0]
+    t_init = t[i - 1] + (10.0 - head[i - 1]) / (head[i] - head[i - 1]) * (t[i] - t[i - 1])
+    assert ind["initial_turning_time_s"] == pytest.approx(t_init, rel=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, key", [
+    ({"speed_kn": 0.0}, "speed_kn"), ({"speed_kn": -3.0}, "speed_kn"),
+    ({"rudder_deg": 0.0}, "rudder_deg"), ({"heading_deg": 0.0}, "heading_deg"),
+    ({"heading_deg": float("nan")}, "heading_deg"),
+])
+def test_zigzag_rejects_zero_angles_and_speeds(kwargs, key):
+    """A zig-zag needs a rudder angle and a heading limit other than 0 and an approach speed
+    above 0: ``InputError`` naming the argument."""
+    with pytest.raises(InputError) as info:
+        manoeuvres.zigzag(load_ship("cargo"), **kwargs)
+    assert info.value.key == key
+
+
+def test_crash_stop_refuses_a_response_ship_and_an_engine_without_astern():
+    """The response family has no astern thrust; a Nomoto ship whose rps_min is 0 cannot go
+    astern either: both ``InputError`` saying so."""
+    with pytest.raises(InputError, match="cannot go astern"):
+        manoeuvres.crash_stop(load_ship("bulk_carrier"))
+    spec = _nomoto()
+    spec["actuators"]["rps_min"] = 0.0
+    with pytest.raises(InputError, match="cannot go astern"):
+        manoeuvres.crash_stop(spec)
+
+
+def test_crash_stop_from_a_lower_speed_matches_the_closed_form():
+    """From 6 kn (not the service speed) the stop follows the same quadratic surge closed form
+    with u0 in place of U_s: ``t = 2 U_s T_u atan(u0/u_a) / u_a``,
+    reach ``U_s T_u ln(1 + u0^2/u_a^2)``."""
+    spec = _nomoto(engine_tau_s=0.05, max_dt_s=0.02)
+    track, ind = manoeuvres.crash_stop(spec, speed_kn=6.0)
+    c = spec["coefficients"]
+    us, tu, u0 = from_kn(10.0), c["surge_tau_s"], from_kn(6.0)
+    ua = us * -spec["actuators"]["rps_min"] / c["rps_service"]
+    t_stop = 2 * us * tu * math.atan(u0 / ua) / ua
+    reach = us * tu * math.log(1 + (u0 / ua) ** 2)
+    dt = track["t_s"][1] - track["t_s"][0]
+    assert t_stop <= ind["time_to_stop_s"] <= t_stop + dt + 0.1
+    assert ind["head_reach_m"] == pytest.approx(reach, rel=2e-3)
+    assert ind["approach_speed_kn"] == pytest.approx(6.0, rel=1e-9)

@@ -372,3 +372,98 @@ def test_ship_file_is_a_copy_safe_plain_mapping() -> None:
     before = copy.deepcopy(spec)
     FAMILY.build([spec])
     assert spec == before
+
+
+# ------------------------------------------------------ independent evaluation of eqs 4.1-4.9
+
+def _thesis_accelerations(spec: Mapping[str, Any], x: np.ndarray) -> np.ndarray:
+    """Eqs 4.1-4.6 evaluated from the ship file's printed coefficients with the module table's
+    factors (0.5 rho times the powers of L, U and V1 = 1 m/s), rudder d = -RUDDER (thesis + =
+    port) and n = 2 pi RPS (shaft rad/s); the sway/yaw mass matrix solved by numpy. ``(3, n)``."""
+    c, p = spec["coefficients"], spec["particulars"]
+    h, L, m, Iz = 0.5 * 1025.0, p["length_m"], p["mass_kg"], p["yaw_inertia_kgm2"]
+    out = np.zeros((3, x.shape[1]))
+    for i in range(x.shape[1]):
+        u, v, r = x[U, i], x[V, i], x[R, i]
+        d, n = -x[RUDDER, i], 2 * np.pi * x[RPS, i]
+        Us = np.hypot(u, v)
+        X = (c["X_uu"] * u * abs(u) + c["X_vv"] * h * L**2 * v**2
+             + c["X_nn"] * n * abs(n) + c["X_dd"] * h * L**2 * Us * d**2 + m * v * r)
+        Y = (c["Y_v"] * h * L**2 * Us * v + c["Y_r"] * h * L**3 * Us * r
+             + c["Y_vvv"] * h * L**2 / Us * v**3 + c["Y_rvv"] * h * L**3 / Us * r * v**2
+             + h * L**2 * Us * (c["Y_d"] * d + c["Y_dd"] * d**2 + c["Y_ddd"] * d**3)
+             + c["Y_n"] * n - m * u * r)
+        N = (c["N_v"] * h * L**3 * Us * v + c["N_r"] * h * L**4 * Us * r
+             + c["N_vvv"] * h * L**3 / Us * v**3 + c["N_rvv"] * h * L**4 / Us * r * v**2
+             + h * L**3 * Us * (c["N_d"] * d + c["N_dd"] * d**2 + c["N_ddd"] * d**3)
+             + c["N_n"] * n + c["N_ndd"] * n**2 * d**2)
+        M = np.array([[m - c["Y_vdot"] * h * L**3, -c["Y_rdot"] * h * L**4],
+                      [-c["N_vdot"] * h * L**4, Iz - c["N_rdot"] * h * L**5]])
+        dv, dr = np.linalg.solve(M, [Y, N])
+        out[:, i] = X / (m - c["X_udot"] * h * L**3), dv, dr
+    return out
+
+
+def test_kernel_equals_the_thesis_equations_evaluated_from_the_printed_coefficients() -> None:
+    """Random states, with the optional Y_n, N_n, N_ndd switched on: the compiled kernel gives
+    what eqs 4.1-4.6 give when the printed coefficients are dimensionalised by hand."""
+    rng = np.random.default_rng(21)
+    spec = _catfish(N_ndd=1.5, Y_n=3.0, N_n=-2.0)
+    x = _random_states(rng, 25)
+    got = np.array(base.accelerations(FAMILY, FAMILY.build([spec] * 25), x, Env()))
+    np.testing.assert_allclose(got, _thesis_accelerations(spec, x), rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.parametrize("rpm, knots", [(1100.0, 4.32), (2200.0, 8.65), (2500.0, 9.83)])
+def test_steady_speed_is_the_closed_form_of_the_surge_balance(rpm: float, knots: float) -> None:
+    """Straight ahead X_uu u^2 + X_nn n^2 = 0: u = n sqrt(X_nn / -X_uu) with n = 2 pi rpm /
+    (60 x 1.66); the module docstring's 4.32, 8.65 and 9.83 kn. steady_rps_for_speed returns the
+    same rpm for that speed (2500 rpm is a hair above rps_max = 25.1 rev/s = 2499.96 rpm, so
+    there it returns rps_max, as documented), and the accelerations vanish there."""
+    spec = _catfish()
+    c = spec["coefficients"]
+    params, act = FAMILY.build([spec]), Actuators.from_specs([spec])
+    n = 2 * np.pi * rpm / (60.0 * 1.66)
+    u = n * np.sqrt(c["X_nn"] / -c["X_uu"])
+    assert to_kn(u) == pytest.approx(knots, abs=0.006)
+    rps = base.steady_rps_for_speed(FAMILY, params, act, np.array([u]))
+    want = min(rpm / (60.0 * 1.66), spec["actuators"]["rps_max"])
+    assert rps[0] == pytest.approx(want, rel=1e-9)
+    x = np.zeros((base.N_STATE, 1))
+    x[U], x[RPS] = u, rpm / (60.0 * 1.66)
+    du, dv, dr = base.accelerations(FAMILY, params, x, Env())
+    assert abs(du[0]) < 1e-12 and dv[0] == 0.0 and dr[0] == 0.0
+
+
+def test_symmetric_coefficients_give_mirrored_accelerations_at_any_state() -> None:
+    """With the even terms Y_dd = N_dd = N_ndd = 0 and Y_n = N_n = 0, reflecting the state
+    (v, r, rudder -> -v, -r, -rudder) reflects dv, dr and keeps du, at every state, not only
+    along one track."""
+    rng = np.random.default_rng(4)
+    sym = _catfish(Y_dd=0.0, N_dd=0.0, N_ndd=0.0, Y_n=0.0, N_n=0.0)
+    params = FAMILY.build([sym] * 30)
+    x = _random_states(rng, 30)
+    xm = x.copy()
+    xm[[V, R, RUDDER]] *= -1.0
+    a = np.array(base.accelerations(FAMILY, params, x, Env()))
+    b = np.array(base.accelerations(FAMILY, params, xm, Env()))
+    np.testing.assert_allclose(b[0], a[0], rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(b[1:], -a[1:], rtol=1e-13, atol=1e-15)
+
+
+def test_even_rudder_terms_make_the_printed_model_asymmetric() -> None:
+    """With the printed Y_dd, N_dd the yaw acceleration from +d and -d at the same speed
+    differs by twice the even part: dr(+) + dr(-) = 2 (even moment through the mass matrix)."""
+    spec = _catfish()
+    params = FAMILY.build([spec] * 2)
+    x = np.zeros((base.N_STATE, 2))
+    x[U] = from_kn(8.9)
+    x[RUDDER] = [0.2, -0.2]
+    _, dv, dr = base.accelerations(FAMILY, params, x, Env())
+    c, p = spec["coefficients"], params
+    h, L = 0.5 * 1025.0, spec["particulars"]["length_m"]
+    Us, d2 = from_kn(8.9), 0.04
+    fy, fn = h * L**2 * Us * c["Y_dd"] * d2, h * L**3 * Us * c["N_dd"] * d2
+    det = p.m22[0] * p.m33[0] - p.y_rdot[0] * p.n_vdot[0]
+    assert dr[0] + dr[1] == pytest.approx(2 * (p.n_vdot[0] * fy + p.m22[0] * fn) / det, rel=1e-9)
+    assert dv[0] + dv[1] == pytest.approx(2 * (p.m33[0] * fy + p.y_rdot[0] * fn) / det, rel=1e-9)

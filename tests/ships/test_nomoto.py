@@ -255,3 +255,143 @@ def test_kernel_columns_follow_params_fields() -> None:
     for i, f in enumerate(dataclasses.fields(NomotoParams)):
         assert getattr(nomoto, "_" + f.name.upper()) == i, f.name
     assert not hasattr(FAMILY, "accelerations")  # one implementation: the compiled kernel
+
+
+# ---------------------------------------------------------------- closed forms at other speeds
+
+
+def _accel_one(spec: dict, u: float, r: float, rudder: float, v: float = 0.0,
+               rps: float = 0.0) -> tuple[float, float, float]:
+    x = np.zeros((base.N_STATE, 1))
+    x[U], x[YAW], x[RUDDER], x[V], x[RPS] = u, r, rudder, v, rps
+    du, dv, dr = base.accelerations(FAMILY, FAMILY.build([spec]), x, Env())
+    return float(du[0]), float(dv[0]), float(dr[0])
+
+
+@pytest.mark.parametrize("frac", [1.0, 0.6, 0.3, 0.08, 0.0, -0.4])
+def test_yaw_and_sway_accelerations_by_hand_at_each_speed_regime(specs: dict, frac: float) -> None:
+    """dr = (K' u / L delta - r - n3' (L / U_nl)^2 r^3) / T, T = T' L / max(|u|, 0.1 U_s),
+    U_nl = max(|u|, 0.1 U_s, 0.5 U_s); dv = -v / T. Speeds above half service, between 10 and
+    50 %, below 10 %, at rest and astern (cargo: L = 160.93 m, U_s = 15 kn)."""
+    spec = specs["cargo"]
+    c, L = spec["coefficients"], spec["particulars"]["length_m"]
+    us = 15.0 * KNOT
+    u, r, d, v = frac * us, 0.004, 0.3, 0.2
+    ueff = max(abs(u), 0.1 * us)
+    T = c["T_prime"] * L / ueff
+    unl = max(ueff, 0.5 * us)
+    want_dr = (c["K_prime"] * u / L * d - r - c["n3_prime"] * (L / unl) ** 2 * r**3) / T
+    _, dv, dr = _accel_one(spec, u, r, d, v=v)
+    assert dr == pytest.approx(want_dr, rel=1e-12, abs=1e-18)
+    assert dv == pytest.approx(-v / T, rel=1e-12)
+
+
+def test_step_response_at_60_percent_speed_is_the_exponential_with_scaled_k_and_t(
+        specs: dict) -> None:
+    """Linear model at u = 0.6 U_s with the engine holding it: r(t) = K delta (1 - exp(-t/T)),
+    K = K' u / L, T = T' L / u, at every sample (RK4 with dt = T/40 is exact to 1e-6)."""
+    spec = _linear(specs["container"])
+    c, L = spec["coefficients"], spec["particulars"]["length_m"]
+    x0 = _service_state([spec])
+    x0[U] *= 0.6
+    x0[RPS] *= 0.6
+    u = x0[U, 0]
+    delta = np.radians(-8.0)
+    x0[RUDDER] = delta
+    K, T = c["K_prime"] * u / L, c["T_prime"] * L / u
+    dt = T / 40.0
+    hist = _run([spec], x0, lambda t: (np.array([delta]), x0[RPS].copy()), dt, 5.0 * T)
+    t = np.arange(hist.shape[0]) * dt
+    np.testing.assert_allclose(hist[:, YAW, 0], K * delta * (1 - np.exp(-t / T)),
+                               rtol=1e-6, atol=1e-12 * abs(K * delta))
+    # heading is the integral: K delta (t - T (1 - exp(-t/T)))
+    psi = K * delta * (t - T * (1 - np.exp(-t / T)))
+    np.testing.assert_allclose(np.unwrap(hist[:, PSI, 0]), psi, rtol=1e-6, atol=1e-9)
+
+
+def test_steady_turn_below_half_service_speed_solves_the_floored_cubic(specs: dict) -> None:
+    """At 30 % of service speed the cubic uses U_nl = U_s / 2: the steady r solves
+    r + n3' (2 L / U_s)^2 r^3 = K' u delta / L (brentq); the cubic is then weaker than
+    n3' (L / u)^2, so the turn is tighter than the speed-independent radius L / r' of the
+    service speed."""
+    from scipy.optimize import brentq
+
+    spec = specs["ferry"]
+    c, L = spec["coefficients"], spec["particulars"]["length_m"]
+    us = spec["service_speed_kn"] * KNOT
+    u = 0.3 * us
+    delta = np.radians(20.0)
+    x0 = np.zeros((base.N_STATE, 1))
+    x0[U], x0[RPS], x0[RUDDER] = u, 0.3 * c["rps_service"], delta
+    T = c["T_prime"] * L / u
+    hist = _run([spec], x0, lambda t: (np.array([delta]), x0[RPS].copy()), T / 10.0, 30.0 * T)
+    rhs = c["K_prime"] * u / L * delta
+    want = brentq(lambda r: r + c["n3_prime"] * (2 * L / us) ** 2 * r**3 - rhs, 0.0, rhs)
+    assert hist[-1, YAW, 0] == pytest.approx(want, rel=1e-6)
+    rp_service = brentq(lambda q: q + c["n3_prime"] * q**3 - c["K_prime"] * delta, 0.0, 10.0)
+    assert u / want < L / rp_service
+
+
+@pytest.mark.parametrize("frac", [0.0, 0.25, 1.0, 1.3])
+def test_surge_acceleration_is_the_quadratic_balance_by_hand(specs: dict, frac: float) -> None:
+    """du = (u_ss |u_ss| - u |u|) / (2 U_s T_u), u_ss = U_s n / n_s; astern order included."""
+    spec = specs["fishing"]
+    c = spec["coefficients"]
+    us = spec["service_speed_kn"] * KNOT
+    for rps in (-0.5 * c["rps_service"], 0.0, 0.7 * c["rps_service"]):
+        u = frac * us
+        uss = us * rps / c["rps_service"]
+        du, _, _ = _accel_one(spec, u, 0.0, 0.0, rps=rps)
+        want = (uss * abs(uss) - u * abs(u)) / (2 * us * c["surge_tau_s"])
+        assert du == pytest.approx(want, rel=1e-12, abs=1e-15)
+
+
+def test_steady_rps_for_speed_equals_a_scipy_root_of_the_surge_balance(specs: dict) -> None:
+    """brentq on du(u, n) = 0 for each ship (the kernel only supplies du) agrees with the
+    compiled bisection; for the Nomoto law it is also n_s u / U_s."""
+    from scipy.optimize import brentq
+
+    ships = [specs[n] for n in SHIPS]
+    params, act = FAMILY.build(ships), Actuators.from_specs(ships)
+    speeds = np.array([0.4, 0.7, 1.0, 0.9, 0.05]) * np.array(
+        [s["service_speed_kn"] * KNOT for s in ships])
+    got = base.steady_rps_for_speed(FAMILY, params, act, speeds)
+    for i, s in enumerate(ships):
+        root = brentq(lambda n, s=s, i=i: _accel_one(s, speeds[i], 0.0, 0.0, rps=n)[0],
+                      0.0, s["actuators"]["rps_max"], xtol=1e-14)
+        assert got[i] == pytest.approx(root, rel=1e-9)
+        want = s["coefficients"]["rps_service"] * speeds[i] / (s["service_speed_kn"] * KNOT)
+        assert got[i] == pytest.approx(want, rel=1e-9)
+
+
+def test_build_rejects_nan_and_zero_time_constants_and_negative_cubic(specs: dict) -> None:
+    """T' must be > 0 and n3' >= 0; NaN fails the comparison and is rejected too; the message
+    names the ship and the error carries the coefficients key."""
+    for key, value in (("T_prime", 0.0), ("T_prime", float("nan")), ("n3_prime", -1.0),
+                       ("n3_prime", float("nan"))):
+        bad = copy.deepcopy(specs["cargo"])
+        bad["coefficients"][key] = value
+        with pytest.raises(ShipLibraryError, match="cargo") as info:
+            FAMILY.build([specs["ferry"], bad])
+        assert info.value.key == "coefficients"
+
+
+def test_heading_lag_equals_that_of_the_second_order_model_it_reduces(specs: dict) -> None:
+    """Nomoto's second-order step response K(1 + T3 s) / (s (1 + T1 s)(1 + T2 s)) has the
+    heading asymptote K delta (t - (T1 + T2 - T3)); the first-order cargo ship (T' = T1' + T2'
+    - T3' with the Mariner indices 5.66, 0.37, 0.89 of cargo.yaml's source) lags by the same
+    time: after 12 T its heading is K delta (t - T) to 1e-5, and T L/U matches the
+    second-order lag within 0.1 %."""
+    spec = _linear(specs["cargo"])
+    c, L = spec["coefficients"], spec["particulars"]["length_m"]
+    x0 = _service_state([spec])
+    u = x0[U, 0]
+    delta = np.radians(3.0)
+    x0[RUDDER] = delta
+    K, T = c["K_prime"] * u / L, c["T_prime"] * L / u
+    dt = T / 20.0
+    hist = _run([spec], x0, lambda t: (np.array([delta]), x0[RPS].copy()), dt, 12.0 * T)
+    t_end = (hist.shape[0] - 1) * dt
+    lag = t_end - np.unwrap(hist[:, PSI, 0])[-1] / (K * delta)
+    assert lag == pytest.approx(T, rel=1e-5)
+    assert lag * u / L == pytest.approx(5.66 + 0.37 - 0.89, rel=1e-3)

@@ -198,3 +198,91 @@ def test_kernel_columns_follow_params_fields() -> None:
     for i, f in enumerate(dataclasses.fields(ResponseParams)):
         assert getattr(response, "_" + f.name.upper()) == i, f.name
     assert not hasattr(FAMILY, "accelerations")  # one implementation: the compiled kernel
+
+
+# ----------------------------------------------------------------------- guards and stability
+
+
+def _accel(spec: dict, x: np.ndarray) -> np.ndarray:
+    return np.array(base.accelerations(FAMILY, FAMILY.build([spec] * x.shape[1]), x, Env()))
+
+
+def test_rudder_fade_is_quadratic_below_the_fade_speed_and_one_above(spec: dict) -> None:
+    """Rudder terms (a4, a6, a7, b3, c3) x min(1, (u/u_fade)^2): the part of each acceleration
+    due to the rudder (with-rudder minus no-rudder, v = r = 0) at u = u_fade/2 is 1/4 of the
+    polynomial's, at -u_fade/2 too, at u_fade and 2 u_fade it is all of it."""
+    c = spec["coefficients"]
+    fade = c.get("rudder_fade_speed_mps", 1.0)
+    D = 180.0 / np.pi
+    d = 0.3
+    for u, factor in ((0.5 * fade, 0.25), (-0.5 * fade, 0.25), (fade, 1.0), (2 * fade, 1.0),
+                      (0.0, 0.0)):
+        x = np.zeros((base.N_STATE, 2))
+        x[U], x[RUDDER] = u, [d, 0.0]
+        a = _accel(spec, x)
+        delta = a[:, 0] - a[:, 1]
+        want = np.array([c["a4"] * (D * d) ** 2, c["b3"] * D * d, c["c3"] * D * d / D])
+        np.testing.assert_allclose(delta, factor * want, rtol=1e-12, atol=1e-18)
+
+
+def test_resistance_opposes_motion_astern(spec: dict) -> None:
+    """a1 u|u| (a1 < 0): moving astern with the engine stopped, du > 0 and equal in size to
+    the ahead case, du(-u) = -du(u)."""
+    x = np.zeros((base.N_STATE, 2))
+    x[U] = [2.5, -2.5]
+    du = _accel(spec, x)[0]
+    assert du[1] > 0.0 and du[1] == pytest.approx(-du[0], rel=1e-15)
+    assert du[0] == pytest.approx(spec["coefficients"]["a1"] * 2.5**2, rel=1e-12)
+
+
+def test_straight_line_stability_changes_sign_at_7_72_mps(spec: dict) -> None:
+    """The sway-yaw part is stable while b1 c2 - (b2 + b4 u) c1 > 0, i.e. u < 7.72 m/s (module
+    docstring): the eigenvalues of the (v, r) Jacobian, taken from the kernel by differences,
+    all have negative real part at 7.6 m/s and one is positive at 7.85 m/s. The ship file's
+    rps_max keeps the steady straight speed below the boundary."""
+    c = spec["coefficients"]
+    boundary = (c["b1"] * c["c2"] / c["c1"] - c["b2"]) / c["b4"]
+    assert boundary == pytest.approx(7.72, abs=0.005)
+    for u, stable in ((7.6, True), (7.85, False)):
+        x = np.zeros((base.N_STATE, 1))
+        x[U] = u
+        jac = np.zeros((2, 2))
+        for k, row in enumerate((V, YAW)):
+            xp, xm = x.copy(), x.copy()
+            xp[row] += 1e-6
+            xm[row] -= 1e-6
+            jac[:, k] = (_accel(spec, xp)[1:, 0] - _accel(spec, xm)[1:, 0]) / 2e-6
+        assert (np.linalg.eigvals(jac).real.max() < 0.0) == stable, u
+    top = _ratio(c) * 60.0 * spec["actuators"]["rps_max"]
+    assert top < boundary
+
+
+def test_turning_circle_port_mirrors_starboard(spec: dict) -> None:
+    """The polynomial is odd in (v, r, delta) for dv, dr and even for du: a port turn is the
+    starboard turn mirrored, so the manoeuvre indices are equal and the track is reflected."""
+    tr_s, stbd = manoeuvres.turning_circle(spec, rudder_deg=20.0, dt=2.0, turns_deg=200.0)
+    tr_p, port = manoeuvres.turning_circle(spec, rudder_deg=-20.0, dt=2.0, turns_deg=200.0)
+    for key in ("advance_m", "transfer_m", "tactical_diameter_m", "time_to_90_s",
+                "time_to_180_s", "speed_loss_ratio"):
+        assert port[key] == pytest.approx(stbd[key], rel=1e-9), key
+    np.testing.assert_allclose(tr_p["east_m"], -tr_s["east_m"], atol=1e-6)
+    np.testing.assert_allclose(tr_p["north_m"], tr_s["north_m"], atol=1e-6)
+
+
+def test_steady_rps_for_speed_equals_a_scipy_root_and_caps(spec: dict) -> None:
+    """brentq of the paper-unit surge polynomial at straight running (independent of the SI
+    conversion) agrees with the compiled bisection; a speed above the full-power speed returns
+    rps_max, and speed 0 returns 0."""
+    from scipy.optimize import brentq
+
+    c, a = spec["coefficients"], spec["actuators"]
+    speeds = np.array([0.0, 2.0, 5.5, 7.3, 9.0])
+    n = len(speeds)
+    got = base.steady_rps_for_speed(FAMILY, FAMILY.build([spec] * n),
+                                    Actuators.from_specs([spec] * n), speeds)
+    for u, g in zip(speeds[1:4], got[1:4], strict=True):
+        rpm = brentq(lambda m, u=u: c["a1"] * u * u + c["a8"] * u * m + c["a9"] * m * m,
+                     0.0, 200.0, xtol=1e-13)
+        assert g == pytest.approx(rpm / 60.0, rel=1e-9)
+    assert got[0] == pytest.approx(0.0, abs=1e-12)
+    assert got[4] == pytest.approx(a["rps_max"], rel=1e-12)

@@ -117,7 +117,7 @@ def start(params: AdaptiveParams, R0: np.ndarray) -> AdaptiveState:
     """Empty window with the prior ``R0 (n, m, m)`` as the estimate."""
     R0 = np.asarray(R0, dtype=float)
     n, m = R0.shape[0], R0.shape[1]
-    w = int(params.window_steps.max())
+    w = int(params.window_steps.max(initial=0))
     return AdaptiveState(
         nu=np.zeros((n, w, m)), hph=np.zeros((n, w, m, m)), used=np.zeros((n, w), dtype=bool),
         head=np.zeros(n, dtype=np.int64), count=np.zeros(n, dtype=np.int64),

@@ -116,7 +116,7 @@ class LineFitParams:
     @property
     def n_max(self) -> int:
         """Length of the history buffer (largest ``n_points``)."""
-        return int(self.n_points.max())
+        return int(self.n_points.max(initial=0))
 
 
 def build(configs: Sequence[Mapping[str, Any]]) -> LineFitParams:
@@ -166,6 +166,8 @@ def predict(params: LineFitParams, state: LineFitState) -> np.ndarray:
     NaN for ships with fewer than ``n_points`` filtered positions.
     """
     h = state.history
+    if h.shape[0] == 0:  # no ships
+        return np.empty((0, 2))
     n_max = h.shape[1]
     npts = params.n_points
     w = (np.arange(n_max)[None, :] >= (n_max - npts)[:, None]).astype(float)  # last n valid

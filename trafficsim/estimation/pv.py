@@ -142,11 +142,14 @@ def _steady_alpha_beta(sigma_m: Any, sp: Any, dt: Any) -> tuple[np.ndarray, np.n
     ``(s + 1/s)^2 - lambda (s + 1/s) + lambda^2 / 6 - 4 = 0``, hence::
 
         w = (lambda + sqrt(16 + lambda^2 / 3)) / 2,   s = (w - sqrt(w^2 - 4)) / 2,
-        alpha = 1 - s^2,   beta = lambda s.
+        alpha = 1 - s^2,   beta = lambda s,
+
+    with ``s`` computed as ``2 / (w + sqrt(w^2 - 4))`` (the same root, the other being
+    ``1/s``), which does not cancel at a large tracking index.
     """
     lam = _tracking_index(sigma_m, sp, dt)
     w = 0.5 * (lam + np.sqrt(16.0 + lam * lam / 3.0))
-    s = 0.5 * (w - np.sqrt(np.maximum(w * w - 4.0, 0.0)))
+    s = 2.0 / (w + np.sqrt(np.maximum(w * w - 4.0, 0.0)))
     return 1.0 - s * s, lam * s
 
 

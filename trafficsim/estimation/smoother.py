@@ -29,6 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from trafficsim.estimation import ca
+from trafficsim.sensors import wrap_2pi
 
 
 class Smoothed(NamedTuple):
@@ -185,7 +186,7 @@ def body_velocities(north: np.ndarray, east: np.ndarray, heading: np.ndarray, dt
         "north_m": pos_s[:, 0, :, 0], "east_m": pos_s[:, 1, :, 0],
         "psi_rad": heading_s, "r_radps": r,
         "u_mps": wn * c + we * s, "v_mps": -wn * s + we * c,
-        "speed_mps": np.hypot(vn, ve), "course_rad": np.mod(course, 2 * np.pi),
+        "speed_mps": np.hypot(vn, ve), "course_rad": wrap_2pi(course),
         "drift_rad": np.angle(np.exp(1j * (course - heading_s))),
         "vn_mps": vn, "ve_mps": ve,
     }
@@ -208,7 +209,7 @@ def unwrap_finite(angle: np.ndarray) -> np.ndarray:
     shortest turn between the samples either side of it.
     """
     a = np.array(angle, dtype=float, copy=True)
-    rows = a.reshape(-1, a.shape[-1])
+    rows = a.reshape(int(np.prod(a.shape[:-1])), a.shape[-1])  # (-1 fails on no samples)
     for row in rows:  # one pass per series (records, not ships on a step path)
         ok = np.isfinite(row)
         row[ok] = np.unwrap(row[ok])

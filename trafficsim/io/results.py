@@ -17,8 +17,17 @@ import numpy as np
 from trafficsim.errors import DataError
 
 
+def plain_mode(path: str | os.PathLike[str]) -> None:
+    """Give a temp file the permissions ``open()`` would have given it (0666 less the umask),
+    not ``mkstemp``'s 0600, before it is renamed into place."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(path, 0o666 & ~umask)
+
+
 def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
-    """Write ``path`` via ``write(fileobj)`` on a temp file, then rename over ``path``."""
+    """Write ``path`` via ``write(fileobj)`` on a temp file, then rename over ``path`` (with the
+    permissions of a plain ``open``)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
@@ -26,6 +35,7 @@ def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
+        plain_mode(tmp)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -113,7 +113,7 @@ def draw_routes(pg: Any, surf: Any, view: View, style: st.Style, data: RunData) 
             continue
         north = np.concatenate([[data.north_m[0, k]], route[:, 0]])
         east = np.concatenate([[data.east_m[0, k]], route[:, 1]])
-        x, y = view.to_px(north, east)
+        x, y = view.to_px(north, east, clip=False)  # (each leg is clipped to the view)
         for j in range(len(x) - 1):
             dashed_line(pg, surf, st.ROUTE, (x[j], y[j]), (x[j + 1], y[j + 1]), dash)
         for px, py in zip(x[1:].tolist(), y[1:].tolist(), strict=True):

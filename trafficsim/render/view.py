@@ -31,12 +31,19 @@ class View:
     origin_x_px: float
     origin_y_px: float
 
-    def to_px(self, north_m: np.ndarray, east_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pixel coordinates (float) of points; any shape, NaN stays NaN."""
-        x = (np.asarray(east_m, dtype=float) - self.centre_east_m) / self.m_per_px
-        y = (np.asarray(north_m, dtype=float) - self.centre_north_m) / self.m_per_px
-        return (np.clip(x + self.origin_x_px, -CLIP_PX, CLIP_PX),
-                np.clip(self.origin_y_px - y, -CLIP_PX, CLIP_PX))
+    def to_px(self, north_m: np.ndarray, east_m: np.ndarray, clip: bool = True
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates (float) of points; any shape, NaN stays NaN. Each coordinate is
+        clipped to +-:data:`CLIP_PX` (what pygame can take), which bends a line to a point
+        beyond it; ``clip=False`` gives the exact coordinates, for a caller that clips its
+        segments to the view itself."""
+        x = (np.asarray(east_m, dtype=float) - self.centre_east_m) / self.m_per_px + \
+            self.origin_x_px
+        y = self.origin_y_px - (np.asarray(north_m, dtype=float) - self.centre_north_m) / \
+            self.m_per_px
+        if not clip:
+            return x, y
+        return np.clip(x, -CLIP_PX, CLIP_PX), np.clip(y, -CLIP_PX, CLIP_PX)
 
     def points(self, north_m: np.ndarray, east_m: np.ndarray) -> np.ndarray:
         """``(k, 2)`` int pixel points (x, y) of ``(k,)`` finite north/east arrays."""

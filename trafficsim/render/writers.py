@@ -26,7 +26,7 @@ from typing import IO, Protocol
 
 import numpy as np
 
-from trafficsim.io.results import atomic_write
+from trafficsim.io.results import atomic_write, plain_mode
 from trafficsim.render.style import gif_palette
 
 FORMATS = ("png", "gif", "mp4")
@@ -115,9 +115,7 @@ class _TempTarget:
     def commit(self) -> None:
         with open(self.tmp, "rb+") as fh:
             os.fsync(fh.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(self.tmp, 0o666 & ~umask)  # as open() would have made it, not mkstemp's 0600
+        plain_mode(self.tmp)
         os.replace(self.tmp, self.path)
 
     def drop(self) -> None:
