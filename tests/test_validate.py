@@ -143,3 +143,24 @@ def test_a_bad_rules_file_a_scenario_or_campaign_names_is_reported(tmp_path, cap
     assert validate_files([path]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'rules.yaml'}:4: nodes.a.test" in err and "rnge_nm" in err
+
+
+def test_a_ship_files_model_checks_run_and_are_located(tmp_path, capsys):
+    """A value only the model family checks (the response model's fade speed must be > 0) is
+    found by validate, for the ship file and for a scenario naming it, at its line."""
+    from trafficsim.ships.library import LIBRARY_DIR
+
+    text = (LIBRARY_DIR / "bulk_carrier.yaml").read_text()
+    assert "  c3: " in text
+    lines = text.splitlines(keepends=True)
+    at = next(k for k, t in enumerate(lines) if t.startswith("  c3: "))
+    lines.insert(at + 1, "  rudder_fade_speed_mps: 0\n")
+    ship = tmp_path / "bc.yaml"
+    ship.write_text("".join(lines))
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("schema_version: 1\nname: s\nduration_s: 60\nships:\n"
+                        "  - {name: a, type: bc.yaml, north_m: 0, east_m: 0, heading_deg: 0}\n")
+    assert validate_files([ship, scenario]) == 2
+    err = capsys.readouterr().err.splitlines()
+    want = f"trafficsim: error: {ship}:{at + 2}: coefficients.rudder_fade_speed_mps: "
+    assert len(err) == 2 and all(line.startswith(want) for line in err)

@@ -568,6 +568,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except TrafficsimError as err:
+        if isinstance(err, InputError):
+            from trafficsim.io.yamlio import locate
+
+            locate(err)  # (an error raised after its file was read has no line yet)
         print(f"trafficsim: error: {one_line(err)}", file=sys.stderr)
         return EXIT_USER_ERROR if isinstance(err, InputError) else 1
     except BrokenPipeError:  # output piped into a command that stopped reading

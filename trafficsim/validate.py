@@ -41,7 +41,9 @@ def _looks_like_rules(path: Path) -> bool:
 
 
 def _errors(err: InputError) -> list[InputError]:
-    return list(getattr(err, "errors", None) or [err])
+    from trafficsim.io.yamlio import locate
+
+    return [locate(e) for e in getattr(err, "errors", None) or [err]]
 
 
 def _check_rules(path: Path) -> tuple[list[InputError], str]:
@@ -54,6 +56,15 @@ def _check_rules(path: Path) -> tuple[list[InputError], str]:
         return _errors(err), ""
     n = len(rules.nodes)
     return [], f"ok ({n} node{'' if n == 1 else 's'})"
+
+
+def _check_ship(path: Path) -> None:
+    """Load a ship file and build its model family (the family's own checks of its values)."""
+    from trafficsim.ships.base import families
+    from trafficsim.ships.library import load_ship
+
+    spec = load_ship(str(path))
+    families()[spec["model"]].build([spec])
 
 
 def check_file(path: Path) -> tuple[list[InputError], str]:
@@ -78,20 +89,17 @@ def check_file(path: Path) -> tuple[list[InputError], str]:
     rules = None
     try:
         if isinstance(doc.data, dict) and "model" in doc.data and "ships" not in doc.data:
-            from trafficsim.ships.library import load_ship
-
-            load_ship(str(path.resolve()))
+            _check_ship(path.resolve())
         elif isinstance(doc.data, dict) and "n_encounters" in doc.data:
             from trafficsim.campaign.spec import load_spec
 
             rules = load_spec(path).rules
         else:
             from trafficsim.io.scenario import load_scenario
-            from trafficsim.ships.library import load_ship
 
             scenario = load_scenario(path)
             for ship_file in scenario.ship_files:
-                load_ship(str(ship_file))
+                _check_ship(ship_file)
             rules = scenario.rules
     except InputError as err:
         return _errors(err), ""

@@ -81,6 +81,18 @@ def test_no_fix_predicts_only_and_ignores_the_measurement():
     np.testing.assert_allclose(out.P[1], st.P[1], rtol=1e-12)  # steady state is a fixed point
 
 
+def test_a_nan_fix_marked_valid_counts_as_no_fix():
+    """As the CA filter does: a valid flag with a NaN position keeps the prediction (a NaN must
+    not enter the state), on either axis alone."""
+    p = pv.build([{}, {}, {}])
+    st = pv.init(p, [0.0] * 3, [0.0] * 3, [3.0] * 3, [-1.0] * 3, converged=True)
+    out = pv.update(p, pv.predict(p, st), [np.nan, 5.0, 3.0], [2.0, np.nan, -1.0], True)
+    pred = pv.predict(p, st)
+    np.testing.assert_array_equal(out.x[:2], pred.x[:2])
+    np.testing.assert_array_equal(out.P[:2], pred.P[:2])
+    assert np.all(np.isfinite(out.x)) and not np.array_equal(out.P[2], pred.P[2])
+
+
 def test_build_defaults_and_rejects_bad_values():
     p = pv.build([{}, {"sigma_m": 1.5, "sp_m2ps3": 0.1, "dt_s": 0.5, "rate_hz": 2}])
     np.testing.assert_array_equal(p.sigma_m, [2.0, 1.5])  # DGPS 2 m [seed 000, eq 4]

@@ -24,6 +24,8 @@ from trafficsim.io.yamlio import (
     Text,
     format_loc,
     load_yaml,
+    locate,
+    parse_loc,
     parse_yaml,
     validate,
     validate_document,
@@ -102,6 +104,9 @@ def test_format_loc() -> None:
     assert format_loc(("ships", 1, "route", 0, 1)) == "ships[1].route[0][1]"
     assert format_loc(("a", "b")) == "a.b"
     assert format_loc(()) == ""
+    # parse_loc reads plain dotted keys back
+    for loc in (("ships", 1, "route", 0, 1), ("a", "b"), ("coefficients", "a1")):
+        assert parse_loc(format_loc(loc)) == loc
     # an empty key stays visible; the validator's key marker is kept
     assert format_loc(("encounter_types", "", "[key]")) == "encounter_types[''][key]"
     assert format_loc(("types", "cargo", "[key]")) == "types.cargo[key]"
@@ -734,3 +739,16 @@ def test_validation_lines_survive_bom_and_crlf() -> None:
         with pytest.raises(ScenarioError) as info:
             validate_document(parse_yaml(data, "m.yaml"), Model)
         assert (info.value.line, info.value.key) == (4, "inner.count")
+
+
+def test_locate_fills_the_line_of_an_error_raised_after_the_file_was_read(tmp_path):
+    """An error naming a file and a key but no line gets the line of that key (of its parent
+    where the key is absent); one already located, or whose file is not YAML, is left as is."""
+    path = tmp_path / "s.yaml"
+    path.write_text("a: 1\nb:\n  c: 2\n  d: [1, 2]\n")
+    err = locate(InputError("bad", path=str(path), key="b.c"))
+    assert err.line == 3 and str(err) == f"{path}:3: b.c: bad"
+    assert locate(InputError("x", path=str(path), key="b.e")).line == 2  # absent: its parent
+    assert locate(InputError("x", path=str(path), line=9, key="b.c")).line == 9
+    (tmp_path / "t.csv").write_text("not: [yaml")
+    assert locate(InputError("x", path=str(tmp_path / "t.csv"), key="a")).line is None

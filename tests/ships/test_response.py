@@ -286,3 +286,17 @@ def test_steady_rps_for_speed_equals_a_scipy_root_and_caps(spec: dict) -> None:
         assert g == pytest.approx(rpm / 60.0, rel=1e-9)
     assert got[0] == pytest.approx(0.0, abs=1e-12)
     assert got[4] == pytest.approx(a["rps_max"], rel=1e-12)
+
+
+@pytest.mark.parametrize("fade", [0.0, -1.0, float("nan")])
+def test_a_fade_speed_that_is_not_positive_is_refused(spec: dict, fade: float) -> None:
+    """u / u_fade is 0/0 at rest with a zero fade speed (the rudder then acts fully, and a
+    ship at rest with helm on turns): refused, naming the ship file and the key."""
+    from trafficsim.errors import ShipLibraryError
+
+    bad = copy.deepcopy(spec)
+    bad["coefficients"]["rudder_fade_speed_mps"] = fade
+    with pytest.raises(ShipLibraryError, match="rudder_fade_speed_mps > 0") as err:
+        FAMILY.build([bad])
+    assert err.value.key == "coefficients.rudder_fade_speed_mps"
+    assert err.value.path == spec.get("path")

@@ -278,15 +278,17 @@ def update(params: PVParams, predicted: PVState, z_north: Any, z_east: Any,
         params: filter parameters.
         predicted: state after :func:`predict`.
         z_north, z_east: ``(n,)`` measured position, m (ignored, may be NaN, where not valid).
-        valid: ``(n,)`` bool, False where the receiver has no fix (the prediction is kept).
+        valid: ``(n,)`` bool, False where the receiver has no fix (the prediction is kept); a
+            NaN fix counts as none too, as in :func:`trafficsim.estimation.ca.update`.
 
     Returns:
         The updated state.
     """
     n = params.n
-    ok = np.ascontiguousarray(np.broadcast_to(np.asarray(valid, bool), (n,)))
     zn = np.ascontiguousarray(np.broadcast_to(np.asarray(z_north, float), (n,)))
     ze = np.ascontiguousarray(np.broadcast_to(np.asarray(z_east, float), (n,)))
+    ok = np.ascontiguousarray(np.broadcast_to(np.asarray(valid, bool), (n,))
+                              & ~np.isnan(zn) & ~np.isnan(ze))
     x, P = predicted.x.copy(), predicted.P.copy()
     _update(x, P, params.sigma_m, zn, ze, ok)
     return PVState(x=x, P=P)

@@ -47,7 +47,7 @@ from pydantic import AfterValidator, BaseModel, ConfigDict, model_validator
 from pydantic.types import AllowInfNan
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
-from trafficsim.errors import ScenarioError
+from trafficsim.errors import InputError, ScenarioError
 
 __all__ = [
     "MAX_BYTES",
@@ -214,6 +214,33 @@ def format_loc(loc: Sequence[str | int]) -> str:
         else:
             out += f".{part}" if out else str(part)
     return out
+
+
+def parse_loc(key: str) -> tuple[str | int, ...]:
+    """The location of a dotted key (the inverse of :func:`format_loc` for plain keys):
+    ``"ships[1].speed_kn"`` -> ``("ships", 1, "speed_kn")``."""
+    out: list[str | int] = []
+    for part in key.split("."):
+        name, *indices = part.split("[")
+        if name:
+            out.append(name)
+        out += [int(i.rstrip("]")) for i in indices if i.rstrip("]").isdigit()]
+    return tuple(out)
+
+
+def locate(err: InputError) -> InputError:
+    """``err`` with its line filled in from its YAML file and key where it names both but no
+    line (errors raised after a file was read, e.g. by a model family's own checks); as it is
+    where the file or the key cannot be found."""
+    if err.line is not None or not err.path or not err.key:
+        return err
+    try:
+        doc = load_yaml(err.path)
+    except (InputError, OSError):
+        return err
+    err.line = doc.line_of(parse_loc(err.key))
+    err.args = (err.render(),)
+    return err
 
 
 def _line(node: Node) -> int:

@@ -65,6 +65,7 @@ from typing import Any
 
 import numpy as np
 
+from trafficsim.errors import ShipLibraryError
 from trafficsim.jit import kernel
 from trafficsim.ships.base import RPS, RUDDER, U, V, register, stack
 from trafficsim.ships.base import R as YAW_RATE
@@ -124,13 +125,20 @@ class ResponseFamily:
         """Convert the paper-unit coefficients of each ship file to SI ``(n,)`` arrays."""
         c = [s["coefficients"] for s in ships]
         p = {k: stack(c, k) for k in _NAMES}
+        u_fade = stack(c, "rudder_fade_speed_mps", 1.0)
+        for ship, fade in zip(ships, u_fade, strict=True):
+            if not fade > 0.0:  # (0 makes the fade 0/0 at rest: a ship at rest would turn)
+                raise ShipLibraryError(
+                    f"response ship '{ship.get('name', '?')}': expected rudder_fade_speed_mps "
+                    f"> 0, got {fade}", path=ship.get("path"),
+                    key="coefficients.rudder_fade_speed_mps")
         D, N = DEG_PER_RAD, RPM_PER_RPS
         return ResponseParams(
             A1=p["a1"], A2=p["a2"], A3=p["a3"] * D**2, A4=p["a4"] * D**2, A5=p["a5"] * D,
             A6=p["a6"] * D, A7=p["a7"] * D**2, A8=p["a8"] * N, A9=p["a9"] * N**2,
             B1=p["b1"], B2=p["b2"] * D, B3=p["b3"] * D, B4=p["b4"] * D,
             C1=p["c1"] / D, C2=p["c2"], C3=p["c3"],
-            u_fade=stack(c, "rudder_fade_speed_mps", 1.0),
+            u_fade=u_fade,
         )
 
 
