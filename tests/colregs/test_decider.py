@@ -912,6 +912,20 @@ def test_restricted_visibility_has_no_roles_and_turns_away():
     astern_port = at_bearing(1.0, -135.0, 20.0, 14.0 * NM / 3600.0)
     assert request([OWN, astern_port])[:3] == ("no_role", rv, "starboard")
 
+def _pairs_decided(ships: list[tuple[float, float, float, float]]) -> Decider:
+    """One decision at t = 0 of colregs ships paired (0, 1), (2, 3), ... from rows of (north m,
+    east m, course deg, speed m/s), each ship knowing the others' true motion."""
+    n = len(ships)
+    dec = Decider.build(["colregs"] * n, np.arange(0, n, 2), np.arange(1, n, 2))
+    a = np.array(ships)
+    hdg = np.radians(a[:, 2])
+    own_state = np.stack([a[:, 0], a[:, 1], hdg])
+    own_vel = np.stack([a[:, 3] * np.cos(hdg), a[:, 3] * np.sin(hdg)])
+    other = np.concatenate([own_state[:2, dec.tgt], own_vel[:, dec.tgt]])
+    dec.decide(0.0, own_state, own_vel, np.full(n, 150.0), other, hdg, a[:, 3])
+    return dec
+
+
 
 def test_both_views_agree_over_many_random_pairs():
     """500 disjoint pairs of ships steering where they head, both running the rules: a risk
@@ -925,14 +939,7 @@ def test_both_views_agree_over_many_random_pairs():
         speed = rng.uniform(3.0, 20.0, 2) * NM / 3600.0
         rel = rng.uniform(-3.0, 3.0, 2) * NM
         ships += [(0.0, 0.0, course[0], speed[0]), (rel[0], rel[1], course[1], speed[1])]
-    pi, pj = np.arange(0, 2 * k, 2), np.arange(1, 2 * k, 2)
-    dec = Decider.build(["colregs"] * (2 * k), pi, pj)
-    a = np.array(ships)
-    hdg = np.radians(a[:, 2])
-    own_state = np.stack([a[:, 0], a[:, 1], hdg])
-    own_vel = np.stack([a[:, 3] * np.cos(hdg), a[:, 3] * np.sin(hdg)])
-    other = np.concatenate([own_state[:2, dec.tgt], own_vel[:, dec.tgt]])
-    dec.decide(0.0, own_state, own_vel, np.full(2 * k, 150.0), other, hdg, a[:, 3])
+    dec = _pairs_decided(ships)
     role, enc = mem(dec, "own_role"), mem(dec, "encounter")
     r_role, r_enc = role[dec.reverse], enc[dec.reverse]
     assert ((role == NO_ROLE) == (r_role == NO_ROLE)).all()
@@ -1117,14 +1124,7 @@ def test_mirror_image_encounters_swap_only_the_crossing_roles():
         for i in range(k):
             ships += [(0.0, 0.0, sign * course[i, 0], speed[i, 0]),
                       (rel[i, 0], sign * rel[i, 1], sign * course[i, 1], speed[i, 1])]
-        dec = Decider.build(["colregs"] * (2 * k), np.arange(0, 2 * k, 2),
-                            np.arange(1, 2 * k, 2))
-        a = np.array(ships)
-        hdg = np.radians(a[:, 2])
-        own_state = np.stack([a[:, 0], a[:, 1], hdg])
-        own_vel = np.stack([a[:, 3] * np.cos(hdg), a[:, 3] * np.sin(hdg)])
-        other = np.concatenate([own_state[:2, dec.tgt], own_vel[:, dec.tgt]])
-        dec.decide(0.0, own_state, own_vel, np.full(2 * k, 150.0), other, hdg, a[:, 3])
+        dec = _pairs_decided(ships)
         return (mem(dec, "own_role").copy(), mem(dec, "encounter").copy(),
                 mem(dec, "other_role").copy(), feature(dec, "bearing_deg").copy())
 
