@@ -869,6 +869,21 @@ def test_nan_plot_is_rejected_and_does_not_poison_the_track() -> None:
     assert new.n_updates[0] == state.n_updates[0]
 
 
+def test_a_run_of_nan_measurements_is_no_measurement_not_gate_failures() -> None:
+    """A plot or report with a NaN field (e.g. from a NaN own-ship estimate) is no
+    measurement: many in a row neither count as gate failures nor restart the track from NaN,
+    and a track never starts from one."""
+    t_par = tracker.build([{}])
+    obs = np.zeros(1, dtype=np.int64)
+    state, _ = _plot_track(np.arange(5.0), np.random.default_rng(118), t_par=t_par)
+    for t in np.arange(5.0, 5.0 + 3 * t_par.max_gate_failures[0] + 1):
+        state = tracker.step(t_par, state, obs, float(t), _plot(1, float(t), np.nan, 0.0),
+                             _one_report(float(t), 1.0, np.nan, 6.9, 0.02))
+        assert state.active[0] and np.all(np.isfinite(state.x)) and state.gate_failures[0] == 0
+    fresh = tracker.step(t_par, tracker.init(1), obs, 0.0, _plot(1, 0.0, np.nan, 0.0))
+    assert not fresh.active[0]
+
+
 def test_predict_is_f_p_ft_plus_q_and_nan_when_untracked() -> None:
     t_par = tracker.build([{"accel_psd_m2ps3": 0.02}, {}])
     obs = np.array([0, 1, 1], dtype=np.int64)

@@ -810,8 +810,13 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, active: np.n
             for i in range(0, 16, 8):
                 _prefetch(P_flat, 16 * f + i)
             _prefetch(P_flat, 16 * f + 15)
-        use_r = has_radar and r_valid[k] and settings[k, S_USE_RADAR] != 0.0
-        use_a = has_ais and a_valid[k] and settings[k, S_USE_AIS] != 0.0
+        # (a measurement with a NaN field is none: a run of them must not restart the track
+        # from NaN, as the gate's rejections would)
+        use_r = (has_radar and r_valid[k] and settings[k, S_USE_RADAR] != 0.0
+                 and not (math.isnan(r_north[k]) or math.isnan(r_east[k])))
+        use_a = (has_ais and a_valid[k] and settings[k, S_USE_AIS] != 0.0
+                 and not (math.isnan(a_north[k]) or math.isnan(a_east[k])
+                          or math.isnan(a_sog[k]) or math.isnan(a_cog[k])))
         if use_r or use_a:
             a_t = (a_stamp[k] if settings[k, S_LATENCY] != 0.0 else t_now) if use_a else t_now
             # older stamp first, so that in-sequence use is the rule
