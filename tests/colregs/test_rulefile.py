@@ -14,6 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from trafficsim.colregs.network import _holds
 from trafficsim.colregs.rulefile import (
     SCHEMA_VERSION,
     ActionField,
@@ -1115,26 +1116,6 @@ def _plain(test, x: dict[str, float], params: dict[str, float]) -> bool:
     return all(results) if word == "all" else any(results)
 
 
-def _tree_holds(test, x: dict[str, float]) -> bool:
-    """The parsed tree's meaning, walked here (Literal / Comparison / AllOf / AnyOf / Not)."""
-    if isinstance(test, Literal):
-        return test.value
-    if isinstance(test, Comparison):
-        v = x[test.feature]
-        if math.isnan(v):
-            return False
-        if test.op == "between":
-            lo, hi = test.value
-            return lo.value <= v <= hi.value
-        c = test.value.value
-        return {"<": v < c, "<=": v <= c, ">": v > c, ">=": v >= c, "==": v == c,
-                "!=": v != c}[test.op]
-    if isinstance(test, Not):
-        return not _tree_holds(test.item, x)
-    results = [_tree_holds(t, x) for t in test.items]
-    return all(results) if isinstance(test, AllOf) else any(results)
-
-
 def test_every_element_file_means_what_it_says_on_a_grid() -> None:
     """Every test of every_element.yaml, parsed, holds exactly where the written YAML (read
     with plain PyYAML) holds by the documented semantics, over a grid of feature values with
@@ -1156,7 +1137,7 @@ def test_every_element_file_means_what_it_says_on_a_grid() -> None:
         x = dict(zip(names, values, strict=True))
         for node in rules.nodes:
             written = raw["nodes"][node.name]["test"]
-            assert _tree_holds(node.test, x) == _plain(written, x, rules.parameters), (node, x)
+            assert _holds(node.test, x) == _plain(written, x, rules.parameters), (node, x)
             checked += 1
     assert checked == 4 * 3 * 3 * 3 * 3 * 2 * 3 * 4
 

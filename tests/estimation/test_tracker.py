@@ -388,23 +388,15 @@ def test_chi2_quantiles() -> None:
     assert tracker.chi2_quantile_even(0.95, 4) == pytest.approx(9.4877, abs=1e-3)
 
 
-def test_three_ships_both_directions_per_observer_settings() -> None:
-    """One encounter of three ships: six directed pairs; ship 2 has no radar and tracks from
-    AIS only, ship 1 has no AIS transponder (invisible to AIS, radar only). Every track follows
-    its target."""
-    pair_i, pair_j = np.array([0, 0, 1]), np.array([1, 2, 2])
-    obs, tgt = radar.directed_pairs(pair_i, pair_j)
-    n = 3
-    pos = np.array([[0.0, 3000.0, -2000.0], [0.0, 4000.0, 5000.0]])
-    vel = np.array([[6.0, -3.0, 4.0], [0.0, -5.0, -2.0]])
-    truth = truth_from(pos, vel)
-    r_par = radar.build([{}, {}, {"enabled": False}])
-    a_par = ais.build([{}, {"enabled": False}, {}])
-    t_par = tracker.build([{}, {}, {"use_radar": False}])
-    r_state, a_state, state = radar.init(r_par), ais.init(a_par, 6), tracker.init(6)
-    r_streams, tx, rx = independent_streams(6, 12), independent_streams(n, 13), \
-        independent_streams(6, 14)
-    for k in range(601):
+def _sensed(truth, r_par, a_par, obs, tgt, steps: int, seed: int):
+    """``(t, radar plots, AIS reports)`` of the steps ``0 .. steps - 1`` (1 s) of ships on
+    straight tracks (``truth``, moved in place), radar and AIS of every directed pair
+    ``obs -> tgt`` on streams keyed ``seed``, ``seed + 1`` (transmitters), ``seed + 2``."""
+    m, n = obs.shape[0], truth.pos.shape[1]
+    r_state, a_state = radar.init(r_par), ais.init(a_par, m)
+    r_streams, tx, rx = (independent_streams(m, seed), independent_streams(n, seed + 1),
+                         independent_streams(m, seed + 2))
+    for k in range(steps):
         t = float(k)
         if k:
             truth.pos += truth.vel
@@ -412,6 +404,23 @@ def test_three_ships_both_directions_per_observer_settings() -> None:
         r_state, plots = radar.step(r_par, r_state, t, obs, tgt, x, x[NORTH], x[EAST], x[PSI],
                                     r_streams)
         a_state, reports = ais.step(a_par, a_state, t, obs, tgt, x, np.zeros((2, n)), tx, rx)
+        yield t, plots, reports
+
+
+def test_three_ships_both_directions_per_observer_settings() -> None:
+    """One encounter of three ships: six directed pairs; ship 2 has no radar and tracks from
+    AIS only, ship 1 has no AIS transponder (invisible to AIS, radar only). Every track follows
+    its target."""
+    pair_i, pair_j = np.array([0, 0, 1]), np.array([1, 2, 2])
+    obs, tgt = radar.directed_pairs(pair_i, pair_j)
+    pos = np.array([[0.0, 3000.0, -2000.0], [0.0, 4000.0, 5000.0]])
+    vel = np.array([[6.0, -3.0, 4.0], [0.0, -5.0, -2.0]])
+    truth = truth_from(pos, vel)
+    r_par = radar.build([{}, {}, {"enabled": False}])
+    a_par = ais.build([{}, {"enabled": False}, {}])
+    t_par = tracker.build([{}, {}, {"use_radar": False}])
+    state = tracker.init(6)
+    for t, plots, reports in _sensed(truth, r_par, a_par, obs, tgt, 601, 12):
         state = tracker.step(t_par, state, obs, t, plots, reports)
     xt, _ = tracker.predict(t_par, state, obs, 600.0)
     # pair 5 is 2 -> 1: no radar on 2, no transponder on 1: never tracked
@@ -1263,19 +1272,10 @@ def test_real_sensors_with_late_ais_equal_time_order_processing() -> None:
     t_par = tracker.build([{"gate_probability": 1.0 - 1e-12}] * n)
     q, sv0 = t_par.q_m2ps3[0], t_par.init_speed_sigma_mps[0]
     sp, sv = t_par.ais_sigma_position_m[0], t_par.ais_sigma_velocity_mps[0]
-    r_state, a_state, state = radar.init(r_par), ais.init(a_par, n_pairs), tracker.init(n_pairs)
-    r_streams, tx, rx = (independent_streams(n_pairs, 56), independent_streams(n, 57),
-                         independent_streams(n_pairs, 58))
+    state = tracker.init(n_pairs)
     meas: list[list] = [[] for _ in range(n_pairs)]
     late = 0
-    for k in range(151):
-        t = float(k)
-        if k:
-            truth.pos += truth.vel
-        x = truth.x8()
-        r_state, plots = radar.step(r_par, r_state, t, obs, tgt, x, x[NORTH], x[EAST], x[PSI],
-                                    r_streams)
-        a_state, rep = ais.step(a_par, a_state, t, obs, tgt, x, np.zeros((2, n)), tx, rx)
+    for t, plots, rep in _sensed(truth, r_par, a_par, obs, tgt, 151, 56):
         for p in np.flatnonzero(rep.valid):
             z, R = _ais_z_r(rep.north_m[p], rep.east_m[p], rep.sog_mps[p], rep.cog_rad[p], sp,
                             sv)

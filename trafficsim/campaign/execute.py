@@ -80,6 +80,7 @@ def inputs_digest(spec: CampaignSpec) -> str:
     parameter folders) its ``ship_types`` name and its ``rules`` file with the files that one
     extends. Contents only, so a copy of the lot elsewhere has the same digest."""
     from trafficsim.campaign.runner import rules_path
+    from trafficsim.colregs.network import rules_digest
     from trafficsim.colregs.rulefile import parse_file
     from trafficsim.colregs.vocabulary import VOCABULARY
     from trafficsim.ships.library import find_ship
@@ -98,9 +99,8 @@ def inputs_digest(spec: CampaignSpec) -> str:
             if f.is_file():
                 add(f"ship {kind} {f.name if found.is_dir() else ''}", f)
     rules = rules_path(spec)
-    if rules is not None:
-        for level, f in enumerate(parse_file(rules, VOCABULARY).files):
-            add(f"rules {level}", Path(f))
+    if rules is not None:  # (the digest the decision records carry, of the file and its chain)
+        digest.update(f"rules\0{rules_digest(parse_file(rules, VOCABULARY).files)}".encode())
     return digest.hexdigest()
 
 

@@ -94,17 +94,17 @@ def explain_run(run_dir: Path, ship: str, at_s: float | None = None) -> str:
             raise InputError(f"the first decision is at t = {times.min():g} s, after "
                              f"--at-s {at_s:g}", key="--at-s")
         rows = sel[times == before.max()]
-    nets: dict[str, network.Network] = {}
+    nets: dict[str, tuple[network.Network, str]] = {}  # rules file -> network, its digest
     for k in rows:
         rules = str(cols["rules"][k])
         if rules not in nets:
-            nets[rules] = network.load(rules, VOCABULARY)
-        net = nets[rules]
+            net = network.load(rules, VOCABULARY)
+            nets[rules] = net, network.rules_digest(net.rules.files)
+        net, digest = nets[rules]
         changed = InputError("changed since the run: the explanation would show rules the "
                              "ships did not decide by (restore the file, or run again)",
                              path=rules)
-        if "rules_sha1" in cols and cols["rules_sha1"][k] != network.rules_digest(
-                net.rules.files):
+        if "rules_sha1" in cols and cols["rules_sha1"][k] != digest:
             raise changed
         names = [n for n in str(cols["path"][k]).split(">") if n]
         feats = np.array([float(cols[f][k]) for f in FEATURES])
