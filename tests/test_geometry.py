@@ -5,6 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from trafficsim import geometry
 from trafficsim.geometry import (
     NORM_MARGIN,
     cpa,
@@ -180,3 +181,23 @@ def test_hulls_touching_side_by_side_overlap_and_the_test_is_symmetric():
     assert hulls_overlap(a, b).tolist() == [True, False, True]
     assert hulls_overlap(b, a).tolist() == [True, False, True]
     assert hulls_overlap(np.zeros((0, 6, 2)), np.zeros((0, 6, 2))).shape == (0,)
+
+
+@pytest.mark.parametrize("d", [0.0, 1e-9, -0.003, 0.03, -0.0625, 0.0625, 0.0626, -0.7, 3.0])
+@pytest.mark.parametrize("angle", [0.0, 1.1, -2.5, 6.2])
+def test_turned_is_the_cosine_and_sine_of_the_sum(angle: float, d: float) -> None:
+    """The RK4 stages turn the step's cosine and sine by the heading change: within a few
+    rounding errors of libm's values of the summed angle (whose own sum rounds by up to half
+    an ulp of ``angle + d``), on both sides of the series' reach."""
+    c, s = geometry.turned(math.cos(angle), math.sin(angle), d)
+    tol = 4e-16 + 0.5 * math.ulp(angle + d)
+    assert c == pytest.approx(math.cos(angle + d), abs=tol)
+    assert s == pytest.approx(math.sin(angle + d), abs=tol)
+
+
+def test_the_series_is_exact_to_rounding_at_its_reach() -> None:
+    """Truncation of the cos/sin series at the largest turn they serve is below rounding."""
+    d = np.linspace(-geometry.SERIES_TURN_RAD, geometry.SERIES_TURN_RAD, 2001)
+    got = np.array([geometry.turned(1.0, 0.0, v) for v in d])
+    np.testing.assert_allclose(got[:, 0], np.cos(d), rtol=0, atol=2.3e-16)
+    np.testing.assert_allclose(got[:, 1], np.sin(d), rtol=0, atol=2.3e-16)

@@ -319,22 +319,3 @@ def test_heading_a_hair_west_of_north_wraps_below_two_pi() -> None:
                        1.0, np.ones(1, dtype=np.int64))
     assert 0.0 <= x[PSI, 0] < 2.0 * math.pi
 
-
-@pytest.mark.parametrize("d", [0.0, 1e-9, -0.003, 0.03, -0.0625, 0.0625, 0.0626, -0.7, 3.0])
-@pytest.mark.parametrize("angle", [0.0, 1.1, -2.5, 6.2])
-def test_turned_is_the_cosine_and_sine_of_the_sum(angle: float, d: float) -> None:
-    """The RK4 stages turn the step's cosine and sine by the heading change: within a few
-    rounding errors of libm's values of the summed angle (whose own sum rounds by up to half
-    an ulp of ``angle + d``), on both sides of the series' reach."""
-    c, s = kernels.turned(math.cos(angle), math.sin(angle), d)
-    tol = 4e-16 + 0.5 * math.ulp(angle + d)
-    assert c == pytest.approx(math.cos(angle + d), abs=tol)
-    assert s == pytest.approx(math.sin(angle + d), abs=tol)
-
-
-def test_the_series_is_exact_to_rounding_at_its_reach() -> None:
-    """Truncation of the cos/sin series at the largest turn they serve is below rounding."""
-    d = np.linspace(-kernels.SERIES_TURN_RAD, kernels.SERIES_TURN_RAD, 2001)
-    got = np.array([kernels.turned(1.0, 0.0, v) for v in d])
-    np.testing.assert_allclose(got[:, 0], np.cos(d), rtol=0, atol=2.3e-16)
-    np.testing.assert_allclose(got[:, 1], np.sin(d), rtol=0, atol=2.3e-16)

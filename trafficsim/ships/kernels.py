@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from trafficsim.geometry import turned
 from trafficsim.jit import inline_kernel, kernel
 from trafficsim.sensors import wrap_2pi_scalar
 from trafficsim.ships import mmg, mmg_berthing, modular, nomoto, response
@@ -75,27 +76,6 @@ def _derivative(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple, c: f
     return (x[3] * c - x[4] * s + env[0], x[3] * s + x[4] * c + env[1], x[5], du, dv, dr,
             min(max(rate, -a[RUDDER_RATE]), a[RUDDER_RATE]),
             (min(max(rps_cmd, a[RPS_MIN]), a[RPS_MAX]) - x[7]) / a[ENGINE_TAU])
-
-
-#: turns up to this (rad) take their cosine and sine from series (:func:`turned`)
-SERIES_TURN_RAD = 0.0625
-
-
-@inline_kernel
-def turned(c: float, s: float, d: float) -> tuple[float, float]:
-    """Cosine and sine of an angle ``d`` (rad) beyond one whose cosine and sine are ``c``,
-    ``s``, by the angle-addition formulas. For ``|d| <= SERIES_TURN_RAD`` (a heading's change
-    within an RK4 step) ``cos d`` and ``sin d`` come from their Taylor series to ``d^8`` and
-    ``d^9`` (truncation below 3e-19, under the rounding of a double), which is several times
-    cheaper than libm's ``cos`` and ``sin``; larger turns call them."""
-    if abs(d) <= SERIES_TURN_RAD:
-        d2 = d * d
-        cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 * (1.0 / 720.0 - d2 * (1.0 / 40320.0))))
-        sd = d * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0
-                                                                  - d2 * (1.0 / 362880.0)))))
-    else:
-        cd, sd = math.cos(d), math.sin(d)
-    return c * cd - s * sd, s * cd + c * sd
 
 
 @inline_kernel
