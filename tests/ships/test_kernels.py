@@ -318,4 +318,3 @@ def test_heading_a_hair_west_of_north_wraps_below_two_pi() -> None:
     kernels.step_ships(codes, P, A, x, np.zeros(1), np.array(x[RPS]), base.env_table(Env(), 1),
                        1.0, np.ones(1, dtype=np.int64))
     assert 0.0 <= x[PSI, 0] < 2.0 * math.pi
-

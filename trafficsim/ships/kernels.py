@@ -47,11 +47,17 @@ def accel(code: int, p: np.ndarray, x: np.ndarray, env: np.ndarray) -> tuple[flo
 
 
 @inline_kernel
-def _kinematics(x: tuple | np.ndarray, env: tuple | np.ndarray) -> tuple[float, float, float]:
+def _turned_kinematics(x: tuple | np.ndarray, env: tuple | np.ndarray, c: float, s: float
+                       ) -> tuple[float, float, float]:
     """Rates of north, east and heading: the velocities through the water turned to the earth
-    frame plus the current, and the yaw rate."""
-    c, s = math.cos(x[2]), math.sin(x[2])
+    frame (``c``, ``s``: cosine and sine of the heading) plus the current, and the yaw rate."""
     return x[3] * c - x[4] * s + env[0], x[3] * s + x[4] * c + env[1], x[5]
+
+
+@inline_kernel
+def _kinematics(x: tuple | np.ndarray, env: tuple | np.ndarray) -> tuple[float, float, float]:
+    """:func:`_turned_kinematics` at the heading ``x[2]``."""
+    return _turned_kinematics(x, env, math.cos(x[2]), math.sin(x[2]))
 
 
 @inline_kernel
@@ -71,10 +77,10 @@ def _derivative(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple, c: f
     """The eight state rates of one ship (``c``, ``s``: cosine and sine of its heading):
     kinematics, the family's accelerations, steering gear and engine."""
     du, dv, dr = accel_fn(p, x, env)
+    dn, de, dpsi = _turned_kinematics(x, env, c, s)
     target = min(max(rudder_cmd, -a[RUDDER_MAX]), a[RUDDER_MAX])
     rate = (target - x[6]) / a[RUDDER_TAU]
-    return (x[3] * c - x[4] * s + env[0], x[3] * s + x[4] * c + env[1], x[5], du, dv, dr,
-            min(max(rate, -a[RUDDER_RATE]), a[RUDDER_RATE]),
+    return (dn, de, dpsi, du, dv, dr, min(max(rate, -a[RUDDER_RATE]), a[RUDDER_RATE]),
             (min(max(rps_cmd, a[RPS_MIN]), a[RPS_MAX]) - x[7]) / a[ENGINE_TAU])
 
 
