@@ -101,8 +101,12 @@ def _accumulate(x: np.ndarray, length_m: np.ndarray, beam_m: np.ndarray, pi: np.
         rng = math.hypot(dn, de)
         if rng < min_range[p]:
             min_range[p], t_min[p] = rng, t_s
-        if not violation[p] and (_inside_domain(kind, x, a, 1.0, dn, de, rng, length_m)
-                                 or _inside_domain(kind, x, b, -1.0, dn, de, rng, length_m)):
+        # (a pair beyond both ships' largest possible domain skips sizing them)
+        outside = rng > max(domains.reach_bound_m(kind, length_m[a]),
+                            domains.reach_bound_m(kind, length_m[b]))
+        if not violation[p] and not outside and (
+                _inside_domain(kind, x, a, 1.0, dn, de, rng, length_m)
+                or _inside_domain(kind, x, b, -1.0, dn, de, rng, length_m)):
             violation[p], t_violation[p] = True, t_s
         reach = 0.5 * (length_m[a] + beam_m[a] + length_m[b] + beam_m[b])
         if rng < reach and not collision[p]:

@@ -583,3 +583,19 @@ def test_horizon_per_pair_and_infinite():
     assert got[0] == pytest.approx(160.0)
     assert got[1] == math.inf
     assert got[2] == pytest.approx(1e6, rel=1e-9)
+
+
+@pytest.mark.parametrize("kind", [domains.COLDWELL, domains.FUJII, domains.GOODWIN,
+                                  domains.KIJIMA])
+def test_reach_bound_holds_the_domain_at_every_length_and_speed(kind: int) -> None:
+    """The metrics skip sizing a domain beyond ``reach_bound_m``: it must not be below the
+    reach at any speed, and (but for Kijima, which grows with speed) be the reach itself within
+    its margin."""
+    for length in (1.0, 7.3, 120.0, 399.9):
+        bound = domains.reach_bound_m(kind, length)
+        for speed in (0.0, 0.5, 5.0, 12.0, 40.0):
+            reach = domains.reach_m(kind, domains.ship_params(kind, length, speed, False))
+            assert bound >= reach * (1.0 + 1e-9)
+            if kind != domains.KIJIMA:
+                assert bound <= reach * (1.0 + 2e-6)
+    assert domains.reach_bound_m(domains.KIJIMA, 100.0) == math.inf

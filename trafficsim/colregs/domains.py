@@ -144,6 +144,25 @@ def reach_m(kind: int, prm: tuple[float, float, float, float]) -> float:
     return math.sqrt(prm[0] * prm[0] + prm[1] * prm[1]) + 1.0 / min(prm[2], prm[3])
 
 
+#: reach of the Coldwell (head-on and crossing) and Fujii domains per metre of ship length
+_UNIT_REACH = (math.sqrt(1.1**2 + 0.75**2) + 1.0 / 0.2, 1.0 / 0.25)
+#: relative margin of :func:`reach_bound_m` over :func:`reach_m` (rounding of either side)
+_BOUND_MARGIN = 1e-6
+
+
+@kernel
+def reach_bound_m(kind: int, length_m: float) -> float:
+    """An upper bound of :func:`reach_m` for a ship of length ``length_m`` at any speed (not
+    overtaking; Goodwin's fixed reach; infinite for Kijima, whose domain grows with speed)
+    with a relative margin far above rounding: a ship beyond it is outside the domain without
+    sizing it."""
+    if kind == GOODWIN:
+        return _GW_REACH * (1.0 + _BOUND_MARGIN)
+    if kind == KIJIMA:
+        return math.inf
+    return _UNIT_REACH[kind] * length_m * (1.0 + _BOUND_MARGIN)
+
+
 @kernel
 def n_pieces(kind: int) -> int:
     """Number of pieces of domain ``kind`` as :func:`piece` lists them (Kijima: see
