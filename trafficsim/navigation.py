@@ -410,11 +410,16 @@ class Navigation:
         """``(2, n)`` each ship's estimate of its velocity over ground at the last
         :meth:`update`, north and east, m/s: the ``pv`` filter's (its ``u, v`` are over
         ground), the ``ekf``'s velocity through the water plus its estimate of the current, the
-        truth (``est`` is the true state) plus ``env``'s current without a filter."""
+        truth (``est`` is the true state) plus ``env``'s current without a filter. The pv
+        ships' is the filter's velocity state itself (``est``'s ``u, v`` are it turned to the
+        body frame)."""
         est = self.est
-        c, s = np.cos(est[PSI]), np.sin(est[PSI])
-        vel = np.stack([est[U] * c - est[V] * s, est[U] * s + est[V] * c])
+        vel = self.pv_s.x[:, pv.VEL_N:pv.VEL_E + 1].T.copy()  # (the other ships' replaced)
         none = ~self.filter_pv
+        if none.any():
+            psi, u, v = est[PSI, none], est[U, none], est[V, none]
+            c, s = np.cos(psi), np.sin(psi)
+            vel[0, none], vel[1, none] = u * c - v * s, u * s + v * c
         if self.ekf_idx is not None and self.ekf_idx.size:
             none[self.ekf_idx] = False
             vel[0, self.ekf_idx] += self.ekf_s.x[:, ekf.XCN]

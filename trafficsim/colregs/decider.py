@@ -248,7 +248,9 @@ class Decider:
             if idx.size == 0:
                 self.last_decision.append(None)
                 continue
-            dec = network.evaluate(net, feats[:, idx], self.cursor[idx])
+            # (one network for every pair, the common case: no copy of the feature table)
+            sub = feats if idx.size == o.shape[0] else feats[:, idx]
+            dec = network.evaluate(net, sub, self.cursor[idx])
             self.cursor[idx] = dec.cursor
             self._merge(idx, dec, t_s, other)
             self.last_decision.append(dec)
@@ -431,9 +433,9 @@ class Decider:
         n = self.ship_net.shape[0]
         manoeuvre = self._mem("own_manoeuvre")
         asking = np.isin(manoeuvre, _ASKING) & (self.ship_net[o] >= 0)
-        ships = np.unique(o[asking])
         idle = np.ones(n, dtype=bool)
-        idle[ships] = False
+        idle[o[asking]] = False
+        ships = np.flatnonzero(~idle)  # the asking ships, ascending
         # back to the route only where it passes every ship at the distance the last manoeuvre
         # kept (Rule 8(d): resuming must not make a new close-quarters situation)
         resuming = idle & (self.candidate >= 0)
