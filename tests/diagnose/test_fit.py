@@ -255,16 +255,23 @@ def test_gear_start_follows_the_logged_rudder_at_the_rate_limit() -> None:
     data = exact()
     res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
     logged = data.windows.inputs[:, 0, 0]
-    # tau 0.2 s, rate 0.5 deg/s: the gear ramps from the 20 deg step at 20 s while the lag
-    # asks for more than the rate, i.e. until 0.1 deg (tau x rate) short of 20 deg at 59.8 s,
-    # then closes the rest as exp(-t / tau): 20 - 0.1 / e at 60 s. The window starting at 30 s
-    # finds it at 5 deg, and from 80 s, with the order at -20 deg, it has come back 5 deg by 90 s
+    # tau 0.2 s, rate 0.5 deg/s. The log (2 s samples) reads as a ramp from 0 at 18 s to
+    # 20 deg at 20 s (10 deg/s), as the replay reads it. The lag y' = (u - y) / tau follows
+    # y = 10 s - 2 (1 - exp(-s / tau)) until its rate reaches 0.5 deg/s, at s0 = -tau
+    # ln(0.95), then ramps at the limit: 12 s after 18 s (window at 30 s) it is at
+    # y(s0) + 0.5 (12 - s0). It is 0.1 deg (tau x rate) short of 20 deg at about 57.8 s and
+    # closes the rest as exp(-t / tau) by 60 s. From 78 s the order ramps to -20 deg at
+    # 20 deg/s: the gear comes back at the limit from s1 = -tau ln(0.975) on
     steer = np.array([[0.0, 0.0], [0.2, np.radians(0.5)]])
     start = res.gear_start(steer)
     assert np.degrees(logged).tolist() == pytest.approx([0.0, 20.0, 20.0, -20.0])
     assert np.array_equal(start[0], logged)  # no gear: the logged angle
-    assert np.degrees(start[1]).tolist() == pytest.approx(
-        [0.0, 5.0, 20.0 - 0.1 * np.exp(-1.0), 15.0], abs=1e-6)
+    tau = 0.2
+    s0, s1 = -tau * np.log(0.95), -tau * np.log(0.975)
+    up = 10.0 * s0 - 2.0 * (1.0 - 0.95) + 0.5 * (12.0 - s0)
+    down = 20.0 - (20.0 * s1 - 4.0 * (1.0 - 0.975)) - 0.5 * (12.0 - s1)
+    # (each 0.2 s step clipped whole: within half a step's rate of the continuous gear)
+    assert np.degrees(start[1]).tolist() == pytest.approx([0.0, up, 20.0, down], abs=0.005)
 
 
 def test_env_offsets_give_every_window_its_run_current() -> None:
@@ -662,16 +669,17 @@ def test_straight_steady_runs_attribute_nothing() -> None:
 
 
 def test_gear_start_of_a_stable_lag_settles_on_the_logged_rudder() -> None:
-    """A 1 s lag without rate limiting (the 40 deg step from 20 to -20 deg is 0.7 rad/s at
-    most, under 90 deg/s) is the step times exp(-10) short of the logged angle 10 s after each
-    step (windows at 30 and 90 s; the one at 60 s, 40 s on, has settled): the exact lag,
-    however the steps are cut."""
+    """A 1 s lag without rate limiting (the log's ramps, 10 and 20 deg/s over 2 s, make it
+    turn at 20 deg/s at most, under 90 deg/s): a ramp of slope a leaves the lag tau a (1 -
+    exp(-2 / tau)) behind at its end, which decays as exp(-t / tau) over the 10 s to the next
+    window start (windows at 30 and 90 s; the one at 60 s, 40 s on, has settled): the exact
+    lag of the linear input, however the steps are cut."""
     data = exact()
     res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
     start = res.gear_start(np.array([[1.0, np.radians(90.0)]]))[0]
-    short = np.exp(-10.0)
-    assert np.degrees(start) == pytest.approx([0.0, 20.0 - 20.0 * short, 20.0,
-                                               -20.0 + 40.0 * short], abs=1e-6)
+    behind = (1.0 - np.exp(-2.0)) * np.exp(-10.0)  # per deg/s of ramp, tau = 1 s
+    assert np.degrees(start) == pytest.approx([0.0, 20.0 - 10.0 * behind, 20.0,
+                                               -20.0 + 20.0 * behind], abs=1e-9)
 
 
 def test_gear_start_of_a_fast_lag_is_the_logged_rudder() -> None:
@@ -697,3 +705,25 @@ def test_gear_start_bridges_a_gap_in_the_logged_rudder() -> None:
     res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
     start = res.gear_start(np.array([[1.0, np.radians(5.0)]]))[0]
     assert np.degrees(start[1]) == pytest.approx(20.0, abs=0.05)
+
+
+def test_gear_start_is_the_gear_on_the_log_read_linearly_between_samples() -> None:
+    """On an irregular log, the gear at every window start equals a fine independent
+    integration (1 ms Euler) of the lag with its rate limit driven by the log interpolated
+    linearly between samples, as the replay drives its windows (a log held for each sample
+    would leave the gear about half a sample behind)."""
+    rng = np.random.default_rng(7)
+    log = np.clip(np.cumsum(rng.normal(0.0, 6.0, N)), -35.0, 35.0)
+    data = exact(rudder=log)
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
+    gears = [(4.0, 2.5), (8.0, 1.0), (1.0, 90.0)]  # lag s, rate deg/s
+    start = np.degrees(res.gear_start(np.array([[tau, np.radians(rate)] for tau, rate in gears])))
+    h = 0.001
+    for g, (tau, rate) in enumerate(gears):
+        y, t, expected = log[0], 0.0, []
+        for t0 in (0.0, 30.0, 60.0, 90.0):
+            while t < t0 - 1e-9:
+                y += h * min(max((np.interp(t, _T, log) - y) / tau, -rate), rate)
+                t += h
+            expected.append(y)
+        assert start[g] == pytest.approx(expected, abs=0.02), (tau, rate)

@@ -226,9 +226,10 @@ class EffectResiduals:
     def gear_start(self, steer: np.ndarray) -> np.ndarray:
         """``(k, W)`` rudder angle of each model's steering gear at each window's start: the
         gear (lag and rate limit, :func:`trafficsim.effects.steering`) run over the logged
-        rudder from the start of the run (gaps in it interpolated, as the replay fills them;
-        10 steps per sample, each the exact lag step clipped to the rate limit, which stays
-        stable and never overshoots however short the lag)."""
+        rudder from the start of the run, read as the replay reads it: linear between samples
+        (first-order hold), gaps interpolated. 10 steps per sample, each the exact response of
+        the lag to the linear input over the step, clipped to the rate limit: stable, never
+        overshooting however short the lag, and exact where the limit is not reached."""
         win = self.data.windows
         k = steer.shape[0]
         out = np.repeat(win.inputs[None, :, 0, 0], k, axis=0)
@@ -246,8 +247,15 @@ class EffectResiduals:
             at = np.empty((tau.size, rud.size))
             for j in range(rud.size):
                 at[:, j] = state
-                for _ in range(10):
-                    state = state + np.clip((rud[j] - state) * approach, -limit, limit)
+                if j + 1 == rud.size:
+                    break
+                step = (rud[j + 1] - rud[j]) / 10.0  # input change per step
+                for s in range(10):
+                    # y' = (u - y) / tau, u = u0 + a t over the step: the change of y is
+                    # du + (u0 - tau a - y)(1 - exp(-dt / tau)), du = a dt
+                    start = rud[j] + step * s
+                    change = step + (start - tau / dt * step - state) * approach
+                    state = state + np.clip(change, -limit, limit)
             for i in np.flatnonzero(win.run == r):
                 j0 = round(float(win.t0_s[i] - run.t_s[0]) / run.dt_s)
                 out[on, i] = at[:, j0]
