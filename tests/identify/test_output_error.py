@@ -181,7 +181,8 @@ def test_residual_count_weights_and_masking() -> None:
 @pytest.mark.parametrize("x, x0, lo, hi, expect", [
     (2.0, 1.0, -np.inf, np.inf, 2e-6),          # relative to |x|
     (1.0, -4.0, -np.inf, np.inf, 4e-6),         # or to the start, whichever is larger
-    (0.0, 0.0, -np.inf, np.inf, 1e-16),         # floor 1e-10 without bounds
+    (0.0, 0.0, -np.inf, np.inf, 1e-9),          # exactly 0 without bounds: floor 1e-3
+    (1e-12, 0.0, -np.inf, np.inf, 1e-16),       # a tiny value: floor 1e-10
     (0.0, 0.0, 0.0, 10.0, 1e-8),                # floor 1e-3 of the bounds' width
     (3.0, 3.0, 0.0, 3.0, -3e-6),                # at the upper bound: step downwards
     (-1.0, -1.0, -np.inf, 0.0, 1e-6),           # room above: upwards
@@ -237,6 +238,21 @@ def test_linear_problem_gives_least_squares_and_its_covariance(analytic: bool) -
     table = fit.table()
     assert table["K_prime"]["ci95_low"] == pytest.approx(fit.x[0] - fit.ci95[0])
     assert table["T_prime"]["initial"] == 0.2
+
+
+def test_a_zero_start_without_bounds_is_fitted() -> None:
+    """A coefficient starting at exactly 0 without bounds has no scale for a relative step:
+    it gets an absolute one large enough to see (a step at rounding size would give a
+    Jacobian column of noise and leave it where it started)."""
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(30, 2))
+    b = a @ [0.8, -0.02] + 100.0 + rng.normal(0.0, 0.01, 30)  # large residuals at the start
+    a = np.hstack([a, np.ones((30, 1))])
+    param = Parametrisation.of(load_ship("bulk_carrier"), ["a2", "a3", "a5"],
+                               {"a2": (-np.inf, np.inf), "a3": (-np.inf, np.inf),
+                                "a5": (-np.inf, np.inf)})
+    fit = output_error.fit(param, None, x0=np.zeros(3), residuals=_Linear(a, b))
+    np.testing.assert_allclose(fit.x, np.linalg.lstsq(a, b, rcond=None)[0], rtol=1e-6)
 
 
 def test_bounded_linear_problem_matches_lsq_linear() -> None:

@@ -160,10 +160,15 @@ class FitResult:
 
 def fd_steps(x: np.ndarray, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray,
              rel_step: float) -> np.ndarray:
-    """Signed forward-difference steps: relative to the value, pointing away from a bound."""
+    """Signed forward-difference steps: relative to the value (or the start, if larger),
+    pointing away from a bound. The scale has a floor of 1e-3 of the bounds' width, or
+    without finite bounds 1e-10; a coefficient without bounds that is and started at exactly 0
+    has no scale at all and gets 1e-3 (a step at rounding size would make its Jacobian column
+    noise)."""
     width = np.where(np.isfinite(upper - lower), upper - lower, np.inf)
-    floor = np.where(np.isfinite(width), 1e-3 * width, 1e-10)
-    h = rel_step * np.maximum(np.maximum(np.abs(x), np.abs(x0)), floor)
+    size = np.maximum(np.abs(x), np.abs(x0))
+    floor = np.where(np.isfinite(width), 1e-3 * width, np.where(size == 0.0, 1e-3, 1e-10))
+    h = rel_step * np.maximum(size, floor)
     return np.where(x + h > upper, -h, h)
 
 
