@@ -55,6 +55,22 @@ def test_resampling_irregular_times() -> None:
     assert np.isnan(out.north_m[7]) and ok[5] and ok[9]  # 6..8 s lies in a 4 s gap
 
 
+def test_resampling_keeps_the_extra_columns() -> None:
+    """Columns the reader keeps under their own names (a trial.csv's receiver and filter
+    columns) are resampled with the rest, angles in radians unwrapped across north, instead
+    of being dropped."""
+    t = np.array([0.0, 1.0, 2.1, 2.9, 4.0, 5.0])
+    trial = from_arrays("e", {"t_s": t, "north_m": 2.0 * t, "east_m": -t,
+                              "heading_deg": t * 0, "rudder_deg": t * 0, "rpm": t * 0 + 60,
+                              "gnss_fix_north_m": 3.0 * t,
+                              "beam_bearing_rad": np.mod(6.2 + 0.05 * t, 2 * np.pi)})
+    assert set(trial.extra) == {"gnss_fix_north_m", "beam_bearing_rad"}
+    out = preprocess.resample_uniform(trial, 1.0)
+    np.testing.assert_allclose(out.extra["gnss_fix_north_m"], 3.0 * np.arange(6.0))
+    np.testing.assert_allclose(np.unwrap(out.extra["beam_bearing_rad"]),
+                               6.2 + 0.05 * np.arange(6.0))
+
+
 def test_batched_smoothing_equals_one_run_at_a_time(zigzag: dict[str, np.ndarray]) -> None:
     """Runs of different lengths smoothed in one padded call give exactly what each gives alone."""
     rng = np.random.default_rng(2)

@@ -112,8 +112,10 @@ class Kinematics:
 def resample_uniform(trial: TrialData, dt_s: float | None = None) -> TrialData:
     """The run on a uniform time grid (no-op if it already is one to 1 %).
 
-    Series are interpolated linearly over their finite samples (angles unwrapped first); grid
-    points farther than ``dt_s`` from every finite sample of a series are NaN.
+    Series, and the extra columns kept under their own names, are interpolated linearly over
+    their finite samples (angles unwrapped first: the heading, course and wind direction, and
+    extra columns in ``_rad``); grid points farther than ``dt_s`` from every finite sample of
+    a series are NaN.
     """
     steps = np.diff(trial.t_s)
     dt = float(np.median(steps)) if dt_s is None else float(dt_s)
@@ -121,23 +123,23 @@ def resample_uniform(trial: TrialData, dt_s: float | None = None) -> TrialData:
         return trial
     grid = trial.t_s[0] + dt * np.arange(int(np.floor(trial.duration_s / dt + 1e-9)) + 1)
     angles = {"psi_rad", "cog_rad", "wind_from_rad"}
-    series: dict[str, np.ndarray | None] = {}
-    for key, values in trial.arrays().items():
-        if key == "t_s":
-            continue
+
+    def on_grid(values: np.ndarray, angle: bool) -> np.ndarray:
         ok = np.isfinite(values)
         if ok.sum() < 2:
-            series[key] = np.full(grid.shape, np.nan)
-            continue
+            return np.full(grid.shape, np.nan)
         t_ok = trial.t_s[ok]
-        y = np.unwrap(values[ok]) if key in angles else values[ok]
-        out = np.interp(grid, t_ok, y)
+        out = np.interp(grid, t_ok, np.unwrap(values[ok]) if angle else values[ok])
         pos = np.clip(np.searchsorted(t_ok, grid), 1, t_ok.size - 1)
         gap = np.minimum(np.abs(grid - t_ok[pos - 1]), np.abs(t_ok[pos] - grid))
         out[gap > dt * (1.0 + 1e-9)] = np.nan
-        series[key] = out
-    out_trial = replace(trial, t_s=grid, extra={})
-    return out_trial.with_series(**series)
+        return out
+
+    series: dict[str, np.ndarray | None] = {key: on_grid(values, key in angles)
+                                            for key, values in trial.arrays().items()
+                                            if key != "t_s"}
+    extra = {key: on_grid(values, key.endswith("_rad")) for key, values in trial.extra.items()}
+    return replace(trial, t_s=grid, extra=extra).with_series(**series)
 
 
 def _stale(same: np.ndarray, dt: float, max_stale_s: float) -> np.ndarray:
