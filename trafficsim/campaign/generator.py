@@ -13,6 +13,8 @@ coming up faster from more than 22.5 degrees abaft the other's beam (relative be
 ``reciprocal_deg``) and each ship sees the other ahead or nearly ahead (Rule 14(b); within 10
 degrees of the bow, its ``head_on_bearing_deg``), crossing otherwise, give-way when the other
 ship is on the own ship's starboard side. Head-on draws are within 6 degrees of reciprocal.
+Keeping only such draws conditions the ship types and speeds on the geometry: the ships that
+overtake, or are overtaken, are mostly the fast, or the slow, types (README, Campaigns).
 In a multi-ship encounter each further ship must also leave the others placed before it that
 much room (:func:`_clear_of`), so that no two ships start in a collision nobody can avoid.
 
