@@ -39,7 +39,7 @@ from trafficsim.colregs.network import (
 from trafficsim.colregs.rulefile import parse
 from trafficsim.errors import ScenarioError
 
-from .test_rulefile import VOCAB
+from .test_rulefile import VOCAB, written_test, written_value
 
 HERE = Path(__file__).parent
 EXAMPLE = HERE / "rules" / "valid" / "example.yaml"
@@ -363,30 +363,12 @@ OPS = ["<", "<=", ">", ">=", "==", "!=", "between"]
 
 
 def _resolve(value: Any) -> float:
-    if isinstance(value, str):
-        return PARAMS[value] if value in PARAMS else DIFF_VOCAB.enums[value]
-    return float(value)
+    return written_value(value, PARAMS, DIFF_VOCAB)
 
 
 def _ref_test(test: Any, feats: dict[str, float]) -> bool:
     """Reference semantics, straight from the language description."""
-    if isinstance(test, bool):
-        return test
-    if isinstance(test, list):
-        feature, op, value = test
-        x = feats[feature]
-        if math.isnan(x):
-            return False
-        if op == "between":
-            return _resolve(value[0]) <= x <= _resolve(value[1])
-        c = _resolve(value)
-        return {"<": x < c, "<=": x <= c, ">": x > c, ">=": x >= c, "==": x == c,
-                "!=": x != c}[op]
-    if "all" in test:
-        return all(_ref_test(t, feats) for t in test["all"])
-    if "any" in test:
-        return any(_ref_test(t, feats) for t in test["any"])
-    return not _ref_test(test["not"], feats)
+    return written_test(test, feats, PARAMS, DIFF_VOCAB)
 
 
 def _ref_run(net: dict[str, Any], feats: dict[str, float], node: str

@@ -1091,7 +1091,14 @@ def test_absolute_extends_path_and_relative_one_give_the_same_rules(tmp_path: Pa
 # Language constructs against a plain evaluation of the written test
 # ------------------------------------------------------------------------------------------
 
-def _plain(test, x: dict[str, float], params: dict[str, float]) -> bool:
+def written_value(value, params: dict[str, float], vocab=VOCAB) -> float:
+    """A written value's number: a parameter's, an enum constant's, or the number itself."""
+    if isinstance(value, str):
+        return params[value] if value in params else vocab.enums[value]
+    return float(value)
+
+
+def written_test(test, x: dict[str, float], params: dict[str, float], vocab=VOCAB) -> bool:
     """The documented meaning of a test as written (PyYAML data), NaN comparisons false."""
     if isinstance(test, bool):
         return test
@@ -1100,19 +1107,16 @@ def _plain(test, x: dict[str, float], params: dict[str, float]) -> bool:
         v = x[feature]
         if math.isnan(v):
             return False
-
-        def num(w):
-            return params[w] if isinstance(w, str) and w in params else (
-                VOCAB.enums[w] if isinstance(w, str) else float(w))
         if op == "between":
-            return num(value[0]) <= v <= num(value[1])
-        c = num(value)
+            return (written_value(value[0], params, vocab) <= v
+                    <= written_value(value[1], params, vocab))
+        c = written_value(value, params, vocab)
         return {"<": v < c, "<=": v <= c, ">": v > c, ">=": v >= c, "==": v == c,
                 "!=": v != c}[op]
     (word, inner), = test.items()
     if word == "not":
-        return not _plain(inner, x, params)
-    results = [_plain(t, x, params) for t in inner]
+        return not written_test(inner, x, params, vocab)
+    results = [written_test(t, x, params, vocab) for t in inner]
     return all(results) if word == "all" else any(results)
 
 
@@ -1137,7 +1141,7 @@ def test_every_element_file_means_what_it_says_on_a_grid() -> None:
         x = dict(zip(names, values, strict=True))
         for node in rules.nodes:
             written = raw["nodes"][node.name]["test"]
-            assert _holds(node.test, x) == _plain(written, x, rules.parameters), (node, x)
+            assert _holds(node.test, x) == written_test(written, x, rules.parameters), (node, x)
             checked += 1
     assert checked == 4 * 3 * 3 * 3 * 3 * 2 * 3 * 4
 

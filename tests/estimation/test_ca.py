@@ -29,6 +29,20 @@ def consistent_truth(params: ca.CAParams, n: int, rng: np.random.Generator,
     return x
 
 
+def assert_nees_chi_square(x: np.ndarray, p: np.ndarray, truth: np.ndarray, samples) -> None:
+    """The NEES ``e^T P^-1 e`` of estimates ``x`` ``(m, N, 3)`` with covariances ``p``
+    ``(m, N, 3, 3)`` against ``truth``, summed over the series and ``samples``, lies in the
+    99 % interval of its chi-square distribution (3 dof a sample and series)."""
+    from scipy import stats
+
+    total = 0.0
+    for k in samples:
+        e = x[:, k] - truth[:, k]
+        total += np.einsum("mi,mi->", e, np.linalg.solve(p[:, k], e[..., None])[..., 0])
+    dof = 3 * len(samples) * x.shape[0]
+    assert stats.chi2.ppf(0.005, dof) < total < stats.chi2.ppf(0.995, dof)
+
+
 def test_matrices_as_printed() -> None:
     p = ca.CAParams.of(2, [2.0, 0.5], 3.0, [0.05, 0.1], [1 / 30, 0.2])
     phi = ca.transition(p.dt_s)
@@ -318,19 +332,12 @@ def test_gap_predicts_only_and_the_innovation_is_nan_there() -> None:
 def test_nees_on_the_filters_own_model_is_chi_square() -> None:
     """Truth drawn from the model with the printed start: the NEES of X(k) over many independent
     series at a few well separated samples lies in the 99 % chi-square interval (3 dof)."""
-    from scipy import stats
-
     rng = np.random.default_rng(8)
     p = ca.CAParams.of(400, T, 3.0, 0.2, 0.1)
     truth = consistent_truth(p, 81, rng)
     z = truth[..., 0] + rng.normal(0.0, 3.0, truth.shape[:2])
     r = ca.run(p, z)
-    total = 0.0
-    for k in (20, 50, 80):
-        e = r.x[:, k] - truth[:, k]
-        total += np.einsum("mi,mi->", e, np.linalg.solve(r.p[:, k], e[..., None])[..., 0])
-    dof = 3 * 3 * p.m
-    assert stats.chi2.ppf(0.005, dof) < total < stats.chi2.ppf(0.995, dof)
+    assert_nees_chi_square(r.x, r.p, truth, (20, 50, 80))
 
 
 def test_update_with_a_rejected_finite_measurement_reports_its_innovation_only() -> None:

@@ -10,7 +10,7 @@ from trafficsim.ships import manoeuvres
 from trafficsim.ships.base import Env
 from trafficsim.ships.library import load_ship
 
-from .test_ca import T, consistent_truth
+from .test_ca import T, assert_nees_chi_square, consistent_truth
 
 
 def test_rts_equals_batch_least_squares() -> None:
@@ -343,19 +343,12 @@ def test_rts_vectorised_over_series_equals_one_series_at_a_time() -> None:
 def test_smoothed_nees_on_the_filters_own_model_is_chi_square() -> None:
     """Truth drawn from the filter's model: the NEES of X(k|N) over many series at separated
     samples (early, middle and last) lies in the 99 % chi-square interval (3 dof each)."""
-    from scipy import stats
-
     rng = np.random.default_rng(9)
     p = ca.CAParams.of(400, T, 3.0, 0.2, 0.1)
     truth = consistent_truth(p, 61, rng)
     z = truth[..., 0] + rng.normal(0.0, 3.0, truth.shape[:2])
     s = smoother.smooth_ca(p, z)
-    total = 0.0
-    for k in (3, 30, 60):
-        e = s.x[:, k] - truth[:, k]
-        total += np.einsum("mi,mi->", e, np.linalg.solve(s.p[:, k], e[..., None])[..., 0])
-    dof = 3 * 3 * p.m
-    assert stats.chi2.ppf(0.005, dof) < total < stats.chi2.ppf(0.995, dof)
+    assert_nees_chi_square(s.x, s.p, truth, (3, 30, 60))
 
 
 def test_smoothed_covariance_never_exceeds_the_filtered_one_and_ends_equal() -> None:
