@@ -50,6 +50,9 @@ class Simulation:
     rudder_cmd_rad: np.ndarray
     rps_cmd: np.ndarray
     substeps: np.ndarray  # (n,) RK4 sub-steps per time step
+    #: the parameter tables column by column for the vectorised step (None: no ship of a
+    #: vectorised family)
+    vector_tables: tuple[np.ndarray, np.ndarray, np.ndarray] | None
     nav: Navigation | None = None  # instruments and filters; None = perfect knowledge
     obs: Observation | None = None  # radar, AIS and tracks of other ships
     decider: Decider | None = None  # collision avoidance; None = every ship follows its route
@@ -89,6 +92,8 @@ class Simulation:
             rudder_cmd_rad=np.zeros(n),
             rps_cmd=batch.rps_for_speed(speed),
             substeps=np.maximum(1, np.ceil(dt * batch.substeps_per_s - 1e-9)).astype(np.int64),
+            vector_tables=kernels.vector_tables(batch.family_code, batch.params,
+                                               batch.actuators),
         )
         if any(f != "none" for f in batch.filters) or any(batch.sensors):
             sim.nav = Navigation.build(batch.sensors, batch.filters, x, seed,
@@ -159,7 +164,7 @@ class Simulation:
         if self._x_good is not None:
             np.copyto(self._x_good, x)
         kernels.step_ships(b.family_code, b.params, b.actuators, x, self.rudder_cmd_rad,
-                           self.rps_cmd, b.env_rows, dt, self.substeps)
+                           self.rps_cmd, b.env_rows, dt, self.substeps, self.vector_tables)
         self.step_index += 1
         if not np.isfinite(x).all():
             self._diverged(np.flatnonzero(~np.isfinite(x).all(axis=0)))

@@ -53,20 +53,66 @@ SERIES_TURN_RAD = 0.0625
 
 
 @inline_kernel
+def turned_by_series(c: float, s: float, d: float) -> tuple[float, float]:
+    """:func:`turned` for ``|d| <= SERIES_TURN_RAD``: ``cos d`` and ``sin d`` from their Taylor
+    series to ``d^8`` and ``d^9`` (truncation below 3e-19, under the rounding of a double).
+    Branch-free, so that a loop calling it can be vectorised."""
+    d2 = d * d
+    cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 * (1.0 / 720.0 - d2 * (1.0 / 40320.0))))
+    sd = d * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0
+                                                              - d2 * (1.0 / 362880.0)))))
+    return c * cd - s * sd, s * cd + c * sd
+
+
+@inline_kernel
 def turned(c: float, s: float, d: float) -> tuple[float, float]:
     """Cosine and sine of an angle ``d`` (rad) beyond one whose cosine and sine are ``c``,
     ``s``, by the angle-addition formulas. For ``|d| <= SERIES_TURN_RAD`` (a heading's change
-    within a time step) ``cos d`` and ``sin d`` come from their Taylor series to ``d^8`` and
-    ``d^9`` (truncation below 3e-19, under the rounding of a double), several times cheaper
-    than libm's ``cos`` and ``sin``; larger turns call them."""
+    within a time step) ``cos d`` and ``sin d`` come from their series
+    (:func:`turned_by_series`), several times cheaper than libm's ``cos`` and ``sin``; larger
+    turns call them."""
     if abs(d) <= SERIES_TURN_RAD:
-        d2 = d * d
-        cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 * (1.0 / 720.0 - d2 * (1.0 / 40320.0))))
-        sd = d * (1.0 - d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0
-                                                                  - d2 * (1.0 / 362880.0)))))
-    else:
-        cd, sd = math.cos(d), math.sin(d)
+        return turned_by_series(c, s, d)
+    cd, sd = math.cos(d), math.sin(d)
     return c * cd - s * sd, s * cd + c * sd
+
+
+def _split_half_pi() -> tuple[float, float, float]:
+    """pi/2 as three doubles: the leading 33 bits, the next 20 (so that their products with a
+    whole number below 2^20 are exact) and the rest (pi - ``math.pi``, halved)."""
+    bits = np.float64(math.pi / 2.0).view(np.uint64) & ~np.uint64((1 << 20) - 1)
+    hi = float(bits.view(np.float64))
+    return hi, math.pi / 2.0 - hi, 6.123233995736766e-17
+
+
+_HALF_PI_HI, _HALF_PI_MID, _HALF_PI_LO = _split_half_pi()
+#: angles up to this size (rad) are reduced exactly enough for :func:`cos_sin`
+COS_SIN_MAX_RAD = 1.0e6
+
+
+@inline_kernel
+def cos_sin(angle: float) -> tuple[float, float]:
+    """Cosine and sine of ``angle`` (rad, ``|angle| <= COS_SIN_MAX_RAD``) within one unit in
+    the last place of libm's, without a call: a loop that calls it can be vectorised (a libm
+    call keeps it scalar). The angle is reduced by the nearest multiple ``k`` of pi/2 (pi/2 in
+    three parts, the first two products exact: Cody and Waite, Software Manual for the
+    Elementary Functions, 1980), the remainder ``|r| <= pi/4`` goes through the Taylor series
+    to ``r^17`` and ``r^18`` (truncation below 1e-19), and ``k mod 4`` picks the quadrant.
+    All arithmetic, selects included, is IEEE 754 double, so a vectorised loop gives the same
+    bits as a scalar one."""
+    k = np.rint(angle * (2.0 / math.pi))
+    r = ((angle - k * _HALF_PI_HI) - k * _HALF_PI_MID) - k * _HALF_PI_LO
+    r2 = r * r
+    sr = r + r * r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0 + r2 * (
+        1.0 / 362880.0 + r2 * (-1.0 / 39916800.0 + r2 * (1.0 / 6227020800.0 + r2 * (
+            -1.0 / 1307674368000.0 + r2 * (1.0 / 355687428096000.0))))))))
+    cr = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0 + r2 * (1.0 / 40320.0 + r2 * (
+        -1.0 / 3628800.0 + r2 * (1.0 / 479001600.0 + r2 * (-1.0 / 87178291200.0 + r2 * (
+            1.0 / 20922789888000.0 + r2 * (-1.0 / 6402373705728000.0)))))))))
+    quadrant = k - 4.0 * math.floor(0.25 * k)  # 0, 1, 2 or 3 (NaN for NaN): no integer casts
+    odd = quadrant == 1.0 or quadrant == 3.0
+    c, s = (sr, cr) if odd else (cr, sr)
+    return (-c if quadrant == 1.0 or quadrant == 2.0 else c), (-s if quadrant >= 2.0 else s)
 
 
 def cpa(rel_north_m: np.ndarray, rel_east_m: np.ndarray, rel_vn_mps: np.ndarray,

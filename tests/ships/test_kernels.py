@@ -4,13 +4,15 @@ and engine lags [seed 002, eqs 4.7-4.8]."""
 from __future__ import annotations
 
 import math
+import platform
 
+import numba
 import numpy as np
 import pytest
 
 from tests.conftest import SHARED
 from trafficsim.ships import base, kernels
-from trafficsim.ships.base import PSI, RPS, RUDDER, Actuators, Env, R, U
+from trafficsim.ships.base import PSI, RPS, RUDDER, Actuators, Env, R, U, V
 from trafficsim.ships.library import load_ship
 
 #: a ship of each library family (modular, mmg, nomoto, response) and a second nomoto
@@ -318,3 +320,108 @@ def test_heading_a_hair_west_of_north_wraps_below_two_pi() -> None:
     kernels.step_ships(codes, P, A, x, np.zeros(1), np.array(x[RPS]), base.env_table(Env(), 1),
                        1.0, np.ones(1, dtype=np.int64))
     assert 0.0 <= x[PSI, 0] < 2.0 * math.pi
+
+
+def _states(names: tuple[str, ...], copies: int, rng: np.random.Generator) -> tuple:
+    """``copies`` ships of each of ``names`` in random states, with their tables: headings
+    round the circle (and just either side of north), yaw rates and rudders up to fast turns."""
+    codes, P, A = _table(names)
+    idx = np.tile(np.arange(len(names)), copies)
+    x = _start(names)[:, idx]
+    n = idx.size
+    x[PSI] = rng.uniform(0.0, 2.0 * math.pi, n)
+    x[PSI, :8] = [0.0, 1e-19, np.nextafter(2.0 * math.pi, 0.0), 1e-3, 6.28, 3.0, 0.5, 2.0]
+    x[R] = rng.uniform(-0.05, 0.05, n)
+    x[R, :8] = [-1e-19, -1e-3, 1e-3, -0.01, 0.03, 0.07, -0.07, 0.0]
+    x[RUDDER] = rng.uniform(-0.6, 0.6, n)
+    x[U] *= rng.uniform(0.0, 1.3, n)
+    x[V] = rng.uniform(-0.5, 0.5, n)
+    return codes[idx], P[idx], A[idx], np.array(x, order="C")
+
+
+@pytest.mark.parametrize("substeps", [1, 3])
+def test_vectorised_step_equals_the_scalar_step_to_the_bit(substeps: int) -> None:
+    """With the column tables, Nomoto and response-model ships go through the vectorised loop
+    and the rest (MMG, modular, several sub-steps, fast turns, frozen ships) through the
+    scalar one: every number equals that of the scalar loop alone, over a run of steps of
+    every family mixed, turning both ways through north."""
+    rng = np.random.default_rng(3)
+    codes, P, A, x0 = _states(SHIPS, 60, rng)
+    n = codes.size
+    sub = np.full(n, substeps, dtype=np.int64)
+    sub[::17] = 0  # frozen (a diverged encounter): left as it is
+    env = base.env_table(Env(current_north_mps=0.4, current_east_mps=-0.3, wind_speed_mps=9.0,
+                             wind_from_rad=2.0), n)
+    tables = kernels.vector_tables(codes, P, A)
+    assert tables is not None and tables[0].shape == (6, n) and tables[1].shape == (17, n)
+    vec, ref = x0.copy(), x0.copy()
+    for step in range(40):
+        rudder = rng.uniform(-0.6, 0.6, n)
+        rps = x0[RPS] * rng.uniform(0.5, 1.1, n)
+        kernels.step_ships(codes, P, A, vec, rudder, rps, env, 1.0, sub, tables)
+        kernels.step_ships(codes, P, A, ref, rudder, rps, env, 1.0, sub)
+        np.testing.assert_array_equal(vec, ref, err_msg=f"step {step}")
+    assert np.isfinite(vec).all()
+    assert np.all((vec[PSI] >= 0.0) & (vec[PSI] < 2.0 * math.pi))
+
+
+def test_vector_tables_only_for_the_vectorised_families() -> None:
+    """No table for a batch without Nomoto or response-model ships; as many parameter columns
+    as the widest of those present has; a single family steps the same either way."""
+    codes, P, A = _table(("kvlcc2", "catfish"))
+    assert kernels.vector_tables(codes, P, A) is None
+    rng = np.random.default_rng(4)
+    codes, P, A, x0 = _states(("container",), 50, rng)
+    tables = kernels.vector_tables(codes, P, A)
+    assert tables is not None
+    assert tables[0].shape == (6, 50) and tables[1].shape == (7, 50)
+    codes2, P2, A2 = _table(("bulk_carrier", "kvlcc2"))
+    assert kernels.vector_tables(codes2, P2, A2)[1].shape == (17, 2)
+    env = base.env_table(Env(), 50)
+    sub = np.ones(50, dtype=np.int64)
+    vec, ref = x0.copy(), x0.copy()
+    kernels.step_ships(codes, P, A, vec, x0[RUDDER], x0[RPS], env, 1.0, sub, tables)
+    kernels.step_ships(codes, P, A, ref, x0[RUDDER], x0[RPS], env, 1.0, sub)
+    np.testing.assert_array_equal(vec, ref)
+
+
+def _mask(codes, tables, x, sub) -> np.ndarray:
+    """The ships the vectorised loops leave to the scalar one, on a copy of ``x``."""
+    scalar = np.ones(codes.size, dtype=bool)
+    fn = kernels._vectorised_nomoto if tables[1].shape[0] == 7 else kernels._vectorised_mixed
+    fn(codes, tables[1], tables[0], x.copy(), x[RUDDER], x[RPS],
+       base.env_table(Env(), codes.size), 1.0, sub, scalar)
+    return scalar
+
+
+def test_the_vectorised_loops_leave_the_exceptions_to_the_scalar_one() -> None:
+    """Other families, several sub-steps, frozen ships, a stage turning past the series' reach
+    and a heading far outside [0, 2 pi) go to the scalar loop; the rest do not."""
+    rng = np.random.default_rng(6)
+    codes, P, A, x = _states(SHIPS, 4, rng)
+    tables = kernels.vector_tables(codes, P, A)
+    x[R] = 0.01
+    x[R, 7] = 0.07  # cargo: past the series at dt 1 s
+    x[PSI, 8] = 3e6  # bulk carrier: beyond the reduction of cos_sin
+    sub = np.ones(codes.size, dtype=np.int64)
+    sub[[12, 13]] = [2, 0]  # cargo with two sub-steps, bulk carrier frozen
+    scalar = _mask(codes, tables, x, sub)
+    vectorised = np.isin(codes, [kernels.NOMOTO_CODE, kernels.RESPONSE_CODE])
+    expected = ~vectorised
+    expected[[7, 8, 12, 13]] = True
+    np.testing.assert_array_equal(scalar, expected)
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 instructions")
+def test_the_nomoto_loop_is_vectorised() -> None:
+    """The compiler turns the Nomoto loop into packed (several ships per instruction)
+    divisions: the run-time overlap tests it needs are allowed (trafficsim.jit). Compiled
+    afresh, since cached code cannot be inspected."""
+    rng = np.random.default_rng(5)
+    codes, P, A, x = _states(("container",), 8, rng)
+    tables = kernels.vector_tables(codes, P, A)
+    assert tables is not None
+    fn = numba.njit(error_model="numpy")(kernels._vectorised_nomoto.py_func)
+    fn(codes, tables[1], tables[0], x, x[RUDDER], x[RPS], base.env_table(Env(), codes.size), 1.0,
+       np.ones(codes.size, dtype=np.int64), np.ones(codes.size, dtype=bool))
+    assert "divpd" in fn.inspect_asm(fn.signatures[0])

@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import fields
 
 import numpy as np
 
-from trafficsim.geometry import turned
+from trafficsim.geometry import COS_SIN_MAX_RAD, SERIES_TURN_RAD, cos_sin, turned, turned_by_series
 from trafficsim.jit import inline_kernel, kernel
 from trafficsim.sensors import wrap_2pi_scalar
 from trafficsim.ships import mmg, mmg_berthing, modular, nomoto, response
@@ -27,6 +28,7 @@ from trafficsim.ships.base import RPS, U, gather_ship
 
 #: integer codes of the model families in the compiled dispatch
 FAMILY_CODE = {"nomoto": 0, "response": 1, "mmg": 2, "modular": 3, "mmg_berthing": 4}
+NOMOTO_CODE, RESPONSE_CODE = FAMILY_CODE["nomoto"], FAMILY_CODE["response"]
 #: columns of the actuator table
 RUDDER_MAX, RUDDER_RATE, RUDDER_TAU, RPS_MAX, RPS_MIN, ENGINE_TAU = range(6)
 TWO_PI = 2.0 * math.pi
@@ -92,6 +94,15 @@ def _stage(x: tuple, f: float, k: tuple) -> tuple:
 
 
 @inline_kernel
+def _heading_cos_sin(psi: float) -> tuple[float, float]:
+    """Cosine and sine of a heading: :func:`cos_sin` (libm beyond its reach), so that the
+    scalar and the vectorised step agree to the bit."""
+    if abs(psi) <= COS_SIN_MAX_RAD:
+        return cos_sin(psi)
+    return math.cos(psi), math.sin(psi)
+
+
+@inline_kernel
 def _rk4(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple, rc: float, nc: float,
          env: tuple, h: float, substeps: int) -> tuple:
     """``substeps`` classic RK4 steps of ``h`` of one ship's 8-state ``x`` (a tuple, so that it
@@ -100,7 +111,7 @@ def _rk4(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple, rc: float, 
     half, sixth = 0.5 * h, h / 6.0
     for _ in range(substeps):
         # one cosine and sine of the heading per step; the stages turn them (turned)
-        c, s = math.cos(x[2]), math.sin(x[2])
+        c, s = _heading_cos_sin(x[2])
         k1 = _derivative(accel_fn, p, a, x, c, s, rc, nc, env)
         c2, s2 = turned(c, s, half * k1[2])
         k2 = _derivative(accel_fn, p, a, _stage(x, half, k1), c2, s2, rc, nc, env)
@@ -119,36 +130,178 @@ def _rk4(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple, rc: float, 
     return x
 
 
+@inline_kernel
+def _step_ship(i: int, codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
+               rudder_cmd: np.ndarray, rps_cmd: np.ndarray, E: np.ndarray, dt: float,
+               substeps: np.ndarray) -> None:
+    """Advance ship ``i`` of :func:`step_ships` in place."""
+    x = (X[0, i], X[1, i], X[2, i], X[3, i], X[4, i], X[5, i], X[6, i], X[7, i])
+    env = (E[0, i], E[1, i], E[2, i], E[3, i])
+    code, p, a = codes[i], P[i], A[i]
+    rc, nc = rudder_cmd[i], rps_cmd[i]
+    m = substeps[i]
+    h = dt / m
+    if code == 0:
+        x = _rk4(nomoto.accel, p, a, x, rc, nc, env, h, m)
+    elif code == 1:
+        x = _rk4(response.accel, p, a, x, rc, nc, env, h, m)
+    elif code == 2:
+        x = _rk4(mmg.accel, p, a, x, rc, nc, env, h, m)
+    elif code == 4:
+        x = _rk4(mmg_berthing.accel, p, a, x, rc, nc, env, h, m)
+    else:
+        x = _rk4(modular.accel, p, a, x, rc, nc, env, h, m)
+    X[0, i], X[1, i], X[2, i], X[3, i] = x[0], x[1], wrap_2pi_scalar(x[2]), x[3]
+    X[4, i], X[5, i], X[6, i], X[7, i] = x[4], x[5], x[6], x[7]
+
+
+#: the families whose step is vectorised (codes 0 and 1), and their numbers of parameters
+VECTORISED = {"nomoto": len(fields(nomoto.NomotoParams)),
+              "response": len(fields(response.ResponseParams))}
+N_NOMOTO_PARAMS = VECTORISED["nomoto"]
+
+
+def vector_tables(codes: np.ndarray, P: np.ndarray, A: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The tables of :func:`step_ships` column by column for its vectorised step: actuators
+    ``(6, n)`` and the leading parameter columns ``(k, n)``, as many as the widest vectorised
+    family present has (7 Nomoto, 17 response model); None when no ship belongs to a
+    vectorised family. Make them once per batch: the parameters do not change while it
+    runs."""
+    codes, P = np.asarray(codes), np.asarray(P, dtype=float)
+    present = [k for name, k in VECTORISED.items() if np.any(codes == FAMILY_CODE[name])]
+    if not present:
+        return None
+    return (np.ascontiguousarray(np.asarray(A, dtype=float).T),
+            np.ascontiguousarray(P[:, :max(present)].T))
+
+
 @kernel
 def step_ships(codes: np.ndarray, P: np.ndarray, A: np.ndarray, X: np.ndarray,
                rudder_cmd: np.ndarray, rps_cmd: np.ndarray, E: np.ndarray, dt: float,
-               substeps: np.ndarray) -> None:
+               substeps: np.ndarray, tables: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> None:
     """Advance every ship by ``dt`` in place (RK4, ``substeps[i]`` equal steps for ship i).
 
     Args:
         codes: ``(n,)`` family codes; P: ``(n, k)`` packed parameters; A: ``(n, 6)`` actuators.
         X: ``(8, n)`` state, updated in place; rudder_cmd (rad), rps_cmd (rev/s): ``(n,)``.
         E: ``(4, n)`` environment rows (current north, current east, wind speed, wind from).
+        tables: :func:`vector_tables` of ``codes, P, A``: the ships of the Nomoto and
+            response families with one RK4 step then go through a vectorised loop
+            (:func:`_vectorised`: the same numbers to the bit, several times faster), the
+            others through the scalar one.
     """
+    n = X.shape[1]
+    if tables is None:
+        for i in range(n):
+            _step_ship(i, codes, P, A, X, rudder_cmd, rps_cmd, E, dt, substeps)
+    else:
+        scalar = np.ones(n, dtype=np.bool_)
+        AT, PT = tables
+        if PT.shape[0] == N_NOMOTO_PARAMS:
+            _vectorised_nomoto(codes, PT, AT, X, rudder_cmd, rps_cmd, E, dt, substeps, scalar)
+        else:
+            _vectorised_mixed(codes, PT, AT, X, rudder_cmd, rps_cmd, E, dt, substeps, scalar)
+        for i in range(n):
+            if scalar[i]:
+                _step_ship(i, codes, P, A, X, rudder_cmd, rps_cmd, E, dt, substeps)
+
+
+@inline_kernel
+def _vectorised(accel_fn: Callable, row_fn: Callable, max_code: int, codes: np.ndarray,
+                PT: np.ndarray, AT: np.ndarray, X: np.ndarray, rudder_cmd: np.ndarray,
+                rps_cmd: np.ndarray, E: np.ndarray, dt: float, substeps: np.ndarray,
+                scalar: np.ndarray) -> None:
+    """One RK4 step of ``dt`` of every ship of a family code up to ``max_code`` with one
+    sub-step, as :func:`_step_ship` takes it, in a loop the compiler vectorises: parameters
+    read column by column (``PT``, ``AT``; ``row_fn`` gives the code and the parameters as one
+    tuple, ``accel_fn`` takes it), the heading's cosine and sine from :func:`cos_sin`, the
+    stages' turns by series alone, selects instead of branches. Every ship is computed; only
+    those the loop takes exactly are stored and cleared in ``scalar`` (not: another family,
+    several sub-steps, a stage turning more than ``SERIES_TURN_RAD``, a heading far outside
+    ``[0, 2 pi)``)."""
+    h = dt
+    half, sixth = 0.5 * h, h / 6.0
     for i in range(X.shape[1]):
         x = (X[0, i], X[1, i], X[2, i], X[3, i], X[4, i], X[5, i], X[6, i], X[7, i])
         env = (E[0, i], E[1, i], E[2, i], E[3, i])
-        code, p, a = codes[i], P[i], A[i]
+        p = row_fn(codes, PT, i)
+        a = (AT[0, i], AT[1, i], AT[2, i], AT[3, i], AT[4, i], AT[5, i])
         rc, nc = rudder_cmd[i], rps_cmd[i]
-        m = substeps[i]
-        h = dt / m
-        if code == 0:
-            x = _rk4(nomoto.accel, p, a, x, rc, nc, env, h, m)
-        elif code == 1:
-            x = _rk4(response.accel, p, a, x, rc, nc, env, h, m)
-        elif code == 2:
-            x = _rk4(mmg.accel, p, a, x, rc, nc, env, h, m)
-        elif code == 4:
-            x = _rk4(mmg_berthing.accel, p, a, x, rc, nc, env, h, m)
-        else:
-            x = _rk4(modular.accel, p, a, x, rc, nc, env, h, m)
-        X[0, i], X[1, i], X[2, i], X[3, i] = x[0], x[1], wrap_2pi_scalar(x[2]), x[3]
-        X[4, i], X[5, i], X[6, i], X[7, i] = x[4], x[5], x[6], x[7]
+        c, s = cos_sin(x[2])
+        k1 = _derivative(accel_fn, p, a, x, c, s, rc, nc, env)
+        c2, s2 = turned_by_series(c, s, half * k1[2])
+        k2 = _derivative(accel_fn, p, a, _stage(x, half, k1), c2, s2, rc, nc, env)
+        c3, s3 = turned_by_series(c, s, half * k2[2])
+        k3 = _derivative(accel_fn, p, a, _stage(x, half, k2), c3, s3, rc, nc, env)
+        c4, s4 = turned_by_series(c, s, h * k3[2])
+        k4 = _derivative(accel_fn, p, a, _stage(x, h, k3), c4, s4, rc, nc, env)
+        psi = x[2] + sixth * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
+        turn = max(abs(half * k1[2]), max(abs(half * k2[2]), abs(h * k3[2])))
+        ok = ((codes[i] >= 0) & (codes[i] <= max_code) & (substeps[i] == 1)
+              & (turn <= SERIES_TURN_RAD) & (psi > -TWO_PI) & (psi < 2.0 * TWO_PI)
+              & (abs(x[2]) <= COS_SIN_MAX_RAD))
+        if ok:
+            scalar[i] = False
+            # wrap_2pi_scalar of an angle in (-2 pi, 4 pi): the same bits (x - 2 pi is exact)
+            w = psi + TWO_PI if psi < 0.0 else (psi - TWO_PI if psi >= TWO_PI else psi + 0.0)
+            X[2, i] = 0.0 if w >= TWO_PI else w
+            X[0, i] = x[0] + sixth * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+            X[1, i] = x[1] + sixth * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+            X[3, i] = x[3] + sixth * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
+            X[4, i] = x[4] + sixth * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
+            X[5, i] = x[5] + sixth * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
+            X[6, i] = x[6] + sixth * (k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6])
+            X[7, i] = x[7] + sixth * (k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7])
+
+
+@inline_kernel
+def _nomoto_row(codes: np.ndarray, PT: np.ndarray, i: int) -> tuple:
+    """Ship ``i``'s family code and Nomoto parameters from their columns."""
+    return (float(codes[i]), PT[0, i], PT[1, i], PT[2, i], PT[3, i], PT[4, i], PT[5, i],
+            PT[6, i])
+
+
+@inline_kernel
+def _mixed_row(codes: np.ndarray, PT: np.ndarray, i: int) -> tuple:
+    """Ship ``i``'s family code and the 17 leading columns of its parameters."""
+    return (float(codes[i]), PT[0, i], PT[1, i], PT[2, i], PT[3, i], PT[4, i], PT[5, i],
+            PT[6, i], PT[7, i], PT[8, i], PT[9, i], PT[10, i], PT[11, i], PT[12, i], PT[13, i],
+            PT[14, i], PT[15, i], PT[16, i])
+
+
+@inline_kernel
+def _nomoto_accel(row: tuple, x: tuple, env: tuple) -> tuple[float, float, float]:
+    """:func:`nomoto.accel` of a :func:`_nomoto_row`."""
+    return nomoto.accel(row[1:], x, env)
+
+
+@inline_kernel
+def _mixed_accel(row: tuple, x: tuple, env: tuple) -> tuple[float, float, float]:
+    """The accelerations of a :func:`_mixed_row`'s family: both are worked out (a select is
+    cheaper than a branch in a vectorised loop; the other's numbers are discarded)."""
+    by_nomoto = nomoto.accel(row[1:], x, env)
+    by_response = response.accel(row[1:], x, env)
+    return by_nomoto if row[0] == NOMOTO_CODE else by_response
+
+
+@kernel
+def _vectorised_nomoto(codes: np.ndarray, PT: np.ndarray, AT: np.ndarray, X: np.ndarray,
+                       rudder_cmd: np.ndarray, rps_cmd: np.ndarray, E: np.ndarray, dt: float,
+                       substeps: np.ndarray, scalar: np.ndarray) -> None:
+    """:func:`_vectorised` for a batch whose vectorised ships are all Nomoto ships."""
+    _vectorised(_nomoto_accel, _nomoto_row, NOMOTO_CODE, codes, PT, AT, X, rudder_cmd,
+                rps_cmd, E, dt, substeps, scalar)
+
+
+@kernel
+def _vectorised_mixed(codes: np.ndarray, PT: np.ndarray, AT: np.ndarray, X: np.ndarray,
+                      rudder_cmd: np.ndarray, rps_cmd: np.ndarray, E: np.ndarray, dt: float,
+                      substeps: np.ndarray, scalar: np.ndarray) -> None:
+    """:func:`_vectorised` for Nomoto and response-model ships together."""
+    _vectorised(_mixed_accel, _mixed_row, max(NOMOTO_CODE, RESPONSE_CODE), codes, PT, AT, X,
+                rudder_cmd, rps_cmd, E, dt, substeps, scalar)
 
 
 @kernel
