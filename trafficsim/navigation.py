@@ -69,7 +69,7 @@ import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.estimation import adaptive, ekf, fusion, gating, pv
-from trafficsim.geometry import cos_sin
+from trafficsim.geometry import turned
 from trafficsim.jit import kernel
 from trafficsim.noise import NoiseBank, normal_from, uniform_from
 from trafficsim.sensors import (
@@ -190,6 +190,9 @@ class Navigation:
     banks: dict[str, NoiseBank]
     dt: float
     est: np.ndarray
+    #: (3, n) a heading (rad) of each ship's estimate and its cosine and sine: the pv filter
+    #: turns them to the next estimate (geometry.turned) instead of calling libm
+    heading_trig: np.ndarray
     ekf_idx: np.ndarray | None = None  # ships using the ekf filter
     ekf_p: Any = None  # ekf.EkfParams of those ships
     ekf_model: Any = None  # ekf.ShipModel of those ships
@@ -282,8 +285,8 @@ class Navigation:
         # filters start converged one step before the first fix, so the first update
         # predicts to the time of the first fix
         vel = _earth_velocity(x)
-        pv_s = _by_ship_last(pv.init(pv_p, x[NORTH] - vel[0] * dt, x[EAST] - vel[1] * dt,
-                                     vel[0], vel[1], converged=True))
+        pv_s = pv.init(pv_p, x[NORTH] - vel[0] * dt, x[EAST] - vel[1] * dt, vel[0], vel[1],
+                       converged=True)
         heading_sp = column(nav_cfg, "heading_sp_rad2ps3", DEFAULT_HEADING_SP, "navigation",
                             minimum=0.0, strictly=True)
         heading_gain = pv.steady_state_gain(np.maximum(compass_p.sigma_rad, 1e-6), heading_sp, dt)
@@ -332,7 +335,7 @@ class Navigation:
             gate_p=_gate_params(section("gate")),
             gate_rejections=gating.init_state(n),
             heading_est=np.stack([x[PSI] - x[R] * dt, x[R].copy()]), banks=banks, dt=dt,
-            est=est,
+            est=est, heading_trig=np.stack([np.zeros(n), np.ones(n), np.zeros(n)]),
             ekf_idx=ekf_idx, ekf_p=ekf_p, ekf_model=ekf_model, ekf_s=ekf_s,
             ekf_rejections=gating.init_state(ekf_idx.size),
             has_waves=any(c.get("waves") for c in configs),
@@ -393,11 +396,11 @@ class Navigation:
             fused_valid = np.ascontiguousarray(self.fused.valid)
             fused_sigma = np.sqrt(self._fused_variance(self.fused, rows))
         est = np.empty((N_EST, n))
-        ps = self.pv_s = _by_ship_last(self.pv_s)
+        ps = self.pv_s
         _pv_filter(x, self.gnss_p.has_lever_arm, t.arm, t.filt, t.max_rejections,
                    self.filter_pv, t.multi_row, fix_n, fix_e, valid, heading, fused_n, fused_e,
-                   fused_valid, fused_sigma, ps.x.T, np.moveaxis(ps.P, 0, -1),
-                   self.gate_rejections, est)
+                   fused_valid, fused_sigma, ps.x, ps.P, self.gate_rejections, ps.x, ps.P,
+                   self.gate_rejections, est, self.heading_trig)
         self.est = est
         if self.ekf_idx is not None and self.ekf_idx.size:
             self.est[:, self.ekf_idx] = self._ekf_update(x, env)
@@ -635,10 +638,10 @@ class _StepTables:
     key: tuple[Any, ...]  # the parameter objects they were gathered from
     wave: np.ndarray  # (n, 10) transition, noise factor and gains (_W*)
     gnss: np.ndarray  # (n, 7) receiver 1 (_G_*)
-    arm: np.ndarray  # (2, n) antenna lever arm x, y, m
+    arm: np.ndarray  # (n, 2) antenna lever arm x, y, m
     compass: np.ndarray  # (n, 6) compass and heading filter (_C_*, _H_*)
     deviation: np.ndarray  # (n, 5) deviation coefficients A..E, rad
-    filt: np.ndarray  # (6, n) pv filter and gate (_F_*)
+    filt: np.ndarray  # (n, 5) pv filter and gate (_F_*)
     every: np.ndarray  # (n,) int64 GNSS fix interval, steps
     bandpass: np.ndarray  # (n,) bool wave output z2 (else z1)
     max_rejections: np.ndarray  # (n,) int64
@@ -655,10 +658,6 @@ class _StepTables:
             return np.ascontiguousarray(np.stack([np.reshape(v, n) for v in columns], axis=1),
                                         dtype=float)
 
-        def by_column(*columns: np.ndarray) -> np.ndarray:  # (for a vectorised loop)
-            return np.ascontiguousarray(np.stack([np.reshape(v, n) for v in columns]),
-                                        dtype=float)
-
         multi_row = np.full(n, -1, dtype=np.int64)
         multi_row[nav.multi_idx] = np.arange(nav.multi_idx.size)
         return cls(
@@ -667,12 +666,12 @@ class _StepTables:
                        w.gain[:, waves.YAW], w.gain[:, waves.SURGE], w.gain[:, waves.SWAY]),
             gnss=table(g.sigma_m, g.gm_a, g.gm_q, g.gross_prob, g.gross_size_m, g.p_start,
                        g.p_end),
-            arm=by_column(g.antenna_x_m, g.antenna_y_m),
+            arm=table(g.antenna_x_m, g.antenna_y_m),
             compass=table(c.sigma_rad, c.bias_rad, c.drift_a, c.drift_q, nav.heading_gain[:, 0],
                           nav.heading_gain[:, 1]),
             deviation=table(c.dev_a, c.dev_b, c.dev_c, c.dev_d, c.dev_e),
-            filt=by_column(p.sigma_m, p.sp, p.dt_s, gate.threshold, gate.reopen_factor,
-                           gate.metres),
+            filt=table(p.sigma_m, p.sp, p.dt_s, gate.threshold, gate.reopen_factor,
+                       gate.metres),
             every=np.ascontiguousarray(g.every, dtype=np.int64),
             bandpass=np.ascontiguousarray(np.reshape(w.bandpass, n), dtype=bool),
             max_rejections=np.ascontiguousarray(gate.max_rejections, dtype=np.int64),
@@ -760,7 +759,7 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
         jump = gtab[i, _G_GROSS_M] if gross_i else 0.0
         north, east = x[NORTH, i], x[EAST, i]
         if lever:  # p + R(psi) r_a [seed 003, eq 5]
-            ax, ay = arm[0, i], arm[1, i]
+            ax, ay = arm[i, 0], arm[i, 1]
             north = north + (ax * c_hull - ay * s_hull)
             east = east + (ax * s_hull + ay * c_hull)
         if has_waves:
@@ -803,11 +802,13 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
 
 @kernel
 def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
-               max_rejections: np.ndarray, filter_pv: np.ndarray, multi_row: np.ndarray,
-               fix_n: np.ndarray, fix_e: np.ndarray, valid: np.ndarray, heading: np.ndarray,
-               fused_n: np.ndarray, fused_e: np.ndarray, fused_valid: np.ndarray,
-               fused_sigma: np.ndarray, xs: np.ndarray, Ps: np.ndarray, rejections: np.ndarray,
-               est: np.ndarray) -> None:
+               max_rejections: np.ndarray,
+               filter_pv: np.ndarray, multi_row: np.ndarray, fix_n: np.ndarray,
+               fix_e: np.ndarray, valid: np.ndarray, heading: np.ndarray, fused_n: np.ndarray,
+               fused_e: np.ndarray, fused_valid: np.ndarray, fused_sigma: np.ndarray,
+               x0: np.ndarray, P0: np.ndarray, rejections0: np.ndarray, x_out: np.ndarray,
+               P_out: np.ndarray, rejections: np.ndarray, est: np.ndarray,
+               trig: np.ndarray) -> None:
     """Per ship: the fix moved to the reference point [seed 003, eq 5] (or the fused fix of
     ``multi_row``), pv predict [seed 000, eqs 3-4], the gate [seed 002, 6.6], pv update
     [seed 000, recursion steps 2-3], restart on a genuine jump and the estimate.
@@ -818,86 +819,78 @@ def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
     :func:`~trafficsim.estimation.gating.distance` for a window in metres) and
     :func:`trafficsim.estimation.pv.update`. ``heading`` ``(2, n)`` the heading filter's
     output; ``fused_*`` ``(m,)`` rows of the ships with several receivers (m; m2 as sigma);
-    the pv state ``xs`` ``(4, n)``, ``Ps`` ``(2, 2, 2, n)`` (a
-    :class:`~trafficsim.estimation.pv.PVState` with the ship last: :func:`_by_ship_last`) and
-    the gate's ``rejections`` ``(n,)`` are updated in place; ``est`` ``(6, n)`` out: the pv
-    estimate of the ``filter_pv`` ships, truth for the others.
-
-    A first pass puts the fused fixes of the ships with several receivers and the opened
-    windows (after a rejection: a power of the reopen factor) in place; the filter itself is
-    one loop the compiler vectorises (the heading's cosine and sine from :func:`cos_sin`,
-    selects instead of branches).
+    ``est`` ``(6, n)`` out: the pv estimate of the ``filter_pv`` ships, truth for the others;
+    ``trig`` ``(3, n)`` :attr:`Navigation.heading_trig`, in place: the heading's cosine and sine
+    come from the last ones turned by the heading's change (a step's turn: series, exact to
+    rounding; the error of the chain grows as the square root of the steps, 1e-13 after a
+    million).
     """
-    n = x.shape[1]
-    ref_n, ref_e, ok, sigma = fix_n.copy(), fix_e.copy(), valid.copy(), tab[_F_SIGMA].copy()
-    window = tab[_F_THRESHOLD].copy()  # reopen_factor ** 0 = 1, also for an infinite factor
-    for i in range(n):
+    for i in range(x.shape[1]):
+        psi = heading[0, i]
+        ref_n, ref_e, ok, sigma = fix_n[i], fix_e[i], valid[i], tab[i, _F_SIGMA]
+        c = s = 0.0
+        if lever or filter_pv[i]:  # for the lever arm and the body-frame velocity
+            c, s = turned(trig[1, i], trig[2, i], psi - trig[0, i])
+            trig[0, i], trig[1, i], trig[2, i] = psi, c, s
+        if lever:
+            ax, ay = arm[i, 0], arm[i, 1]
+            ref_n, ref_e = ref_n - (ax * c - ay * s), ref_e - (ax * s + ay * c)
         k = multi_row[i]
         if k >= 0:
-            ref_n[i], ref_e[i], ok[i], sigma[i] = fused_n[k], fused_e[k], fused_valid[k], \
-                fused_sigma[k]
-        if rejections[i]:
-            window[i] = window[i] * tab[_F_REOPEN, i] ** float(rejections[i])
-    for i in range(n):
-        psi = heading[0, i]
-        c, s = cos_sin(psi)  # for the lever arm and the body-frame velocity
-        zn, ze = ref_n[i], ref_e[i]
-        if lever and multi_row[i] < 0:  # (a fused fix is at the reference point already)
-            ax, ay = arm[0, i], arm[1, i]
-            zn, ze = zn - (ax * c - ay * s), ze - (ax * s + ay * c)
-        dt, q = tab[_F_DT, i], tab[_F_SP, i]
-        pos_n = xs[pv.POS_N, i] + dt * xs[pv.VEL_N, i]
-        pos_e = xs[pv.POS_E, i] + dt * xs[pv.VEL_E, i]
-        vel_n, vel_e = xs[pv.VEL_N, i], xs[pv.VEL_E, i]
-        qdt3, qdt2, qdt = q * (dt * dt * dt) / 3.0, 0.5 * q * dt * dt, q * dt
-        pp_n = Ps[0, 0, 0, i] + 2.0 * dt * Ps[0, 0, 1, i] + dt * dt * Ps[0, 1, 1, i] + qdt3
-        pv_n = Ps[0, 0, 1, i] + dt * Ps[0, 1, 1, i] + qdt2
-        vv_n = Ps[0, 1, 1, i] + qdt
-        pp_e = Ps[1, 0, 0, i] + 2.0 * dt * Ps[1, 0, 1, i] + dt * dt * Ps[1, 1, 1, i] + qdt3
-        pv_e = Ps[1, 0, 1, i] + dt * Ps[1, 1, 1, i] + qdt2
-        vv_e = Ps[1, 1, 1, i] + qdt
-        r = sigma[i] * sigma[i]
+            ref_n, ref_e, ok, sigma = fused_n[k], fused_e[k], fused_valid[k], fused_sigma[k]
+        dt, q = tab[i, _F_DT], tab[i, _F_SP]
+        x_out[i, pv.POS_N] = x0[i, pv.POS_N] + dt * x0[i, pv.VEL_N]
+        x_out[i, pv.POS_E] = x0[i, pv.POS_E] + dt * x0[i, pv.VEL_E]
+        x_out[i, pv.VEL_N] = x0[i, pv.VEL_N]
+        x_out[i, pv.VEL_E] = x0[i, pv.VEL_E]
+        for a in range(2):
+            pp, pv_, vv = P0[i, a, pv.POS, pv.POS], P0[i, a, pv.POS, pv.VEL], P0[i, a, pv.VEL,
+                                                                                  pv.VEL]
+            P_out[i, a, pv.POS, pv.POS] = pp + 2.0 * dt * pv_ + dt * dt * vv + q * dt**3 / 3.0
+            P_out[i, a, pv.POS, pv.VEL] = pv_ + dt * vv + 0.5 * q * dt * dt
+            P_out[i, a, pv.VEL, pv.POS] = P_out[i, a, pv.POS, pv.VEL]
+            P_out[i, a, pv.VEL, pv.VEL] = vv + q * dt
+        r = sigma * sigma
         # gate on the normalised innovation, or on the distance for a window in metres
-        nu_n, nu_e = zn - pos_n, ze - pos_e
-        metres = math.sqrt(nu_n * nu_n + nu_e * nu_e)
-        normalised = math.sqrt(nu_n * nu_n / (pp_n + r) + nu_e * nu_e / (pp_e + r))
-        d = (metres if tab[_F_METRES, i] else normalised) if ok[i] else math.nan
+        d = math.nan
+        if ok:
+            nu_n, nu_e = ref_n - x_out[i, pv.POS_N], ref_e - x_out[i, pv.POS_E]
+            if tab[i, _F_METRES]:
+                d = math.sqrt(nu_n * nu_n + nu_e * nu_e)
+            else:
+                d = math.sqrt(nu_n * nu_n / (P_out[i, pv.AXIS_NORTH, pv.POS, pv.POS] + r)
+                              + nu_e * nu_e / (P_out[i, pv.AXIS_EAST, pv.POS, pv.POS] + r))
+        window = tab[i, _F_THRESHOLD]  # reopen_factor ** 0 = 1, also for an infinite factor
+        if rejections0[i]:
+            window = window * tab[i, _F_REOPEN] ** float(rejections0[i])
         have = not math.isnan(d)  # (as gating.gate: only NaN means no fix)
-        accept = have and d <= window[i]
+        accept = have and d <= window
         reject = have and not accept
-        count = 0 if accept else rejections[i] + (1 if reject else 0)
+        count = 0 if accept else rejections0[i] + (1 if reject else 0)
         restart = reject and count >= max_rejections[i]
         rejections[i] = 0 if restart else count
         if accept:
-            s_n, s_e = pp_n + r, pp_e + r
-            pos_n, vel_n = pos_n + pp_n / s_n * nu_n, vel_n + pv_n / s_n * nu_n
-            pos_e, vel_e = pos_e + pp_e / s_e * nu_e, vel_e + pv_e / s_e * nu_e
-            pp_n, pv_n, vv_n = pp_n * r / s_n, pv_n * r / s_n, vv_n - pv_n * pv_n / s_n
-            pp_e, pv_e, vv_e = pp_e * r / s_e, pv_e * r / s_e, vv_e - pv_e * pv_e / s_e
+            for a in range(2):
+                pos, vel = (pv.POS_N, pv.VEL_N) if a == 0 else (pv.POS_E, pv.VEL_E)
+                z = ref_n if a == 0 else ref_e
+                pp, pv_, vv = (P_out[i, a, pv.POS, pv.POS], P_out[i, a, pv.POS, pv.VEL],
+                               P_out[i, a, pv.VEL, pv.VEL])
+                s_ = pp + r
+                nu = z - x_out[i, pos]
+                x_out[i, pos] += pp / s_ * nu
+                x_out[i, vel] += pv_ / s_ * nu
+                P_out[i, a, pv.POS, pv.POS] = pp * r / s_
+                P_out[i, a, pv.POS, pv.VEL] = P_out[i, a, pv.VEL, pv.POS] = pv_ * r / s_
+                P_out[i, a, pv.VEL, pv.VEL] = vv - pv_ * pv_ / s_
         if restart:  # genuine jump: restart on the fix, keep the velocity
-            pos_n, pos_e = zn, ze
-        xs[pv.POS_N, i], xs[pv.POS_E, i], xs[pv.VEL_N, i], xs[pv.VEL_E, i] = (pos_n, pos_e,
-                                                                              vel_n, vel_e)
-        Ps[0, 0, 0, i], Ps[0, 1, 1, i], Ps[0, 0, 1, i], Ps[0, 1, 0, i] = pp_n, vv_n, pv_n, pv_n
-        Ps[1, 0, 0, i], Ps[1, 1, 1, i], Ps[1, 0, 1, i], Ps[1, 1, 0, i] = pp_e, vv_e, pv_e, pv_e
-        mine = filter_pv[i]  # (else truth)
-        est[0, i] = pos_n if mine else x[0, i]
-        est[1, i] = pos_e if mine else x[1, i]
-        est[2, i] = psi if mine else x[2, i]
-        est[3, i] = vel_n * c + vel_e * s if mine else x[3, i]
-        est[4, i] = -vel_n * s + vel_e * c if mine else x[4, i]
-        est[5, i] = heading[1, i] if mine else x[5, i]
-
-
-def _by_ship_last(state: pv.PVState) -> pv.PVState:
-    """``state`` held with the ship as the last axis in memory (its arrays are views of
-    ``(4, n)`` and ``(2, 2, 2, n)`` C-ordered ones), as :func:`_pv_filter` takes it: a copy
-    where it is not already."""
-    if state.x.T.flags.c_contiguous and np.moveaxis(state.P, 0, -1).flags.c_contiguous:
-        return state
-    x = np.ascontiguousarray(state.x.T, dtype=float)
-    P = np.ascontiguousarray(np.moveaxis(state.P, 0, -1), dtype=float)
-    return pv.PVState(x=x.T, P=np.moveaxis(P, -1, 0))
+            x_out[i, pv.POS_N], x_out[i, pv.POS_E] = ref_n, ref_e
+        if filter_pv[i]:
+            vn, ve = x_out[i, pv.VEL_N], x_out[i, pv.VEL_E]
+            est[0, i], est[1, i], est[2, i] = x_out[i, pv.POS_N], x_out[i, pv.POS_E], psi
+            est[3, i], est[4, i], est[5, i] = vn * c + ve * s, -vn * s + ve * c, heading[1, i]
+        else:
+            for row in range(N_EST):
+                est[row, i] = x[row, i]
 
 
 def _adaptive_configs(nav_cfg: Sequence[Mapping[str, Any]]) -> list[dict[str, Any] | None]:
