@@ -430,7 +430,7 @@ _INF_CHILD = """
 import sys
 import numpy as np
 from trafficsim.estimation import linalg
-linalg.van_loan(np.eye(2)[None], np.eye(2)[None], 1.0)
+linalg.van_loan(np.zeros((2, 2, 2)), np.eye(2), 1.0)  # (compiled for the types below)
 print("ready", flush=True)
 F = np.zeros((2, 2, 2))
 F[1, 0, 1], F[1, 1, 0] = np.inf, 1.0
