@@ -272,19 +272,11 @@ class Decider:
 
     def _memory_features(self, t_s: float, other: np.ndarray,
                          route_course_rad: np.ndarray) -> None:
-        has_role = self._mem("own_role") != NO_ROLE
-        cog = np.arctan2(other[3], other[2])
-        sog = np.hypot(other[2], other[3])
-        self._mem("time_in_role_min")[:] = np.where(has_role, (t_s - self.role_since_s) / 60.0,
-                                                    0.0)
-        change = np.abs((cog - self.other_cog_at_role + math.pi) % (2 * math.pi) - math.pi)
-        self._mem("other_course_change_deg")[:] = np.where(has_role, np.degrees(change), 0.0)
-        ratio = sog / np.maximum(self.other_sog_at_role, 1e-6)
-        self._mem("other_speed_change_ratio")[:] = np.where(has_role, ratio, 1.0)
-        own = np.where(np.isnan(self.course_order_rad), 0.0,
-                       (self.course_order_rad - route_course_rad + math.pi) % (2 * math.pi)
-                       - math.pi)
-        self._mem("own_course_change_deg")[:] = np.degrees(own)[self.obs]
+        _memory_rows(float(t_s), self._mem("own_role"), self.role_since_s,
+                     self.other_cog_at_role, self.other_sog_at_role, other,
+                     self.course_order_rad, route_course_rad, self.obs,
+                     self._mem("time_in_role_min"), self._mem("other_course_change_deg"),
+                     self._mem("other_speed_change_ratio"), self._mem("own_course_change_deg"))
 
     def _merge(self, idx: np.ndarray, dec: network.Decision, t_s: float,
                other: np.ndarray) -> None:
@@ -350,19 +342,14 @@ class Decider:
         position along the route course. Ships start on their route, so the first model is the
         first leg.
         """
-        e = self._cross_track_m(own_state)
-        predicted = self.line_course_rad - np.arctan(e / (LOOKAHEAD_L * length_m))
-        off = np.abs((predicted - route_course_rad + math.pi) % (2 * math.pi) - math.pi)
-        new = ~(off <= _LINE_TOL_RAD)  # NaN (no model yet) included
-        self.line_north_m[new] = own_state[0, new]
-        self.line_east_m[new] = own_state[1, new]
-        self.line_course_rad[new] = route_course_rad[new]
+        _route_line_model(own_state[0], own_state[1], length_m, route_course_rad,
+                          self.line_north_m, self.line_east_m, self.line_course_rad)
 
-    def _cross_track_m(self, own_state: np.ndarray) -> np.ndarray:
-        """``(n,)`` distance of each ship from its route line model, m (+ = starboard of it)."""
-        c = self.line_course_rad
-        return (-(own_state[0] - self.line_north_m) * np.sin(c)
-                + (own_state[1] - self.line_east_m) * np.cos(c))
+    def _cross_track_m(self, own_state: np.ndarray, ships: np.ndarray) -> np.ndarray:
+        """Distance of each of ``ships`` from its route line model, m (+ = starboard of it)."""
+        c = self.line_course_rad[ships]
+        return (-(own_state[0, ships] - self.line_north_m[ships]) * np.sin(c)
+                + (own_state[1, ships] - self.line_east_m[ships]) * np.cos(c))
 
     def _resume(self, ships_mask: np.ndarray, own_state: np.ndarray, own_vel: np.ndarray,
                 other: np.ndarray, route_course_rad: np.ndarray,
@@ -404,7 +391,7 @@ class Decider:
         ps = slot[o[pairs]]
         route = route_course_rad[r]
         chi = self.line_course_rad[r]
-        e = self._cross_track_m(own_state)[r]
+        e = self._cross_track_m(own_state, r)
         ordered = np.where(np.isnan(self.course_order_rad[r]), route, self.course_order_rad[r])
         slow = np.where(self.speed_factor[r] < 1.0, self.speed_factor[r], DEFAULT_SLOW_FACTOR)
         c = np.ascontiguousarray
@@ -449,11 +436,12 @@ class Decider:
         self.kept_distance_m[idle] = 0.0
         if ships.size == 0:
             return
-        start = np.isnan(self.base_course_rad[ships])
+        start = ships[np.isnan(self.base_course_rad[ships])]
         # the course over ground, the heading where the ship barely moves (features module)
-        course_now = np.where(np.hypot(own_vel[0], own_vel[1]) < features.COURSE_MIN_SPEED_MPS,
-                              own_state[2], np.arctan2(own_vel[1], own_vel[0]))
-        self.base_course_rad[ships[start]] = course_now[ships[start]]
+        vn, ve = own_vel[0, start], own_vel[1, start]
+        self.base_course_rad[start] = np.where(
+            np.hypot(vn, ve) < features.COURSE_MIN_SPEED_MPS, own_state[2, start],
+            np.arctan2(ve, vn))
         slot = np.full(n, -1, dtype=np.int64)
         slot[ships] = np.arange(ships.size)
         pairs = np.flatnonzero(slot[o] >= 0)
@@ -535,6 +523,57 @@ class Decider:
         """Blind spots as records: ship, other ship, role, time first seen."""
         return [{"ship": names[b.ship], "other": names[b.other], "role": b.role,
                  "from_s": b.from_s} for b in self.blind_spots]
+
+
+_DEG_PER_RAD = 180.0 / math.pi  # (the factor of np.degrees)
+
+
+@kernel
+def _signed_turn(a: float) -> float:
+    """``(a + pi) % (2 pi) - pi`` as numpy evaluates it (floored remainder)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@kernel
+def _memory_rows(t_s: float, own_role: np.ndarray, role_since_s: np.ndarray,
+                 cog_at_role: np.ndarray, sog_at_role: np.ndarray, other: np.ndarray,
+                 course_order_rad: np.ndarray, route_course_rad: np.ndarray, obs: np.ndarray,
+                 time_in_role_min: np.ndarray, other_course_change_deg: np.ndarray,
+                 other_speed_change_ratio: np.ndarray, own_course_change_deg: np.ndarray) -> None:
+    """The memory features of every directed pair, in place: minutes in the present role, the
+    other ship's change of course (deg) and speed (ratio) since the role was taken (0 and 1
+    without a role), and the observer's ordered course change from its route (deg, 0 on the
+    route). ``other`` ``(4, m)``: what the observer knows of the other ship."""
+    for k in range(obs.shape[0]):
+        has_role = own_role[k] != NO_ROLE
+        cog = math.atan2(other[3, k], other[2, k])
+        sog = math.hypot(other[2, k], other[3, k])
+        time_in_role_min[k] = (t_s - role_since_s[k]) / 60.0 if has_role else 0.0
+        change = abs(_signed_turn(cog - cog_at_role[k]))
+        other_course_change_deg[k] = change * _DEG_PER_RAD if has_role else 0.0
+        floor = sog_at_role[k] if sog_at_role[k] >= 1e-6 or math.isnan(sog_at_role[k]) else 1e-6
+        other_speed_change_ratio[k] = sog / floor if has_role else 1.0
+        i = obs[k]
+        order = course_order_rad[i]
+        own = 0.0 if math.isnan(order) else _signed_turn(order - route_course_rad[i])
+        own_course_change_deg[k] = own * _DEG_PER_RAD
+
+
+@kernel
+def _route_line_model(north: np.ndarray, east: np.ndarray, length_m: np.ndarray,
+                      route_course_rad: np.ndarray, line_north_m: np.ndarray,
+                      line_east_m: np.ndarray, line_course_rad: np.ndarray) -> None:
+    """:meth:`Decider._route_line` over ships, in place: the course guidance would steer on
+    the line model, ``chi_leg - atan(e / Delta)``, against the route course asked now; off
+    by more than :data:`_LINE_TOL_RAD` (or no model yet), the model restarts through the
+    ship's position along the route course."""
+    for i in range(north.shape[0]):
+        c = line_course_rad[i]
+        e = -(north[i] - line_north_m[i]) * math.sin(c) + (east[i] - line_east_m[i]) * math.cos(c)
+        predicted = c - math.atan(e / (LOOKAHEAD_L * length_m[i]))
+        if not abs(_signed_turn(predicted - route_course_rad[i])) <= _LINE_TOL_RAD:
+            line_north_m[i], line_east_m[i] = north[i], east[i]
+            line_course_rad[i] = route_course_rad[i]
 
 
 @kernel
