@@ -115,6 +115,37 @@ def cos_sin(angle: float) -> tuple[float, float]:
     return (-c if quadrant == 1.0 or quadrant == 2.0 else c), (-s if quadrant >= 2.0 else s)
 
 
+#: arctangent reduction: breakpoints tan(j pi / 12) and their angles, and the thresholds
+#: tan((2 j - 1) pi / 24) between them (:func:`atan`)
+_ATAN_POINTS = tuple(math.tan(j * math.pi / 12.0) for j in range(4))
+_ATAN_ANGLES = tuple(j * math.pi / 12.0 for j in range(4))
+_ATAN_SPLITS = tuple(math.tan((2 * j - 1) * math.pi / 24.0) for j in range(1, 4))
+
+
+@inline_kernel
+def atan(x: float) -> float:
+    """Arctangent of ``x`` within two units in the last place of libm's, without a call (a
+    loop that calls it can be vectorised). ``|x| > 1`` goes through ``pi/2 - atan(1/|x|)``;
+    ``t`` in ``[0, 1]`` through ``atan t = j pi/12 + atan u``, ``u = (t - c_j) / (1 + t c_j)``
+    with ``c_j = tan(j pi/12)`` the nearest breakpoint, so ``|u| <= tan(pi/24) = 0.132``,
+    and ``atan u`` is its Taylor series to ``u^21`` (truncation below 1e-21). Selects, no
+    branches."""
+    a = abs(x)
+    big = a > 1.0
+    t = 1.0 / a if big else a
+    j1, j2, j3 = t > _ATAN_SPLITS[0], t > _ATAN_SPLITS[1], t > _ATAN_SPLITS[2]
+    c = _ATAN_POINTS[3] if j3 else (_ATAN_POINTS[2] if j2 else (_ATAN_POINTS[1] if j1 else 0.0))
+    base = _ATAN_ANGLES[3] if j3 else (_ATAN_ANGLES[2] if j2 else (_ATAN_ANGLES[1] if j1 else 0.0))
+    u = (t - c) / (1.0 + t * c)
+    u2 = u * u
+    series = u + u * u2 * (-1.0 / 3.0 + u2 * (1.0 / 5.0 + u2 * (-1.0 / 7.0 + u2 * (
+        1.0 / 9.0 + u2 * (-1.0 / 11.0 + u2 * (1.0 / 13.0 + u2 * (-1.0 / 15.0 + u2 * (
+            1.0 / 17.0 + u2 * (-1.0 / 19.0 + u2 * (1.0 / 21.0))))))))))
+    angle = base + series
+    angle = math.pi / 2.0 - angle if big else angle
+    return -angle if x < 0.0 else angle
+
+
 def cpa(rel_north_m: np.ndarray, rel_east_m: np.ndarray, rel_vn_mps: np.ndarray,
         rel_ve_mps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distance and time to the closest point of approach for straight-line motion.

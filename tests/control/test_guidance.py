@@ -1,8 +1,11 @@
 import math
+import platform
 
+import numba
 import numpy as np
 import pytest
 
+from trafficsim.control import guidance
 from trafficsim.control.guidance import LOOKAHEAD_L, TURN_RADIUS_L, RouteState, desired_course
 
 
@@ -119,7 +122,7 @@ def test_wheel_over_distance_is_the_tangent_circle_geometry(turn_deg):
         c = desired_course(r, wp, n, np.array([2000.0 - to_go]), np.zeros(1), np.array([L]))
         assert r.wp_index[0] == index, to_go
         if index == 1:  # on the next leg, from the waypoint: its course, LOS-corrected
-            np.testing.assert_array_equal(r.leg_start[0], wp[0, 0])
+            np.testing.assert_array_equal(r.leg_start[:, 0], wp[0, 0])
             leg = math.atan2(wp[0, 1, 1] - wp[0, 0, 1], wp[0, 1, 0] - wp[0, 0, 0])
             e = to_go * math.sin(d)  # signed offset of the ship from the new leg line
             assert abs(_wrapdiff(c[0], leg - math.atan(e / (LOOKAHEAD_L * L)))) < 1e-9
@@ -263,3 +266,18 @@ def test_a_route_of_only_the_start_point_holds_the_start_heading():
     r = RouteState.start(np.array([100.0]), np.array([200.0]), np.array([2.0]))
     c = desired_course(r, wp, n, np.array([100.0]), np.array([200.0]), np.array([100.0]))
     assert c[0] == 2.0 and r.wp_index[0] == 2
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"), reason="x86 instructions")
+def test_the_loop_over_ships_on_a_leg_is_vectorised() -> None:
+    """The steering of ships on a leg compiles to packed (several ships per instruction)
+    divisions. Compiled afresh, since cached code cannot be inspected."""
+    n = 16
+    rng = np.random.default_rng(2)
+    north, east, psi = rng.uniform(-1e4, 1e4, (3, n))
+    route = guidance.RouteState.start(north, east, psi)
+    fresh = numba.njit(error_model="numpy")(guidance._desired_course.py_func)
+    fresh(route.leg_start, route.wp_index, route.hold_course_rad, route.leg, route.leg_index,
+          rng.uniform(-3e4, 3e4, (n, 2, 2)), np.full(n, 2), north, east, np.full(n, 100.0),
+          np.empty(n))
+    assert "divpd" in fresh.inspect_asm(fresh.signatures[0])

@@ -9,9 +9,9 @@ turning radius and dchi the course change at the waypoint (the geometry of a cir
 tangent to both legs). After the last waypoint the ship holds the last leg's course. A
 waypoint that repeats the point before it (or the start) has no leg and is passed over.
 
-One compiled loop over ships (:func:`_desired_course`); no Python loop per ship. The constants of
+Compiled loops over ships (:func:`_desired_course`); no Python loop per ship. The constants of
 a ship's current leg (course, direction, length, wheel-over distance) are worked out when it
-starts the leg and kept, so a step costs one arctangent per ship.
+starts the leg and kept, so a step costs one arctangent per ship, in a vectorised loop.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from trafficsim.geometry import atan
 from trafficsim.jit import kernel
 
 #: look-ahead distance and turning radius in ship lengths
@@ -34,11 +35,13 @@ class RouteState:
     """Progress of every ship along its route, ``(n,)`` arrays.
 
     Attributes:
-        leg_start: ``(n, 2)`` north/east of the current leg's start, m.
+        leg_start: ``(2, n)`` north/east of the current leg's start, m.
         wp_index: index of the waypoint being steered to (== n_waypoints when the route is done).
         hold_course_rad: course held when there is no (more) route.
-        leg: ``(n, 5)`` constants of the current leg: course (rad), north and east extent (m),
+        leg: ``(5, n)`` constants of the current leg: course (rad), north and east extent (m),
             length (m), distance to go at which the ship wheels over (m).
+
+    Stored one row per quantity, so that the loop over ships on a leg is vectorised.
         leg_index: waypoint index ``leg`` was worked out for (-1: not yet).
     """
 
@@ -51,8 +54,8 @@ class RouteState:
     @classmethod
     def start(cls, north_m: np.ndarray, east_m: np.ndarray, heading_rad: np.ndarray) -> RouteState:
         n = np.shape(north_m)[0]
-        return cls(np.stack([north_m, east_m], axis=1), np.zeros(n, np.int64),
-                   np.asarray(heading_rad, dtype=float).copy(), np.zeros((n, 5)),
+        return cls(np.stack([north_m, east_m]).astype(float), np.zeros(n, np.int64),
+                   np.asarray(heading_rad, dtype=float).copy(), np.zeros((5, n)),
                    np.full(n, -1, np.int64))
 
 
@@ -97,7 +100,7 @@ def _leg(i: int, k: int, leg_start: np.ndarray, waypoints: np.ndarray, n_waypoin
     """Constants of ship ``i``'s leg to waypoint ``k`` (:class:`RouteState`), a waypoint apart
     from the leg's start; the turn at its end is towards the next waypoint apart from it."""
     tn, te = waypoints[i, k, 0], waypoints[i, k, 1]
-    ln, le = tn - leg_start[i, 0], te - leg_start[i, 1]
+    ln, le = tn - leg_start[0, i], te - leg_start[1, i]
     course = math.atan2(le, ln)
     turn = 0.0
     j = _next_distinct(i, k + 1, tn, te, waypoints, n_waypoints)
@@ -105,9 +108,9 @@ def _leg(i: int, k: int, leg_start: np.ndarray, waypoints: np.ndarray, n_waypoin
         nn, ne = waypoints[i, j, 0] - tn, waypoints[i, j, 1] - te
         turn = abs(_wrap(math.atan2(ne, nn) - course))
     wheel_over = TURN_RADIUS_L * length[i] * math.tan(min(turn, _MAX_TURN) / 2.0)
-    leg[i, 0], leg[i, 1], leg[i, 2] = course, ln, le
-    leg[i, 3] = max(math.hypot(ln, le), 1e-9)
-    leg[i, 4] = max(wheel_over, 0.5 * length[i])
+    leg[0, i], leg[1, i], leg[2, i] = course, ln, le
+    leg[3, i] = max(math.hypot(ln, le), 1e-9)
+    leg[4, i] = max(wheel_over, 0.5 * length[i])
     leg_index[i] = k
 
 
@@ -117,7 +120,7 @@ def _enter(i: int, k: int, leg_start: np.ndarray, wp_index: np.ndarray,
            leg_index: np.ndarray) -> int:
     """Start ship ``i``'s leg to waypoint ``k``, skipping waypoints that repeat the leg's start
     (a leg of no length has no course); returns the waypoint steered to."""
-    k = _next_distinct(i, k, leg_start[i, 0], leg_start[i, 1], waypoints, n_waypoints)
+    k = _next_distinct(i, k, leg_start[0, i], leg_start[1, i], waypoints, n_waypoints)
     wp_index[i] = k
     if k < n_waypoints[i]:
         _leg(i, k, leg_start, waypoints, n_waypoints, length, leg, leg_index)
@@ -129,21 +132,54 @@ def _desired_course(leg_start: np.ndarray, wp_index: np.ndarray, hold: np.ndarra
                     leg: np.ndarray, leg_index: np.ndarray, waypoints: np.ndarray,
                     n_waypoints: np.ndarray, north: np.ndarray, east: np.ndarray,
                     length: np.ndarray, out: np.ndarray) -> None:
-    for i in range(north.shape[0]):
+    """The ships steering along a leg they are on, or holding a course after their route, in
+    a loop the compiler vectorises (:func:`trafficsim.geometry.atan`); then, one by one, those
+    that start a leg or wheel over onto the next (a step or two per leg)."""
+    n = north.shape[0]
+    turning = np.empty(n, dtype=np.bool_)
+    for i in range(n):
         k = wp_index[i]
-        if k < n_waypoints[i] and leg_index[i] != k:
-            k = _enter(i, k, leg_start, wp_index, waypoints, n_waypoints, length, leg, leg_index)
-        if k < n_waypoints[i]:
-            rn, re = north[i] - leg_start[i, 0], east[i] - leg_start[i, 1]
-            to_go = leg[i, 3] - (rn * leg[i, 1] + re * leg[i, 2]) / leg[i, 3]
-            if to_go <= leg[i, 4]:  # wheel over: next leg (held as the course if the last)
-                hold[i] = leg[i, 0]
-                leg_start[i, 0], leg_start[i, 1] = waypoints[i, k, 0], waypoints[i, k, 1]
-                k = _enter(i, k + 1, leg_start, wp_index, waypoints, n_waypoints, length, leg,
-                           leg_index)
-        if k < n_waypoints[i]:
-            rn, re = north[i] - leg_start[i, 0], east[i] - leg_start[i, 1]
-            cross = (-rn * leg[i, 2] + re * leg[i, 1]) / leg[i, 3]  # + = starboard of the leg
-            out[i] = leg[i, 0] - math.atan(cross / (LOOKAHEAD_L * length[i]))
-        else:
-            out[i] = hold[i]
+        on_route = k < n_waypoints[i]
+        rn, re = north[i] - leg_start[0, i], east[i] - leg_start[1, i]
+        to_go = leg[3, i] - (rn * leg[1, i] + re * leg[2, i]) / leg[3, i]
+        turning[i] = on_route and (leg_index[i] != k or to_go <= leg[4, i])
+        if not turning[i]:
+            out[i] = _line_of_sight(leg[0, i], leg[1, i], leg[2, i], leg[3, i], rn, re,
+                                    length[i]) if on_route else hold[i]
+    for i in range(n):
+        if turning[i]:
+            _turning_ship(i, leg_start, wp_index, hold, leg, leg_index, waypoints, n_waypoints,
+                          north, east, length, out)
+
+
+@kernel
+def _line_of_sight(course: float, ln: float, le: float, leg_length: float, rn: float,
+                   re: float, length: float) -> float:
+    """Course on a leg (``course``, extent ``ln, le``) for a ship at ``rn, re`` from its start:
+    the leg course less the arctangent of the cross-track error over the look-ahead."""
+    cross = (-rn * le + re * ln) / leg_length  # + = starboard of the leg
+    return course - atan(cross / (LOOKAHEAD_L * length))
+
+
+@kernel
+def _turning_ship(i: int, leg_start: np.ndarray, wp_index: np.ndarray, hold: np.ndarray,
+                  leg: np.ndarray, leg_index: np.ndarray, waypoints: np.ndarray,
+                  n_waypoints: np.ndarray, north: np.ndarray, east: np.ndarray,
+                  length: np.ndarray, out: np.ndarray) -> None:
+    """Ship ``i`` of :func:`_desired_course` starting a leg or at its wheel-over point."""
+    k = wp_index[i]
+    if k < n_waypoints[i] and leg_index[i] != k:
+        k = _enter(i, k, leg_start, wp_index, waypoints, n_waypoints, length, leg, leg_index)
+    if k < n_waypoints[i]:
+        rn, re = north[i] - leg_start[0, i], east[i] - leg_start[1, i]
+        to_go = leg[3, i] - (rn * leg[1, i] + re * leg[2, i]) / leg[3, i]
+        if to_go <= leg[4, i]:  # wheel over: next leg (held as the course if the last)
+            hold[i] = leg[0, i]
+            leg_start[0, i], leg_start[1, i] = waypoints[i, k, 0], waypoints[i, k, 1]
+            k = _enter(i, k + 1, leg_start, wp_index, waypoints, n_waypoints, length, leg,
+                       leg_index)
+    if k < n_waypoints[i]:
+        rn, re = north[i] - leg_start[0, i], east[i] - leg_start[1, i]
+        out[i] = _line_of_sight(leg[0, i], leg[1, i], leg[2, i], leg[3, i], rn, re, length[i])
+    else:
+        out[i] = hold[i]
