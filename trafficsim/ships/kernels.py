@@ -103,30 +103,41 @@ def _heading_cos_sin(psi: float) -> tuple[float, float]:
 
 
 @inline_kernel
+def _rk4_step(accel_fn: Callable, turn_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple,
+              c: float, s: float, rc: float, nc: float, env: tuple, h: float) -> tuple:
+    """One classic RK4 step of ``h`` of one ship's 8-state ``x`` whose heading has cosine and
+    sine ``c, s``: the stages turn them by their change of heading (``turn_fn``:
+    :func:`turned`, or :func:`turned_by_series` where the caller checks the turn). Returns the
+    new state (heading not wrapped) and the largest turn of a stage."""
+    half, sixth = 0.5 * h, h / 6.0
+    k1 = _derivative(accel_fn, p, a, x, c, s, rc, nc, env)
+    c2, s2 = turn_fn(c, s, half * k1[2])
+    k2 = _derivative(accel_fn, p, a, _stage(x, half, k1), c2, s2, rc, nc, env)
+    c3, s3 = turn_fn(c, s, half * k2[2])
+    k3 = _derivative(accel_fn, p, a, _stage(x, half, k2), c3, s3, rc, nc, env)
+    c4, s4 = turn_fn(c, s, h * k3[2])
+    k4 = _derivative(accel_fn, p, a, _stage(x, h, k3), c4, s4, rc, nc, env)
+    new = (x[0] + sixth * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
+           x[1] + sixth * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
+           x[2] + sixth * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]),
+           x[3] + sixth * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3]),
+           x[4] + sixth * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4]),
+           x[5] + sixth * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5]),
+           x[6] + sixth * (k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6]),
+           x[7] + sixth * (k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7]))
+    return new, max(abs(half * k1[2]), max(abs(half * k2[2]), abs(h * k3[2])))
+
+
+@inline_kernel
 def _rk4(accel_fn: Callable, p: np.ndarray, a: np.ndarray, x: tuple, rc: float, nc: float,
          env: tuple, h: float, substeps: int) -> tuple:
     """``substeps`` classic RK4 steps of ``h`` of one ship's 8-state ``x`` (a tuple, so that it
     stays in registers); returns the new state. Written once and compiled once per family
     (``accel_fn``), so a ship's four derivative evaluations carry no family dispatch."""
-    half, sixth = 0.5 * h, h / 6.0
     for _ in range(substeps):
         # one cosine and sine of the heading per step; the stages turn them (turned)
         c, s = _heading_cos_sin(x[2])
-        k1 = _derivative(accel_fn, p, a, x, c, s, rc, nc, env)
-        c2, s2 = turned(c, s, half * k1[2])
-        k2 = _derivative(accel_fn, p, a, _stage(x, half, k1), c2, s2, rc, nc, env)
-        c3, s3 = turned(c, s, half * k2[2])
-        k3 = _derivative(accel_fn, p, a, _stage(x, half, k2), c3, s3, rc, nc, env)
-        c4, s4 = turned(c, s, h * k3[2])
-        k4 = _derivative(accel_fn, p, a, _stage(x, h, k3), c4, s4, rc, nc, env)
-        x = (x[0] + sixth * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
-             x[1] + sixth * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
-             x[2] + sixth * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]),
-             x[3] + sixth * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3]),
-             x[4] + sixth * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4]),
-             x[5] + sixth * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5]),
-             x[6] + sixth * (k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6]),
-             x[7] + sixth * (k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7]))
+        x, _ = _rk4_step(accel_fn, turned, p, a, x, c, s, rc, nc, env, h)
     return x
 
 
@@ -221,24 +232,14 @@ def _vectorised(accel_fn: Callable, row_fn: Callable, max_code: int, codes: np.n
     those the loop takes exactly are stored and cleared in ``scalar`` (not: another family,
     several sub-steps, a stage turning more than ``SERIES_TURN_RAD``, a heading far outside
     ``[0, 2 pi)``)."""
-    h = dt
-    half, sixth = 0.5 * h, h / 6.0
     for i in range(X.shape[1]):
         x = (X[0, i], X[1, i], X[2, i], X[3, i], X[4, i], X[5, i], X[6, i], X[7, i])
         env = (E[0, i], E[1, i], E[2, i], E[3, i])
-        p = row_fn(codes, PT, i)
         a = (AT[0, i], AT[1, i], AT[2, i], AT[3, i], AT[4, i], AT[5, i])
-        rc, nc = rudder_cmd[i], rps_cmd[i]
         c, s = cos_sin(x[2])
-        k1 = _derivative(accel_fn, p, a, x, c, s, rc, nc, env)
-        c2, s2 = turned_by_series(c, s, half * k1[2])
-        k2 = _derivative(accel_fn, p, a, _stage(x, half, k1), c2, s2, rc, nc, env)
-        c3, s3 = turned_by_series(c, s, half * k2[2])
-        k3 = _derivative(accel_fn, p, a, _stage(x, half, k2), c3, s3, rc, nc, env)
-        c4, s4 = turned_by_series(c, s, h * k3[2])
-        k4 = _derivative(accel_fn, p, a, _stage(x, h, k3), c4, s4, rc, nc, env)
-        psi = x[2] + sixth * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2])
-        turn = max(abs(half * k1[2]), max(abs(half * k2[2]), abs(h * k3[2])))
+        new, turn = _rk4_step(accel_fn, turned_by_series, row_fn(codes, PT, i), a, x, c, s,
+                              rudder_cmd[i], rps_cmd[i], env, dt)
+        psi = new[2]
         ok = ((codes[i] >= 0) & (codes[i] <= max_code) & (substeps[i] == 1)
               & (turn <= SERIES_TURN_RAD) & (psi > -TWO_PI) & (psi < 2.0 * TWO_PI)
               & (abs(x[2]) <= COS_SIN_MAX_RAD))
@@ -246,14 +247,8 @@ def _vectorised(accel_fn: Callable, row_fn: Callable, max_code: int, codes: np.n
             scalar[i] = False
             # wrap_2pi_scalar of an angle in (-2 pi, 4 pi): the same bits (x - 2 pi is exact)
             w = psi + TWO_PI if psi < 0.0 else (psi - TWO_PI if psi >= TWO_PI else psi + 0.0)
-            X[2, i] = 0.0 if w >= TWO_PI else w
-            X[0, i] = x[0] + sixth * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
-            X[1, i] = x[1] + sixth * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
-            X[3, i] = x[3] + sixth * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3])
-            X[4, i] = x[4] + sixth * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4])
-            X[5, i] = x[5] + sixth * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5])
-            X[6, i] = x[6] + sixth * (k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6])
-            X[7, i] = x[7] + sixth * (k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7])
+            X[0, i], X[1, i], X[2, i], X[3, i] = new[0], new[1], 0.0 if w >= TWO_PI else w, new[3]
+            X[4, i], X[5, i], X[6, i], X[7, i] = new[4], new[5], new[6], new[7]
 
 
 @inline_kernel
