@@ -52,7 +52,7 @@ class Simulation:
     substeps: np.ndarray  # (n,) RK4 sub-steps per time step
     #: the parameter tables column by column for the vectorised step (None: no ship of a
     #: vectorised family)
-    vector_tables: tuple[np.ndarray, np.ndarray, np.ndarray] | None
+    vector_tables: tuple[np.ndarray, np.ndarray] | None
     nav: Navigation | None = None  # instruments and filters; None = perfect knowledge
     obs: Observation | None = None  # radar, AIS and tracks of other ships
     decider: Decider | None = None  # collision avoidance; None = every ship follows its route

@@ -56,7 +56,7 @@ from trafficsim.colregs.vocabulary import (
     STARBOARD,
     VOCABULARY,
 )
-from trafficsim.control.guidance import LOOKAHEAD_L
+from trafficsim.control.guidance import LOOKAHEAD_L, signed_angle
 from trafficsim.errors import InputError
 from trafficsim.geometry import hypot_below
 from trafficsim.jit import kernel
@@ -529,12 +529,6 @@ _DEG_PER_RAD = 180.0 / math.pi  # (the factor of np.degrees)
 
 
 @kernel
-def _signed_turn(a: float) -> float:
-    """``(a + pi) % (2 pi) - pi`` as numpy evaluates it (floored remainder)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-@kernel
 def _memory_rows(t_s: float, own_role: np.ndarray, role_since_s: np.ndarray,
                  cog_at_role: np.ndarray, sog_at_role: np.ndarray, other: np.ndarray,
                  course_order_rad: np.ndarray, route_course_rad: np.ndarray, obs: np.ndarray,
@@ -549,13 +543,13 @@ def _memory_rows(t_s: float, own_role: np.ndarray, role_since_s: np.ndarray,
         cog = math.atan2(other[3, k], other[2, k])
         sog = math.hypot(other[2, k], other[3, k])
         time_in_role_min[k] = (t_s - role_since_s[k]) / 60.0 if has_role else 0.0
-        change = abs(_signed_turn(cog - cog_at_role[k]))
+        change = abs(signed_angle(cog - cog_at_role[k]))
         other_course_change_deg[k] = change * _DEG_PER_RAD if has_role else 0.0
         floor = sog_at_role[k] if sog_at_role[k] >= 1e-6 or math.isnan(sog_at_role[k]) else 1e-6
         other_speed_change_ratio[k] = sog / floor if has_role else 1.0
         i = obs[k]
         order = course_order_rad[i]
-        own = 0.0 if math.isnan(order) else _signed_turn(order - route_course_rad[i])
+        own = 0.0 if math.isnan(order) else signed_angle(order - route_course_rad[i])
         own_course_change_deg[k] = own * _DEG_PER_RAD
 
 
@@ -571,7 +565,7 @@ def _route_line_model(north: np.ndarray, east: np.ndarray, length_m: np.ndarray,
         c = line_course_rad[i]
         e = -(north[i] - line_north_m[i]) * math.sin(c) + (east[i] - line_east_m[i]) * math.cos(c)
         predicted = c - math.atan(e / (LOOKAHEAD_L * length_m[i]))
-        if not abs(_signed_turn(predicted - route_course_rad[i])) <= _LINE_TOL_RAD:
+        if not abs(signed_angle(predicted - route_course_rad[i])) <= _LINE_TOL_RAD:
             line_north_m[i], line_east_m[i] = north[i], east[i]
             line_course_rad[i] = route_course_rad[i]
 

@@ -40,9 +40,9 @@ class RouteState:
         hold_course_rad: course held when there is no (more) route.
         leg: ``(5, n)`` constants of the current leg: course (rad), north and east extent (m),
             length (m), distance to go at which the ship wheels over (m).
+        leg_index: waypoint index ``leg`` was worked out for (-1: not yet).
 
     Stored one row per quantity, so that the loop over ships on a leg is vectorised.
-        leg_index: waypoint index ``leg`` was worked out for (-1: not yet).
     """
 
     leg_start: np.ndarray
@@ -75,7 +75,8 @@ def desired_course(route: RouteState, waypoints: np.ndarray, n_waypoints: np.nda
 
 
 @kernel
-def _wrap(a: float) -> float:
+def signed_angle(a: float) -> float:
+    """``a`` wrapped to [-pi, pi) as numpy's floored remainder gives it, rad."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
@@ -106,7 +107,7 @@ def _leg(i: int, k: int, leg_start: np.ndarray, waypoints: np.ndarray, n_waypoin
     j = _next_distinct(i, k + 1, tn, te, waypoints, n_waypoints)
     if j < n_waypoints[i]:
         nn, ne = waypoints[i, j, 0] - tn, waypoints[i, j, 1] - te
-        turn = abs(_wrap(math.atan2(ne, nn) - course))
+        turn = abs(signed_angle(math.atan2(ne, nn) - course))
     wheel_over = TURN_RADIUS_L * length[i] * math.tan(min(turn, _MAX_TURN) / 2.0)
     leg[0, i], leg[1, i], leg[2, i] = course, ln, le
     leg[3, i] = max(math.hypot(ln, le), 1e-9)
@@ -141,8 +142,7 @@ def _desired_course(leg_start: np.ndarray, wp_index: np.ndarray, hold: np.ndarra
         k = wp_index[i]
         on_route = k < n_waypoints[i]
         rn, re = north[i] - leg_start[0, i], east[i] - leg_start[1, i]
-        to_go = leg[3, i] - (rn * leg[1, i] + re * leg[2, i]) / leg[3, i]
-        turning[i] = on_route and (leg_index[i] != k or to_go <= leg[4, i])
+        turning[i] = on_route and (leg_index[i] != k or _to_go(leg, i, rn, re) <= leg[4, i])
         if not turning[i]:
             out[i] = _line_of_sight(leg[0, i], leg[1, i], leg[2, i], leg[3, i], rn, re,
                                     length[i]) if on_route else hold[i]
@@ -150,6 +150,12 @@ def _desired_course(leg_start: np.ndarray, wp_index: np.ndarray, hold: np.ndarra
         if turning[i]:
             _turning_ship(i, leg_start, wp_index, hold, leg, leg_index, waypoints, n_waypoints,
                           north, east, length, out)
+
+
+@kernel
+def _to_go(leg: np.ndarray, i: int, rn: float, re: float) -> float:
+    """Distance along ship ``i``'s leg from ``rn, re`` (from the leg's start) to its end, m."""
+    return leg[3, i] - (rn * leg[1, i] + re * leg[2, i]) / leg[3, i]
 
 
 @kernel
@@ -172,8 +178,7 @@ def _turning_ship(i: int, leg_start: np.ndarray, wp_index: np.ndarray, hold: np.
         k = _enter(i, k, leg_start, wp_index, waypoints, n_waypoints, length, leg, leg_index)
     if k < n_waypoints[i]:
         rn, re = north[i] - leg_start[0, i], east[i] - leg_start[1, i]
-        to_go = leg[3, i] - (rn * leg[1, i] + re * leg[2, i]) / leg[3, i]
-        if to_go <= leg[4, i]:  # wheel over: next leg (held as the course if the last)
+        if _to_go(leg, i, rn, re) <= leg[4, i]:  # wheel over: next leg (held if the last)
             hold[i] = leg[0, i]
             leg_start[0, i], leg_start[1, i] = waypoints[i, k, 0], waypoints[i, k, 1]
             k = _enter(i, k + 1, leg_start, wp_index, waypoints, n_waypoints, length, leg,

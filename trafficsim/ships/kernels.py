@@ -226,8 +226,8 @@ def _vectorised(accel_fn: Callable, row_fn: Callable, max_code: int, codes: np.n
                 scalar: np.ndarray) -> None:
     """One RK4 step of ``dt`` of every ship of a family code up to ``max_code`` with one
     sub-step, as :func:`_step_ship` takes it, in a loop the compiler vectorises: parameters
-    read column by column (``PT``, ``AT``; ``row_fn`` gives the code and the parameters as one
-    tuple, ``accel_fn`` takes it), the heading's cosine and sine from :func:`cos_sin`, the
+    read column by column (``PT``, ``AT``; ``row_fn`` gives them as one tuple, ``accel_fn``
+    takes it), the heading's cosine and sine from :func:`cos_sin`, the
     stages' turns by series alone, selects instead of branches. Every ship is computed; only
     those the loop takes exactly are stored and cleared in ``scalar`` (not: another family,
     several sub-steps, a stage turning more than ``SERIES_TURN_RAD``, a heading far outside
@@ -253,9 +253,8 @@ def _vectorised(accel_fn: Callable, row_fn: Callable, max_code: int, codes: np.n
 
 @inline_kernel
 def _nomoto_row(codes: np.ndarray, PT: np.ndarray, i: int) -> tuple:
-    """Ship ``i``'s family code and Nomoto parameters from their columns."""
-    return (float(codes[i]), PT[0, i], PT[1, i], PT[2, i], PT[3, i], PT[4, i], PT[5, i],
-            PT[6, i])
+    """Ship ``i``'s Nomoto parameters from their columns."""
+    return (PT[0, i], PT[1, i], PT[2, i], PT[3, i], PT[4, i], PT[5, i], PT[6, i])
 
 
 @inline_kernel
@@ -264,12 +263,6 @@ def _mixed_row(codes: np.ndarray, PT: np.ndarray, i: int) -> tuple:
     return (float(codes[i]), PT[0, i], PT[1, i], PT[2, i], PT[3, i], PT[4, i], PT[5, i],
             PT[6, i], PT[7, i], PT[8, i], PT[9, i], PT[10, i], PT[11, i], PT[12, i], PT[13, i],
             PT[14, i], PT[15, i], PT[16, i])
-
-
-@inline_kernel
-def _nomoto_accel(row: tuple, x: tuple, env: tuple) -> tuple[float, float, float]:
-    """:func:`nomoto.accel` of a :func:`_nomoto_row`."""
-    return nomoto.accel(row[1:], x, env)
 
 
 @inline_kernel
@@ -286,7 +279,7 @@ def _vectorised_nomoto(codes: np.ndarray, PT: np.ndarray, AT: np.ndarray, X: np.
                        rudder_cmd: np.ndarray, rps_cmd: np.ndarray, E: np.ndarray, dt: float,
                        substeps: np.ndarray, scalar: np.ndarray) -> None:
     """:func:`_vectorised` for a batch whose vectorised ships are all Nomoto ships."""
-    _vectorised(_nomoto_accel, _nomoto_row, NOMOTO_CODE, codes, PT, AT, X, rudder_cmd,
+    _vectorised(nomoto.accel, _nomoto_row, NOMOTO_CODE, codes, PT, AT, X, rudder_cmd,
                 rps_cmd, E, dt, substeps, scalar)
 
 
