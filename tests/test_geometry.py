@@ -2,12 +2,13 @@ import math
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from trafficsim import geometry
 from trafficsim.geometry import (
     NORM_MARGIN,
+    atan2,
     cpa,
     hull_outlines,
     hulls_overlap,
@@ -256,3 +257,27 @@ def test_atan_is_within_two_ulp_of_libm() -> None:
     nan = np.empty(1)
     _atan_all(np.array([math.nan]), nan)
     assert math.isnan(nan[0])
+
+
+def test_atan2_matches_the_library_everywhere():
+    rng = np.random.default_rng(7)
+    n = 200_000
+    y = rng.normal(size=n) * 10.0 ** rng.uniform(-9, 9, n)
+    x = rng.normal(size=n) * 10.0 ** rng.uniform(-9, 9, n)
+    err = max(abs(atan2(a, b) - math.atan2(a, b)) for a, b in zip(y, x, strict=True))
+    assert err < 2e-15
+    # the axes, the diagonals and the octant edges
+    for deg in np.arange(-180.0, 180.01, 22.5):
+        a = math.radians(deg)
+        assert atan2(math.sin(a), math.cos(a)) == pytest.approx(math.atan2(math.sin(a),
+                                                                               math.cos(a)),
+                                                                    abs=2e-15)
+    assert atan2(0.0, -1.0) == math.pi and atan2(0.0, 0.0) == 0.0
+    assert math.isnan(atan2(math.nan, 1.0)) and math.isnan(atan2(1.0, math.nan))
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.floats(-1e12, 1e12, allow_nan=False), st.floats(-1e12, 1e12, allow_nan=False))
+def test_atan2_property(y, x):
+    assume(x != 0.0 or y != 0.0)
+    assert atan2(y, x) == pytest.approx(math.atan2(y, x), abs=2e-15)

@@ -146,6 +146,48 @@ def atan(x: float) -> float:
     return -angle if x < 0.0 else angle
 
 
+#: atan(w) = w + w s P(s) with s = w^2 for |w| <= tan(pi/8): coefficients of P (ascending) from
+#: a least-squares Chebyshev fit of degree 9 made for this function; within 5e-16 rad of atan
+_ATAN_P = (-0.3333333333333615, 0.20000000000716178, -0.14285714342138997, 0.1111111301933719,
+           -0.09090936282868968, 0.07692291193467717, -0.06660746235832808,
+           0.057962791232318185, -0.04660571794469063, 0.024962770517444693)
+_A0, _A1, _A2, _A3, _A4, _A5, _A6, _A7, _A8, _A9 = _ATAN_P
+_TAN_PI_8 = math.tan(math.pi / 8.0)
+_PI_4, _PI_2 = math.pi / 4.0, math.pi / 2.0
+
+
+@kernel
+def atan2(y: float, x: float) -> float:
+    """``atan2(y, x)`` in [-pi, pi] to within about 1e-15 rad, several times faster than libm's.
+
+    The three angles per pair dominated the decision features' pair loop with the library
+    function (it also serves the radar's bearings and the AIS course). Reduction: the
+    octant by symmetry, then ``atan(z) = pi/4 + atan((z - 1)/(z + 1))`` above tan(pi/8), so the
+    polynomial :data:`_ATAN_P` only sees ``|w| <= tan(pi/8)``. Written with selects rather than
+    branches: the octant of random geometry is unpredictable, and mispredicted branches cost more
+    than the arithmetic. ``(0, 0)`` gives 0, the sign of the result is the sign bit of ``y`` (as
+    ``math.copysign``), NaN gives NaN.
+    """
+    if math.isnan(x) or math.isnan(y):
+        return math.nan
+    ax, ay = abs(x), abs(y)
+    mx, mn = max(ax, ay), min(ax, ay)
+    if mx == 0.0:
+        return 0.0
+    far = 1.0 if mn > _TAN_PI_8 * mx else 0.0
+    w = (mn - far * mx) / (mx + far * mn)
+    s = w * w
+    # Estrin's scheme: a shorter chain of dependent operations than Horner's
+    s2 = s * s
+    s4 = s2 * s2
+    p = ((_A0 + _A1 * s) + s2 * (_A2 + _A3 * s)
+         + s4 * ((_A4 + _A5 * s) + s2 * (_A6 + _A7 * s)) + s4 * s4 * (_A8 + _A9 * s))
+    r = far * _PI_4 + (w + w * s * p)
+    r = _PI_2 - r if ay > ax else r
+    r = math.pi - r if x < 0.0 else r
+    return math.copysign(r, y)
+
+
 def cpa(rel_north_m: np.ndarray, rel_east_m: np.ndarray, rel_vn_mps: np.ndarray,
         rel_ve_mps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Distance and time to the closest point of approach for straight-line motion.

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trafficsim.colregs import domains
-from trafficsim.geometry import cpa, hull_outlines, hulls_overlap
+from trafficsim.geometry import cos_sin, cpa, hull_outlines, hulls_overlap
 from trafficsim.jit import kernel
 from trafficsim.ships.base import EAST, NORTH, PSI, U
 
@@ -46,7 +46,7 @@ class PairMetrics:
         d = pos[:, pj] - pos[:, pi]
         dv = vel[:, pj] - vel[:, pi]
         dcpa, tcpa = cpa(d[0], d[1], dv[0], dv[1])
-        rng = np.hypot(d[0], d[1])
+        rng = np.sqrt(d[0] * d[0] + d[1] * d[1])  # (as the compiled step: no libm hypot)
         p = pi.shape[0]
         return cls(dcpa, tcpa, rng, np.zeros(p), np.zeros(p, bool), np.full(p, np.nan),
                    domain, np.zeros(p, bool), np.full(p, np.nan))
@@ -81,7 +81,7 @@ def _inside_domain(kind: int, x: np.ndarray, own: int, sign: float, dn: float, d
     prm = domains.ship_params(kind, length_m[own], x[U, own], False)
     if rng > domains.reach_m(kind, prm) * (1.0 + 1e-9):
         return False
-    c, s = math.cos(x[PSI, own]), math.sin(x[PSI, own])
+    c, s = cos_sin(x[PSI, own])
     fwd, stbd = sign * (dn * c + de * s), sign * (-dn * s + de * c)
     return domains.inside(kind, prm, fwd, stbd)
 
@@ -98,7 +98,7 @@ def _accumulate(x: np.ndarray, length_m: np.ndarray, beam_m: np.ndarray, pi: np.
     for p in range(pi.shape[0]):
         a, b = pi[p], pj[p]
         dn, de = x[NORTH, b] - x[NORTH, a], x[EAST, b] - x[EAST, a]
-        rng = math.hypot(dn, de)
+        rng = math.sqrt(dn * dn + de * de)
         if rng < min_range[p]:
             min_range[p], t_min[p] = rng, t_s
         # (a pair beyond both ships' largest possible domain skips sizing them)

@@ -69,7 +69,7 @@ import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.estimation import adaptive, ekf, fusion, gating, pv
-from trafficsim.geometry import turned
+from trafficsim.geometry import cos_sin
 from trafficsim.jit import kernel
 from trafficsim.noise import NoiseBank, normal_from, uniform_from
 from trafficsim.sensors import (
@@ -190,9 +190,6 @@ class Navigation:
     banks: dict[str, NoiseBank]
     dt: float
     est: np.ndarray
-    #: (3, n) a heading (rad) of each ship's estimate and its cosine and sine: the pv filter
-    #: turns them to the next estimate (geometry.turned) instead of calling libm
-    heading_trig: np.ndarray
     ekf_idx: np.ndarray | None = None  # ships using the ekf filter
     ekf_p: Any = None  # ekf.EkfParams of those ships
     ekf_model: Any = None  # ekf.ShipModel of those ships
@@ -335,7 +332,7 @@ class Navigation:
             gate_p=_gate_params(section("gate")),
             gate_rejections=gating.init_state(n),
             heading_est=np.stack([x[PSI] - x[R] * dt, x[R].copy()]), banks=banks, dt=dt,
-            est=est, heading_trig=np.stack([np.zeros(n), np.ones(n), np.zeros(n)]),
+            est=est,
             ekf_idx=ekf_idx, ekf_p=ekf_p, ekf_model=ekf_model, ekf_s=ekf_s,
             ekf_rejections=gating.init_state(ekf_idx.size),
             has_waves=any(c.get("waves") for c in configs),
@@ -400,7 +397,7 @@ class Navigation:
         _pv_filter(x, self.gnss_p.has_lever_arm, t.arm, t.filt, t.max_rejections,
                    self.filter_pv, t.multi_row, fix_n, fix_e, valid, heading, fused_n, fused_e,
                    fused_valid, fused_sigma, ps.x, ps.P, self.gate_rejections, ps.x, ps.P,
-                   self.gate_rejections, est, self.heading_trig)
+                   self.gate_rejections, est)
         self.est = est
         if self.ekf_idx is not None and self.ekf_idx.size:
             self.est[:, self.ekf_idx] = self._ekf_update(x, env)
@@ -729,13 +726,13 @@ def _sense(x: np.ndarray, dt: float, has_waves: bool, lever: bool, deviation: bo
             wpsi = wtab[i, _WG_YAW] * zz[i, waves.YAW]
             surge = wtab[i, _WG_SURGE] * zz[i, waves.SURGE]
             sway = wtab[i, _WG_SWAY] * zz[i, waves.SWAY]
-            c, s = math.cos(psi), math.sin(psi)
+            c, s = cos_sin(psi)
             wn, we = surge * c - sway * s, surge * s + sway * c
             wave_psi[i], wave_ne[0, i], wave_ne[1, i] = wpsi, wn, we
         hull = psi + wpsi if has_waves else psi
         c_hull = s_hull = 0.0
         if lever or deviation:  # one cos and sin of the hull heading for both
-            c_hull, s_hull = math.cos(hull), math.sin(hull)
+            c_hull, s_hull = cos_sin(hull)
 
         # GNSS: outage chain, Gauss-Markov error, gross error, antenna with its lever arm
         if up0[i]:  # the outage chain moves only where outages start (or one is on)
@@ -807,8 +804,7 @@ def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
                fix_e: np.ndarray, valid: np.ndarray, heading: np.ndarray, fused_n: np.ndarray,
                fused_e: np.ndarray, fused_valid: np.ndarray, fused_sigma: np.ndarray,
                x0: np.ndarray, P0: np.ndarray, rejections0: np.ndarray, x_out: np.ndarray,
-               P_out: np.ndarray, rejections: np.ndarray, est: np.ndarray,
-               trig: np.ndarray) -> None:
+               P_out: np.ndarray, rejections: np.ndarray, est: np.ndarray) -> None:
     """Per ship: the fix moved to the reference point [seed 003, eq 5] (or the fused fix of
     ``multi_row``), pv predict [seed 000, eqs 3-4], the gate [seed 002, 6.6], pv update
     [seed 000, recursion steps 2-3], restart on a genuine jump and the estimate.
@@ -819,19 +815,15 @@ def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
     :func:`~trafficsim.estimation.gating.distance` for a window in metres) and
     :func:`trafficsim.estimation.pv.update`. ``heading`` ``(2, n)`` the heading filter's
     output; ``fused_*`` ``(m,)`` rows of the ships with several receivers (m; m2 as sigma);
-    ``est`` ``(6, n)`` out: the pv estimate of the ``filter_pv`` ships, truth for the others;
-    ``trig`` ``(3, n)`` :attr:`Navigation.heading_trig`, in place: the heading's cosine and sine
-    come from the last ones turned by the heading's change (a step's turn: series, exact to
-    rounding; the error of the chain grows as the square root of the steps, 1e-13 after a
-    million).
+    ``est`` ``(6, n)`` out: the pv estimate of the ``filter_pv`` ships, truth for the others.
+    The heading's cosine and sine come from :func:`trafficsim.geometry.cos_sin` (no libm call).
     """
     for i in range(x.shape[1]):
         psi = heading[0, i]
         ref_n, ref_e, ok, sigma = fix_n[i], fix_e[i], valid[i], tab[i, _F_SIGMA]
         c = s = 0.0
         if lever or filter_pv[i]:  # for the lever arm and the body-frame velocity
-            c, s = turned(trig[1, i], trig[2, i], psi - trig[0, i])
-            trig[0, i], trig[1, i], trig[2, i] = psi, c, s
+            c, s = cos_sin(psi)
         if lever:
             ax, ay = arm[i, 0], arm[i, 1]
             ref_n, ref_e = ref_n - (ax * c - ay * s), ref_e - (ax * s + ay * c)

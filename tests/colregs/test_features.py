@@ -11,7 +11,6 @@ from trafficsim.colregs.features import (
     INDEX,
     NAMES,
     Features,
-    fast_atan2,
     feature_index,
     pair_features,
 )
@@ -315,34 +314,6 @@ def test_inside_now_means_zero_time_to_domain(n1, e1, vn1, ve1, n2, e2, vn2, ve2
                  domain=domain)
     assert (f["range_to_domain_nm"][0] <= 0.0) == (f["time_to_domain_min"][0] == 0.0)
     assert not np.isnan(f.values).any()
-
-
-# ---------------------------------------------------------------------------------------------
-# The angle kernel
-# ---------------------------------------------------------------------------------------------
-
-def test_fast_atan2_matches_the_library_everywhere():
-    rng = np.random.default_rng(7)
-    n = 200_000
-    y = rng.normal(size=n) * 10.0 ** rng.uniform(-9, 9, n)
-    x = rng.normal(size=n) * 10.0 ** rng.uniform(-9, 9, n)
-    err = max(abs(fast_atan2(a, b) - math.atan2(a, b)) for a, b in zip(y, x, strict=True))
-    assert err < 2e-15
-    # the axes, the diagonals and the octant edges
-    for deg in np.arange(-180.0, 180.01, 22.5):
-        a = math.radians(deg)
-        assert fast_atan2(math.sin(a), math.cos(a)) == pytest.approx(math.atan2(math.sin(a),
-                                                                               math.cos(a)),
-                                                                    abs=2e-15)
-    assert fast_atan2(0.0, -1.0) == math.pi and fast_atan2(0.0, 0.0) == 0.0
-    assert math.isnan(fast_atan2(math.nan, 1.0)) and math.isnan(fast_atan2(1.0, math.nan))
-
-
-@settings(max_examples=500, deadline=None)
-@given(st.floats(-1e12, 1e12, allow_nan=False), st.floats(-1e12, 1e12, allow_nan=False))
-def test_fast_atan2_property(y, x):
-    assume(x != 0.0 or y != 0.0)
-    assert fast_atan2(y, x) == pytest.approx(math.atan2(y, x), abs=2e-15)
 
 
 # ---------------------------------------------------------------------------------------------

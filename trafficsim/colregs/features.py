@@ -90,6 +90,7 @@ from numpy.typing import ArrayLike
 
 from trafficsim.colregs import domains
 from trafficsim.errors import InputError
+from trafficsim.geometry import atan2
 from trafficsim.jit import kernel
 from trafficsim.units import KN, NM
 
@@ -176,47 +177,6 @@ class Features:
         return {name: self.values[i] for i, name in enumerate(NAMES)}
 
 
-#: atan(w) = w + w s P(s) with s = w^2 for |w| <= tan(pi/8): coefficients of P (ascending) from
-#: a least-squares Chebyshev fit of degree 9 made for this module; within 5e-16 rad of atan
-_ATAN_P = (-0.3333333333333615, 0.20000000000716178, -0.14285714342138997, 0.1111111301933719,
-           -0.09090936282868968, 0.07692291193467717, -0.06660746235832808,
-           0.057962791232318185, -0.04660571794469063, 0.024962770517444693)
-_A0, _A1, _A2, _A3, _A4, _A5, _A6, _A7, _A8, _A9 = _ATAN_P
-_TAN_PI_8 = math.tan(math.pi / 8.0)
-_PI_4, _PI_2 = math.pi / 4.0, math.pi / 2.0
-
-
-@kernel
-def fast_atan2(y: float, x: float) -> float:
-    """``atan2(y, x)`` in [-pi, pi] to within about 1e-15 rad, several times faster than libm's.
-
-    The three angles per pair dominated the pair loop with the library function. Reduction: the
-    octant by symmetry, then ``atan(z) = pi/4 + atan((z - 1)/(z + 1))`` above tan(pi/8), so the
-    polynomial :data:`_ATAN_P` only sees ``|w| <= tan(pi/8)``. Written with selects rather than
-    branches: the octant of random geometry is unpredictable, and mispredicted branches cost more
-    than the arithmetic. ``(0, 0)`` gives 0, the sign of the result is the sign bit of ``y`` (as
-    ``math.copysign``), NaN gives NaN.
-    """
-    if math.isnan(x) or math.isnan(y):
-        return math.nan
-    ax, ay = abs(x), abs(y)
-    mx, mn = max(ax, ay), min(ax, ay)
-    if mx == 0.0:
-        return 0.0
-    far = 1.0 if mn > _TAN_PI_8 * mx else 0.0
-    w = (mn - far * mx) / (mx + far * mn)
-    s = w * w
-    # Estrin's scheme: a shorter chain of dependent operations than Horner's
-    s2 = s * s
-    s4 = s2 * s2
-    p = ((_A0 + _A1 * s) + s2 * (_A2 + _A3 * s)
-         + s4 * ((_A4 + _A5 * s) + s2 * (_A6 + _A7 * s)) + s4 * s4 * (_A8 + _A9 * s))
-    r = far * _PI_4 + (w + w * s * p)
-    r = _PI_2 - r if ay > ax else r
-    r = math.pi - r if x < 0.0 else r
-    return math.copysign(r, y)
-
-
 @kernel
 def _deg(angle_rad: float) -> float:
     """Radians from an atan2 to degrees in (-180, 180] (an atan2 may return exactly -pi)."""
@@ -258,16 +218,16 @@ def _features_loop(kind: int, own_n: np.ndarray, own_e: np.ndarray, own_vn: np.n
             inv = 1.0 / oth_sog
             oth_cn, oth_ce = oth_vn[i] * inv, oth_ve[i] * inv
 
-        bearing = fast_atan2(y, x)
+        bearing = atan2(y, x)
         # own ship lies at -p from the other: cross and dot of the other's course with -p
-        aspect = _deg(fast_atan2(oth_ce * pn - oth_cn * pe, -(oth_cn * pn + oth_ce * pe)))
+        aspect = _deg(atan2(oth_ce * pn - oth_cn * pe, -(oth_cn * pn + oth_ce * pe)))
         bearing_deg = _deg(bearing)
         out[RANGE, i] = rng * _PER_NM
         out[BEARING, i] = bearing_deg
         out[BEARING_ABS, i] = abs(bearing_deg)
         out[ASPECT, i] = aspect
         out[ASPECT_ABS, i] = abs(aspect)
-        out[COURSE_DIFF, i] = _deg(fast_atan2(own_cn * oth_ce - own_ce * oth_cn,
+        out[COURSE_DIFF, i] = _deg(atan2(own_cn * oth_ce - own_ce * oth_cn,
                                               own_cn * oth_cn + own_ce * oth_ce))
         out[COURSE_DIFF_ABS, i] = abs(out[COURSE_DIFF, i])
 

@@ -111,7 +111,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from trafficsim.errors import InputError
-from trafficsim.geometry import cpa
+from trafficsim.geometry import cos_sin, cpa
 from trafficsim.jit import kernel
 from trafficsim.sensors import check_keys, column, flags
 from trafficsim.sensors.ais import COG_STEP_RAD, POSITION_STEP_M, SOG_STEP_MPS, AisReports
@@ -444,7 +444,7 @@ def _ais_zr(north: float, east: float, sog: float, cog: float, sp: float, sv: fl
             out: np.ndarray, o: int) -> None:
     """AIS report as a full-state measurement (module docstring): ``z`` (4) at ``out[o:]``,
     the lower triangle of ``R`` packed row by row (10) at ``out[o + 4:]``."""
-    c, s = math.cos(cog), math.sin(cog)
+    c, s = cos_sin(cog)
     out[o], out[o + 1], out[o + 2], out[o + 3] = north, east, sog * c, sog * s
     var_p = sp * sp + VAR_POSITION_QUANT_M2
     var_v = sv * sv

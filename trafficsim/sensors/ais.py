@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.geometry import norm_side
+from trafficsim.geometry import atan2, cos_sin, norm_side
 from trafficsim.jit import kernel
 from trafficsim.noise import check_streams, normal_from
 from trafficsim.sensors import KNOT_MPS, check_keys, column, flags, wrap_2pi, wrap_2pi_scalar
@@ -432,7 +432,7 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
         else:
             interval = _interval_in_current(u, v, cn, ce, turning, anchor)
             if interval < 0.0:  # near a bin boundary: the ground velocity decides
-                c, s = math.cos(psi), math.sin(psi)
+                c, s = cos_sin(psi)
                 vn, ve, ground = u * c - v * s + cn, u * s + v * c + ce, True
                 interval = _interval(vn, ve, turning, anchor)
         # a shorter required interval pulls the pending report forward
@@ -449,7 +449,7 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
         else:
             next_tx[i], last_tx[i] = nxt, pending
         if not ground:
-            c, s = math.cos(psi), math.sin(psi)
+            c, s = cos_sin(psi)
             vn, ve = u * c - v * s + cn, u * s + v * c + ce
         z_n, z_e = normal_from(streams, i), normal_from(streams, i)
         z_vn, z_ve, z_h = normal_from(streams, i), normal_from(streams, i), normal_from(streams, i)
@@ -465,7 +465,7 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
         buf[i, h, 1] = e_q * east_step[i]
         sog_q = np.rint(sog / SOG_STEP_MPS)
         buf[i, h, 2] = (1022.0 if sog_q > 1022.0 else sog_q) * SOG_STEP_MPS
-        buf[i, h, 3] = _quantise_angle(math.atan2(ve, vn), COG_STEP_RAD, _COG_STEPS)
+        buf[i, h, 3] = _quantise_angle(atan2(ve, vn), COG_STEP_RAD, _COG_STEPS)
         buf[i, h, 4] = _quantise_angle(psi + sh[i] * z_h, HEADING_STEP_RAD, _HEADING_STEPS)
 
 

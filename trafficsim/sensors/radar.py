@@ -63,6 +63,7 @@ from statistics import NormalDist
 import numpy as np
 
 from trafficsim.errors import InputError
+from trafficsim.geometry import atan2, cos_sin
 from trafficsim.jit import kernel
 from trafficsim.noise import check_streams, normal_from
 from trafficsim.sensors import check_keys, column, flags, wrap_2pi_scalar
@@ -298,11 +299,11 @@ def _plots(params: tuple, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
             offset = ax != 0.0 or ay != 0.0  # (no rotation of a zero offset: saves two sincos)
             off_n = off_e = 0.0
             if offset:
-                c, s = math.cos(psi), math.sin(psi)
+                c, s = cos_sin(psi)
                 off_n, off_e = ax * c - ay * s, ax * s + ay * c
             rel_n = x_true[NORTH, j] - (x_true[NORTH, i] + off_n)
             rel_e = x_true[EAST, j] - (x_true[EAST, i] + off_e)
-            true_range = math.hypot(rel_n, rel_e)
+            true_range = math.sqrt(rel_n * rel_n + rel_e * rel_e)
             rng = true_range + sr[i] * z_range
             ok = true_range <= rmax[i] and true_range >= rmin[i] and rng > 0.0
         valid[k] = ok
@@ -310,14 +311,14 @@ def _plots(params: tuple, due: np.ndarray, obs: np.ndarray, tgt: np.ndarray,
             north[k] = east[k] = rng_out[k] = brg_out[k] = math.nan
             cov[k, 0, 0] = cov[k, 0, 1] = cov[k, 1, 0] = cov[k, 1, 1] = math.nan
             continue
-        true_brg = math.atan2(rel_e, rel_n) - psi
+        true_brg = atan2(rel_e, rel_n) - psi
         brg = wrap_2pi_scalar(true_brg + sb[i] * z_bearing + math.pi) - math.pi
         psi_est = est_psi[i]
         if offset:
-            ce, se = math.cos(psi_est), math.sin(psi_est)
+            ce, se = cos_sin(psi_est)
             off_n, off_e = ax * ce - ay * se, ax * se + ay * ce
         theta = psi_est + brg
-        c, s = math.cos(theta), math.sin(theta)
+        c, s = cos_sin(theta)
         north[k] = est_n[i] + off_n + rng * c
         east[k] = est_e[i] + off_e + rng * s
         rng_out[k], brg_out[k] = rng, brg
