@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from trafficsim.colregs.vocabulary import PORT, STARBOARD
-from trafficsim.geometry import hypot_below
+from trafficsim.geometry import cos_sin, hypot_below
 from trafficsim.jit import kernel
 
 #: candidate course offsets, rad (+ = starboard), and whether a candidate runs at reduced speed
@@ -158,7 +158,7 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
     alongside = np.empty(n_cand, dtype=np.bool_)
     worst = np.empty(n_cand)
     for i in range(s):
-        cb, sb = math.cos(base[i]), math.sin(base[i])
+        cb, sb = cos_sin(base[i])
         pairs = mine[first[i]:first[i + 1]]
         run = current[i]
         if run >= 0:

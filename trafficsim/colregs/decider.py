@@ -58,7 +58,7 @@ from trafficsim.colregs.vocabulary import (
 )
 from trafficsim.control.guidance import LOOKAHEAD_L, signed_angle
 from trafficsim.errors import InputError
-from trafficsim.geometry import hypot_below
+from trafficsim.geometry import atan, cos_sin, hypot_below
 from trafficsim.jit import kernel
 from trafficsim.sensors import mod_2pi_scalar
 from trafficsim.sensors.radar import directed_pairs
@@ -563,8 +563,9 @@ def _route_line_model(north: np.ndarray, east: np.ndarray, length_m: np.ndarray,
     ship's position along the route course."""
     for i in range(north.shape[0]):
         c = line_course_rad[i]
-        e = -(north[i] - line_north_m[i]) * math.sin(c) + (east[i] - line_east_m[i]) * math.cos(c)
-        predicted = c - math.atan(e / (LOOKAHEAD_L * length_m[i]))
+        cc, sc = cos_sin(c)
+        e = -(north[i] - line_north_m[i]) * sc + (east[i] - line_east_m[i]) * cc
+        predicted = c - atan(e / (LOOKAHEAD_L * length_m[i]))  # (guidance's own arctangent)
         if not abs(signed_angle(predicted - route_course_rad[i])) <= _LINE_TOL_RAD:
             line_north_m[i], line_east_m[i] = north[i], east[i]
             line_course_rad[i] = route_course_rad[i]

@@ -90,7 +90,7 @@ from numpy.typing import ArrayLike
 
 from trafficsim.colregs import domains
 from trafficsim.errors import InputError
-from trafficsim.geometry import atan2
+from trafficsim.geometry import atan2, cos_sin
 from trafficsim.jit import kernel
 from trafficsim.units import KN, NM
 
@@ -198,7 +198,7 @@ def _features_loop(kind: int, own_n: np.ndarray, own_e: np.ndarray, own_vn: np.n
             out[:, i] = math.nan
             out[VISIBILITY, i] = visibility[i]
             continue
-        ch, sh = math.cos(hdg[i]), math.sin(hdg[i])
+        ch, sh = cos_sin(hdg[i])
         # own body frame (x forward, y starboard): the domain and the bow line turn with heading
         x, y = ch * pn + sh * pe, ch * pe - sh * pn
         vx, vy = ch * vn + sh * ve, ch * ve - sh * vn
