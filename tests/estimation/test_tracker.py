@@ -1229,19 +1229,52 @@ def test_deletion_exactly_after_coast_seconds_without_accepted_measurement(coast
     assert state.n_updates[0] == 0 and state.gate_failures[0] == 0
 
 
-def test_ais_only_track_coast_counts_from_the_report_stamp() -> None:
-    """An AIS-only track is held at its report's time stamp: a report stamped 4 s, received
-    at 7 s (3 s latency), keeps a 10 s coast track to t = 14 and deletes it at 14.5."""
+def test_ais_only_track_coast_counts_from_the_reports_arrival() -> None:
+    """An AIS-only track is held at its report's time stamp, but coasts from the report's
+    arrival: a report stamped 4 s, received at 7 s (3 s latency), keeps a 10 s coast track to
+    t = 17 and deletes it at 17.5."""
     t_par = tracker.build([{"coast_s": 10.0}])
     obs = np.zeros(1, dtype=np.int64)
     state = tracker.step(t_par, tracker.init(1), obs, 7.0,
                          ais=_one_report(4.0, 100.0, 0.0, 5.0, 0.0))
-    assert state.active[0] and state.t_s[0] == 4.0
-    for t in np.arange(7.5, 14.01, 0.5):
+    assert state.active[0] and state.t_s[0] == 4.0 and state.heard_s[0] == 7.0
+    for t in np.arange(7.5, 17.01, 0.5):
         state = tracker.step(t_par, state, obs, float(t))
         assert state.active[0], t
-    state = tracker.step(t_par, state, obs, 14.5)
+    state = tracker.step(t_par, state, obs, 17.5)
     assert not state.active[0]
+
+
+def test_ais_latency_beyond_the_coast_time_keeps_the_track() -> None:
+    """A target reporting every 10 s whose reports arrive 12 s late, seen by an AIS-only
+    observer with a 15 s coast: the stamps lie up to 22 s back, but a report arrives every
+    10 s, so once the first has arrived the track never drops (one initiation in all) and it
+    follows the target within metres."""
+    a_par = ais.build([{"latency_s": 12.0}, {"latency_s": 12.0}])
+    t_par = tracker.build([{"coast_s": 15.0}, {}])
+    obs, tgt = np.array([0]), np.array([1])
+    a_state = ais.init(a_par, 1)
+    tracks = tracker.init(1)
+    tx, rx = independent_streams(2, 3, "ais"), independent_streams(1, 3, "ais_rx")
+    x = np.zeros((8, 2))
+    x[U, 1] = 5.0  # the target sails north at 5 m/s (about 10 kn: reports every 10 s)
+    x[EAST, 1] = 2000.0
+    current = np.zeros((2, 2))
+    first_heard, starts, was_active = None, 0, False
+    for t in np.arange(0.0, 400.0, 1.0):
+        x[NORTH, 1] = 5.0 * t
+        a_state, reports = ais.step(a_par, a_state, float(t), obs, tgt, x, current, tx, rx)
+        tracks = tracker.step(t_par, tracks, obs, float(t), ais=reports)
+        if tracks.active[0] and not was_active:
+            starts += 1
+        was_active = bool(tracks.active[0])
+        if first_heard is None and was_active:
+            first_heard = t
+        if first_heard is not None:
+            assert tracks.active[0], t
+    assert first_heard == 12.0 and starts == 1
+    predicted = tracker.predict_state(tracks, 399.0)[0]
+    assert abs(predicted[0] - 5.0 * 399.0) < 20.0 and abs(predicted[1] - 2000.0) < 20.0
 
 
 @pytest.mark.parametrize("p", [0.5, 0.9, 0.99, 0.9999, 1.0 - 1e-9])

@@ -78,7 +78,10 @@ Track management:
   which follows a failure", "test for several consecutive failures and restarted");
 * deletion when no measurement has been accepted for ``coast_s`` (default 30 s, 12 scans at
   2.5 s: with detection probability 0.8 the chance of losing a present target is 0.2^12 = 4e-9
-  per scan; MSC.192(79) 5.25.4.3 asks a tracker to hold targets seen in 5 of 10 scans).
+  per scan; MSC.192(79) 5.25.4.3 asks a tracker to hold targets seen in 5 of 10 scans). The
+  time counts from the step that accepted the newest measurement, not from its stamp: a
+  tracker can only miss what has not arrived, so an AIS-only track is kept whenever reports
+  arrive more often than ``coast_s``, however old their stamps.
 
 Config keys (per observer ship; defaults in brackets): ``accel_psd_m2ps3`` [0.001],
 ``coast_s`` [30.0], ``init_speed_sigma_mps`` [10.0], ``gate_probability`` [0.9999],
@@ -162,6 +165,8 @@ class TrackState:
         x: ``(m, 4)`` state north, east (m), v_north, v_east (m/s) at time ``t_s``.
         P: ``(m, 4, 4)`` its covariance.
         t_s: ``(m,)`` time of the state = stamp of the newest accepted measurement, s.
+        heard_s: ``(m,)`` time of the step that accepted the newest measurement, s (coasting
+            counts from it).
         active: ``(m,)`` bool, the target is tracked.
         gate_failures: ``(m,)`` int consecutive gate rejections.
         n_updates: ``(m,)`` int accepted measurements since initiation.
@@ -179,6 +184,7 @@ class TrackState:
     x: np.ndarray
     P: np.ndarray
     t_s: np.ndarray
+    heard_s: np.ndarray
     active: np.ndarray
     gate_failures: np.ndarray
     n_updates: np.ndarray
@@ -248,7 +254,7 @@ def init(n_pairs: int) -> TrackState:
     m = int(n_pairs)
     return TrackState(
         x=np.full((m, N_STATE), np.nan), P=np.full((m, N_STATE, N_STATE), np.nan),
-        t_s=np.full(m, np.nan), active=np.zeros(m, dtype=bool),
+        t_s=np.full(m, np.nan), heard_s=np.full(m, np.nan), active=np.zeros(m, dtype=bool),
         gate_failures=np.zeros(m, dtype=np.int64), n_updates=np.zeros(m, dtype=np.int64),
         hist_n=np.zeros(m, dtype=np.int64), hist_start=np.zeros(m, dtype=np.int64),
         hist=np.full((m, HISTORY, H_SIZE), np.nan))
@@ -340,7 +346,7 @@ def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
              _c(ais.sog_mps), _c(ais.cog_rad))
     else:
         a = (False, _NONE_B, _NONE_F, _NONE_F, _NONE_F, _NONE_F, _NONE_F)
-    _step_kernel(new.x, new.P, new.t_s, new.active, new.gate_failures, new.n_updates,
+    _step_kernel(new.x, new.P, new.t_s, new.heard_s, new.active, new.gate_failures, new.n_updates,
                  new.hist_n, new.hist_start, new.hist, settings, float(t_s), *r, *a)
     return new
 
@@ -768,8 +774,8 @@ def _make_room(hist: np.ndarray, k: int, j: int, n: int, start: int) -> tuple[in
 
 
 @kernel
-def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, active: np.ndarray,
-                 fails: np.ndarray, n_upd: np.ndarray, hist_n: np.ndarray,
+def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.ndarray,
+                 active: np.ndarray, fails: np.ndarray, n_upd: np.ndarray, hist_n: np.ndarray,
                  hist_start: np.ndarray, hist: np.ndarray, settings: np.ndarray, t_now: float,
                  has_radar: bool, r_valid: np.ndarray, r_t: float, r_north: np.ndarray,
                  r_east: np.ndarray, r_cov: np.ndarray, has_ais: bool, a_valid: np.ndarray,
@@ -902,7 +908,8 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, active: np.n
                 _store_track(w, x, P, k)
                 fails[k] = 0
                 n_upd[k] += 1
-        if active[k] and t_now - t_state[k] > settings[k, S_COAST]:
+                heard[k] = t_now
+        if active[k] and t_now - heard[k] > settings[k, S_COAST]:
             active[k] = False
             fails[k] = 0
             n_upd[k] = 0
