@@ -607,15 +607,12 @@ def _far_leg(pg, kind):
         layers.draw_routes(pg, surf, view, STYLE, data)
     else:
         data = _data([[0.0], [10000.0]], [[0.0], [20000.0]])
-        layers.draw_tracks(pg, surf, view, STYLE, data, 0, 1, False)
+        layers.draw_tracks(pg, surf, view, STYLE, data, 0, 1, False,
+                           stepwise=kind == "track_stepwise")
     return surf
 
 
-@pytest.mark.parametrize("kind", [
-    "route",
-    pytest.param("track", marks=pytest.mark.xfail(
-        strict=True, reason="KNOWN: track segments are drawn from points clipped to CLIP_PX "
-        "per axis; only a record over 1e6 px from the view (22 km at 0.05 m/px) bends"))])
+@pytest.mark.parametrize("kind", ["route", "track", "track_stepwise"])
 def test_a_line_to_a_far_point_keeps_its_bearing(pg, kind):
     """The leg climbs 1 px for every 2 px east (10 km north over 20 km east): at column 180
     it passes row 100 - 80 / 2 = 60, and nothing is drawn near the 45-degree row 20 the

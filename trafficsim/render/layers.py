@@ -8,6 +8,7 @@ Pixel transforms are numpy over all points of a layer at once; only the drawing 
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import OrderedDict
 from collections.abc import Sequence
@@ -19,7 +20,7 @@ from trafficsim.colregs import domains
 from trafficsim.geometry import cpa, hull_outlines
 from trafficsim.render import style as st
 from trafficsim.render.data import RunData
-from trafficsim.render.view import View, nice_length_m
+from trafficsim.render.view import CLIP_PX, View, nice_length_m
 from trafficsim.units import NM
 
 #: bearings at which a ship domain's boundary is drawn
@@ -121,6 +122,46 @@ def draw_routes(pg: Any, surf: Any, view: View, style: st.Style, data: RunData) 
                 pg.draw.circle(surf, st.ROUTE, (px, py), ring, 1)
 
 
+Path = tuple[list, list | None]  # a polyline's int pixel points, and its clipped segments
+
+
+def _path(view: View, north_m: np.ndarray, east_m: np.ndarray, w: int, h: int) -> Path:
+    """A track as int pixel points (:meth:`View.points`) and, when a point lies beyond
+    :data:`CLIP_PX` (where clipping each coordinate would bend the line), each segment clipped
+    to the view instead (:func:`_clip`; None for a segment wholly outside): the line keeps its
+    bearing however far off its ends lie."""
+    points = view.points(north_m, east_m).tolist()
+    x, y = view.to_px(north_m, east_m, clip=False)
+    if x.size == 0 or not max(np.abs(x).max(), np.abs(y).max()) > CLIP_PX:
+        return points, None
+    ends = np.stack([x, y], axis=-1)
+    segments: list = []
+    for a, b in itertools.pairwise(ends):
+        span = _clip(a, b, w, h, 1.0)
+        if span is None:
+            segments.append(None)
+            continue
+        p0, p1 = (np.floor(a + t * (b - a)).astype(np.int64).tolist() for t in span)
+        segments.append((p0, p1))
+    return points, segments
+
+
+def _draw_path(pg: Any, surf: Any, colour: st.Colour, path: Path, width: int,
+               segment: int | None = None) -> None:
+    """The whole polyline ``path`` (:func:`_path`), or only its ``segment`` (into point
+    ``segment + 1``)."""
+    points, segments = path
+    if segments is None:
+        if segment is None:
+            pg.draw.lines(surf, colour, False, points, width)
+        else:
+            pg.draw.line(surf, colour, points[segment], points[segment + 1], width)
+        return
+    for piece in segments if segment is None else segments[segment:segment + 1]:
+        if piece is not None:
+            pg.draw.line(surf, colour, piece[0], piece[1], width)
+
+
 def _dots(pg: Any, surf: Any, pts: np.ndarray, colour: st.Colour, size: int) -> None:
     """Square dots of ``size`` pixels at ``(k, 2)`` int pixel points, set through a numpy
     view of the surface (one vectorised write instead of a call per dot)."""
@@ -148,8 +189,9 @@ def draw_tracks(pg: Any, surf: Any, view: View, style: st.Style, data: RunData, 
     rows = slice(k0, k1 + 1)
     n = data.ships.n
     width, dot = style.px(2), style.px(2)
-    true = [view.points(data.north_m[rows, j], data.east_m[rows, j]).tolist() for j in range(n)]
-    est = [view.points(data.est_north_m[rows, j], data.est_east_m[rows, j]).tolist()
+    w, h = surf.get_size()
+    true = [_path(view, data.north_m[rows, j], data.east_m[rows, j], w, h) for j in range(n)]
+    est = [_path(view, data.est_north_m[rows, j], data.est_east_m[rows, j], w, h)
            if data.has_estimate[j] else None for j in range(n)]
     fixes = []
     for j in range(n):
@@ -165,8 +207,8 @@ def draw_tracks(pg: Any, surf: Any, view: View, style: st.Style, data: RunData, 
         for j in range(n):
             if k1 > k0:
                 if est[j] is not None:
-                    pg.draw.lines(surf, st.estimate_colour(j), False, est[j], 1)
-                pg.draw.lines(surf, st.ship_colour(j), False, true[j], width)
+                    _draw_path(pg, surf, st.estimate_colour(j), est[j], 1)
+                _draw_path(pg, surf, st.ship_colour(j), true[j], width)
             if fixes[j] is not None and fixes[j][0].any():
                 _dots(pg, surf, fixes[j][1][fixes[j][0]], st.GNSS, dot)
         return
@@ -176,8 +218,8 @@ def draw_tracks(pg: Any, surf: Any, view: View, style: st.Style, data: RunData, 
         for j in range(n):
             if r > 0:
                 if est[j] is not None:
-                    pg.draw.line(surf, st.estimate_colour(j), est[j][r - 1], est[j][r], 1)
-                pg.draw.line(surf, st.ship_colour(j), true[j][r - 1], true[j][r], width)
+                    _draw_path(pg, surf, st.estimate_colour(j), est[j], 1, r - 1)
+                _draw_path(pg, surf, st.ship_colour(j), true[j], width, r - 1)
             if fixes[j] is not None and fixes[j][0][r]:
                 x, y = fixes[j][1][r]
                 pg.draw.rect(surf, st.GNSS, (x - half, y - half, dot, dot))
