@@ -329,9 +329,12 @@ def test_compiled_transmit_and_receive_match_array_formulas() -> None:
     assert 0 < n_received < 90 * obs.shape[0]
 
 
-def test_compiled_schedule_on_the_speed_bin_boundaries() -> None:
+@pytest.mark.parametrize("current_mps", [(0.0, 0.0), (0.4, -0.3)])
+def test_compiled_schedule_on_the_speed_bin_boundaries(current_mps) -> None:
     """Speeds within a few ulps of 3, 14 and 23 kn, split over north and east at several
-    angles: the compiled schedule takes the same interval as the array formulas."""
+    angles, still and in a current: the compiled schedule, with its shortcut for ships that
+    surely keep their interval, takes the same interval as the array formulas, step after
+    step (the pending reports of 6 and 10 s are pulled forward or kept)."""
     speeds, angles, anchored = [], [], []
     for kn, anchor in ((3.0, True), (14.0, False), (23.0, False)):
         for ulps in range(-4, 5):
@@ -346,13 +349,39 @@ def test_compiled_schedule_on_the_speed_bin_boundaries() -> None:
     params = ais.build([{"sigma_velocity_mps": 0.0}] * n)
     anchored = np.array(anchored)
     state, streams, current = ais.init(params, 0), independent_streams(n), np.zeros((2, n))
-    for t in (0.0, 1.0, 2.0, 3.0):
+    current[0], current[1] = current_mps
+    for t in range(12):
+        x[U] *= 1.0 + 2.0**-50 if t % 2 else 1.0 - 2.0**-50  # across the boundaries and back
         want, want_sent = _reference_transmit(params, state, t, x, current,
                                               peek_normals(streams, 5), anchored)
         state, sent = ais.transmit(params, state, t, x, current, streams, anchored)
         np.testing.assert_array_equal(sent, want_sent)
         np.testing.assert_array_equal(state.next_tx_s, want[0])
     assert len(set(state.next_tx_s.tolist())) > 1  # both sides of the boundaries occur
+
+
+@pytest.mark.parametrize("current_n", [0.5, -0.5, 0.0])
+def test_compiled_schedule_in_a_current_along_the_track(current_n) -> None:
+    """Ships sailing north with a current along or against them, their speed over ground
+    within a few ulps of 14 and 23 kn: the interval follows the speed over ground as the array
+    formulas do, step after step (the shortcut allows for the current's speed)."""
+    base = np.array([14.0, 23.0]) * KN
+    speed = np.concatenate([(base * (1.0 + u * 2.0**-52)) - current_n for u in range(-6, 7)])
+    n = speed.size
+    x = np.zeros((N_STATE, n))
+    x[U] = speed
+    params = ais.build([{"sigma_velocity_mps": 0.0}] * n)
+    anchored = np.zeros(n, dtype=bool)
+    state, streams, current = ais.init(params, 0), independent_streams(n), np.zeros((2, n))
+    current[0] = current_n
+    for t in range(12):
+        x[U] *= 1.0 + 2.0**-50 if t % 2 else 1.0 - 2.0**-50
+        want, want_sent = _reference_transmit(params, state, t, x, current,
+                                              peek_normals(streams, 5), anchored)
+        state, sent = ais.transmit(params, state, t, x, current, streams, anchored)
+        np.testing.assert_array_equal(sent, want_sent)
+        np.testing.assert_array_equal(state.next_tx_s, want[0])
+    assert len(set(state.next_tx_s.tolist())) > 1
 
 
 def test_reception_range_boundary_matches_array_formulas() -> None:
