@@ -862,18 +862,8 @@ def _pv_filter(x: np.ndarray, lever: bool, arm: np.ndarray, tab: np.ndarray,
         restart = reject and count >= max_rejections[i]
         rejections[i] = 0 if restart else count
         if accept:
-            for a in range(2):
-                pos, vel = (pv.POS_N, pv.VEL_N) if a == 0 else (pv.POS_E, pv.VEL_E)
-                z = ref_n if a == 0 else ref_e
-                pp, pv_, vv = (P_out[i, a, pv.POS, pv.POS], P_out[i, a, pv.POS, pv.VEL],
-                               P_out[i, a, pv.VEL, pv.VEL])
-                s_ = pp + r
-                nu = z - x_out[i, pos]
-                x_out[i, pos] += pp / s_ * nu
-                x_out[i, vel] += pv_ / s_ * nu
-                P_out[i, a, pv.POS, pv.POS] = pp * r / s_
-                P_out[i, a, pv.POS, pv.VEL] = P_out[i, a, pv.VEL, pv.POS] = pv_ * r / s_
-                P_out[i, a, pv.VEL, pv.VEL] = vv - pv_ * pv_ / s_
+            pv.update_axis(x_out, P_out, i, 0, r, ref_n)
+            pv.update_axis(x_out, P_out, i, 1, r, ref_e)
         if restart:  # genuine jump: restart on the fix, keep the velocity
             x_out[i, pv.POS_N], x_out[i, pv.POS_E] = ref_n, ref_e
         if filter_pv[i]:

@@ -44,7 +44,7 @@ import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.io.yamlio import finite_number, shown
-from trafficsim.jit import kernel
+from trafficsim.jit import inline_kernel, kernel
 from trafficsim.sensors import wrap_2pi
 
 #: state layout of ``PVState.x``: north, east position (m), north, east velocity (m/s)
@@ -294,26 +294,32 @@ def update(params: PVParams, predicted: PVState, z_north: Any, z_east: Any,
     return PVState(x=x, P=P)
 
 
+@inline_kernel
+def update_axis(x: np.ndarray, P: np.ndarray, i: int, a: int, r: float, z: float) -> None:
+    """Update axis ``a`` of filter ``i`` (``x (n, 4)``, ``P (n, 2, 2, 2)``, in place) with
+    the position ``z`` of variance ``r``: gain ``K = (pp, pv) / s``, ``s = pp + r``, and
+    ``P = (I - K H) P`` in closed form, symmetric by construction and positive definite
+    (``vv - pv^2 / s > 0`` since ``pv^2 <= pp vv < s vv``). One division, the rest products
+    with ``1 / s``."""
+    pos, vel = (POS_N, VEL_N) if a == 0 else (POS_E, VEL_E)
+    pp, pv, vv = P[i, a, POS, POS], P[i, a, POS, VEL], P[i, a, VEL, VEL]
+    inv = 1.0 / (pp + r)
+    nu = z - x[i, pos]
+    x[i, pos] += pp * inv * nu
+    x[i, vel] += pv * inv * nu
+    P[i, a, POS, POS] = pp * r * inv
+    P[i, a, POS, VEL] = P[i, a, VEL, POS] = pv * r * inv
+    P[i, a, VEL, VEL] = vv - pv * pv * inv
+
+
 @kernel
 def _update(x: np.ndarray, P: np.ndarray, sigma_m: np.ndarray, zn: np.ndarray, ze: np.ndarray,
             ok: np.ndarray) -> None:
     for i in range(x.shape[0]):
-        if not ok[i]:  # no fix: keep the prediction (a NaN fix cannot leak)
-            continue
-        r = sigma_m[i] * sigma_m[i]
-        for a in range(2):
-            pos, vel = (POS_N, VEL_N) if a == 0 else (POS_E, VEL_E)
-            z = zn[i] if a == 0 else ze[i]
-            pp, pv, vv = P[i, a, POS, POS], P[i, a, POS, VEL], P[i, a, VEL, VEL]
-            s = pp + r
-            nu = z - x[i, pos]
-            x[i, pos] += pp / s * nu
-            x[i, vel] += pv / s * nu
-            # P = (I - K H) P in closed form; symmetric by construction and positive definite
-            # (vv - pv^2 / s > 0 since pv^2 <= pp vv < s vv)
-            P[i, a, POS, POS] = pp * r / s
-            P[i, a, POS, VEL] = P[i, a, VEL, POS] = pv * r / s
-            P[i, a, VEL, VEL] = vv - pv * pv / s
+        if ok[i]:  # no fix: keep the prediction (a NaN fix cannot leak)
+            r = sigma_m[i] * sigma_m[i]
+            update_axis(x, P, i, 0, r, zn[i])
+            update_axis(x, P, i, 1, r, ze[i])
 
 
 def step(params: PVParams, state: PVState, z_north: Any, z_east: Any,
