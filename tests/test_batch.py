@@ -323,6 +323,16 @@ def test_rps_for_speed_takes_a_different_speed_per_ship():
     np.testing.assert_allclose(got, fr * rps_service, rtol=1e-12)
 
 
+def test_rps_for_speed_of_some_ships_is_theirs_of_the_whole_batch():
+    """Given ship indices (in any order), the speeds are theirs and the answer the whole
+    batch's at those ships, to the bit."""
+    b = _batch([_setup("a", "cargo"), _setup("b", "kvlcc2"), _setup("c", "container")])
+    speed = np.array([0.4, 1.1, 0.8]) * b.service_speed_mps
+    ships = np.array([2, 0])
+    np.testing.assert_array_equal(b.rps_for_speed(speed[ships], ships),
+                                  b.rps_for_speed(speed)[ships])
+
+
 # -- more per-ship tables ---------------------------------------------------------------------
 
 

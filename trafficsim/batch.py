@@ -108,13 +108,17 @@ class Batch:
     def n_ships(self) -> int:
         return self.x.shape[1]
 
-    def rps_for_speed(self, speed_mps: np.ndarray) -> np.ndarray:
-        """Steady calm-water rps for ``speed_mps`` ``(n,)`` by linear interpolation in the table."""
-        frac = np.clip(speed_mps / self.service_speed_mps, 0.0, SPEED_TABLE_FRACTIONS[-1])
+    def rps_for_speed(self, speed_mps: np.ndarray, ships: np.ndarray | None = None
+                      ) -> np.ndarray:
+        """Steady calm-water rps for ``speed_mps`` by linear interpolation in the table: of
+        every ship (``speed_mps`` ``(n,)``), or of the ships with indices ``ships`` (``(k,)``,
+        ``speed_mps`` theirs)."""
+        rows = np.arange(self.n_ships) if ships is None else np.asarray(ships)
+        service = self.service_speed_mps if ships is None else self.service_speed_mps[rows]
+        frac = np.clip(speed_mps / service, 0.0, SPEED_TABLE_FRACTIONS[-1])
         pos = frac / (SPEED_TABLE_FRACTIONS[1] - SPEED_TABLE_FRACTIONS[0])
         k = np.minimum(pos.astype(np.int64), len(SPEED_TABLE_FRACTIONS) - 2)
         w = pos - k
-        rows = np.arange(self.n_ships)
         return (1.0 - w) * self.rps_table[rows, k] + w * self.rps_table[rows, k + 1]
 
 

@@ -145,18 +145,19 @@ class Simulation:
         b, x, d = self.batch, self.batch.x, self.decider
         true_vel = earth_velocity(x, b.env) if self.nav is None or self.obs is None else None
         own_vel = true_vel if self.nav is None else self.nav.ground_velocity(b.env)
-        if self.obs is not None:
-            xp, active = self.obs.predicted_tracks(self.t_s)
-            other = np.where(active[None, :], xp.T, np.nan)
+        if self.obs is not None:  # (NaN where a pair has no track)
+            other = np.ascontiguousarray(self.obs.predicted_tracks(self.t_s)[0].T)
         else:
             other = np.concatenate([x[[NORTH, EAST]][:, d.tgt], true_vel[:, d.tgt]])
         factor_before = d.speed_factor.copy()
         d.decide(self.t_s, est[[NORTH, EAST, PSI]], own_vel, b.length_m, other,
                  self.course_order_rad, self.route_speed_mps)
-        changed = d.speed_factor != factor_before
-        if changed.any():
+        changed = np.flatnonzero(d.speed_factor != factor_before)
+        if changed.size:
             self.speed_order_mps = self.route_speed_mps * d.speed_factor
-            self.rps_cmd = np.where(changed, b.rps_for_speed(self.speed_order_mps), self.rps_cmd)
+            rps = self.rps_cmd.copy()
+            rps[changed] = b.rps_for_speed(self.speed_order_mps[changed], changed)
+            self.rps_cmd = rps
 
     def step(self) -> None:
         """Advance all ships by one time step with the current orders, then navigate."""
