@@ -349,6 +349,24 @@ def test_bad_domain_and_shapes():
         pair_features(z, z, z, z, z, np.ones(3), z, z, z, z, np.ones(2), "fujii", 5.0, 60.0)
 
 
+def test_features_written_into_a_given_array():
+    """``out`` receives the same values as a fresh array (its rows are the features' values);
+    an array of another shape or layout is refused."""
+    rng = np.random.default_rng(4)
+    cols = [rng.uniform(-3000, 3000, 5) for _ in range(4)] + [rng.uniform(0, 6, 5),
+                                                             np.full(5, 150.0)]
+    cols += [rng.uniform(-3000, 3000, 5) for _ in range(4)] + [np.full(5, 120.0)]
+    want = pair_features(*cols, "coldwell", 5.0, 600.0).values
+    table = np.full((len(NAMES) + 3, 5), -1.0)
+    got = pair_features(*cols, "coldwell", 5.0, 600.0, out=table[: len(NAMES)])
+    assert np.shares_memory(got.values, table)
+    np.testing.assert_array_equal(table[: len(NAMES)], want)
+    assert (table[len(NAMES):] == -1.0).all()
+    for bad in (np.empty((len(NAMES), 4)), np.empty((5, len(NAMES))).T):
+        with pytest.raises(ValueError, match="out must be"):
+            pair_features(*cols, "coldwell", 5.0, 600.0, out=bad)
+
+
 def test_unknown_other_state_gives_nan_features():
     unknown = dict(n=math.nan, e=math.nan, vn=math.nan, ve=math.nan, h=0.0, L=100.0)
     f = features([(ship(), unknown), (ship(), ship(north_nm=1.0))], visibility_nm=2.0)

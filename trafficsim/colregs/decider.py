@@ -233,11 +233,10 @@ class Decider:
         self._forget_lost(t_s, other)
         self._route_line(own_state, length_m, route_course_rad)
         feats = np.empty((len(FEATURES), o.shape[0]))
-        geo = features.pair_features(
+        features.pair_features(
             own_state[0, o], own_state[1, o], own_vel[0, o], own_vel[1, o], own_state[2, o],
             length_m[o], other[0], other[1], other[2], other[3], length_m[self.tgt],
-            self.domain, self.visibility_nm, self.horizon_s)
-        feats[: len(features.NAMES)] = geo.values
+            self.domain, self.visibility_nm, self.horizon_s, out=feats[: len(features.NAMES)])
         self._memory_features(t_s, other, route_course_rad)
         feats[len(features.NAMES):] = self.memory
         self.last_features = feats

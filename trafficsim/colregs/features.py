@@ -277,7 +277,8 @@ def pair_features(own_north_m: ArrayLike, own_east_m: ArrayLike, own_vn_mps: Arr
                   own_ve_mps: ArrayLike, own_heading_rad: ArrayLike, own_length_m: ArrayLike,
                   oth_north_m: ArrayLike, oth_east_m: ArrayLike, oth_vn_mps: ArrayLike,
                   oth_ve_mps: ArrayLike, oth_length_m: ArrayLike, domain: str,
-                  visibility_nm: ArrayLike, horizon_s: float) -> Features:
+                  visibility_nm: ArrayLike, horizon_s: float,
+                  out: np.ndarray | None = None) -> Features:
     """Encounter features of ``m`` directed pairs (see the module docstring for the vocabulary).
 
     Args:
@@ -292,6 +293,8 @@ def pair_features(own_north_m: ArrayLike, own_east_m: ArrayLike, own_vn_mps: Arr
         domain: ship-domain name (``coldwell``, ``fujii``, ``goodwin``, ``kijima``).
         visibility_nm: visibility, NM, scalar or ``(m,)``.
         horizon_s: look-ahead for the domain entry, seconds.
+        out: optional C-contiguous ``(len(NAMES), m)`` float64 array to write the values into
+            (the returned features' ``values`` are then ``out``).
 
     Returns:
         :class:`Features` with ``values`` of shape ``(len(NAMES), m)``.
@@ -309,6 +312,11 @@ def pair_features(own_north_m: ArrayLike, own_east_m: ArrayLike, own_vn_mps: Arr
                          f"argument, got shapes {[c.shape for c in cols]}", key="pairs")
     vis = np.ascontiguousarray(np.broadcast_to(np.asarray(visibility_nm, dtype=np.float64),
                                                shape))
-    out = np.empty((len(NAMES), shape[0]))
+    if out is None:
+        out = np.empty((len(NAMES), shape[0]))
+    elif (out.shape != (len(NAMES), shape[0]) or out.dtype != np.float64
+          or not out.flags.c_contiguous):
+        raise ValueError(f"out must be a C-contiguous float64 array of shape "
+                         f"{(len(NAMES), shape[0])}, got {out.shape} {out.dtype}")
     _features_loop(code, *cols[:10], vis, float(horizon_s), out)
     return Features(out)
