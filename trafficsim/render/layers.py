@@ -20,7 +20,7 @@ from trafficsim.colregs import domains
 from trafficsim.geometry import cpa, hull_outlines
 from trafficsim.render import style as st
 from trafficsim.render.data import RunData
-from trafficsim.render.view import CLIP_PX, View, nice_length_m
+from trafficsim.render.view import CLIP_PX, View, nice_length_m, pixel_points
 from trafficsim.units import NM
 
 #: bearings at which a ship domain's boundary is drawn
@@ -122,18 +122,17 @@ def draw_routes(pg: Any, surf: Any, view: View, style: st.Style, data: RunData) 
                 pg.draw.circle(surf, st.ROUTE, (px, py), ring, 1)
 
 
-Path = tuple[list, list | None]  # a polyline's int pixel points, and its clipped segments
+Path = tuple[list, list | None]  # a polyline's int pixel points, or its clipped segments
 
 
 def _path(view: View, north_m: np.ndarray, east_m: np.ndarray, w: int, h: int) -> Path:
-    """A track as int pixel points (:meth:`View.points`) and, when a point lies beyond
+    """A track as int pixel points (:meth:`View.points`) or, when a point lies beyond
     :data:`CLIP_PX` (where clipping each coordinate would bend the line), each segment clipped
     to the view instead (:func:`_clip`; None for a segment wholly outside): the line keeps its
     bearing however far off its ends lie."""
-    points = view.points(north_m, east_m).tolist()
     x, y = view.to_px(north_m, east_m, clip=False)
     if x.size == 0 or not max(np.abs(x).max(), np.abs(y).max()) > CLIP_PX:
-        return points, None
+        return pixel_points(x, y).tolist(), None  # (within CLIP_PX: View.points' points)
     ends = np.stack([x, y], axis=-1)
     segments: list = []
     for a, b in itertools.pairwise(ends):
@@ -143,7 +142,7 @@ def _path(view: View, north_m: np.ndarray, east_m: np.ndarray, w: int, h: int) -
             continue
         p0, p1 = (np.floor(a + t * (b - a)).astype(np.int64).tolist() for t in span)
         segments.append((p0, p1))
-    return points, segments
+    return [], segments
 
 
 def _draw_path(pg: Any, surf: Any, colour: st.Colour, path: Path, width: int,

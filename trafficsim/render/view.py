@@ -47,8 +47,7 @@ class View:
 
     def points(self, north_m: np.ndarray, east_m: np.ndarray) -> np.ndarray:
         """``(k, 2)`` int pixel points (x, y) of ``(k,)`` finite north/east arrays."""
-        x, y = self.to_px(north_m, east_m)
-        return np.stack([np.floor(x), np.floor(y)], axis=-1).astype(np.int64)
+        return pixel_points(*self.to_px(north_m, east_m))
 
     def to_m(self, x_px: np.ndarray, y_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """North/east metres of pixel coordinates (the inverse of :meth:`to_px`)."""
@@ -59,6 +58,11 @@ class View:
     def centred_on(self, north_m: float, east_m: float) -> View:
         """The same scale and size centred elsewhere."""
         return replace(self, centre_north_m=float(north_m), centre_east_m=float(east_m))
+
+
+def pixel_points(x_px: np.ndarray, y_px: np.ndarray) -> np.ndarray:
+    """``(k, 2)`` int pixel points of ``(k,)`` float pixel coordinates (floored)."""
+    return np.stack([np.floor(x_px), np.floor(y_px)], axis=-1).astype(np.int64)
 
 
 Area = tuple[int, int, int, int]  # left, top, width, height in pixels
