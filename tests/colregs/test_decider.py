@@ -397,6 +397,24 @@ def test_resume_route_not_into_a_slower_ship_ahead():
     assert dec.candidate[0] == -1 and np.isnan(dec.course_order_rad[0])  # released
 
 
+def test_a_manoeuvre_asked_while_resuming_on_a_new_leg_starts_from_the_present_course():
+    """Ship 0 slows on her course 000 in fog, resumes her route at half speed behind the slower
+    ship 1 when it clears (not yet released), and follows it round onto a leg 090. Fog again:
+    she slows on her present course, 090, not on the 000 the first manoeuvre was taken from
+    (which would turn her 90 deg to port). On the same leg, the manoeuvre she ran is taken up
+    from its own base course."""
+    for leg_deg, heading_deg, expected_deg in ((90.0, 90.0, 90.0), (0.0, 10.0, 0.0)):
+        dec = _fog_then_clear(4.5)
+        assert dec.candidate[0] >= 0 and dec.resuming[0]
+        dec.visibility_nm = 1.0
+        decide(dec, 300.0, [(2000.0, 0.0, heading_deg, 0.5 * V), (3000.0, 0.0, 0.0, 4.5)],
+               route_deg=[leg_deg, 0.0], route_mps=[V, 4.5])
+        assert mem(dec, "own_manoeuvre")[0] == ENC["reduce_speed"]
+        assert dec.speed_factor[0] == 0.5
+        assert not dec.resuming[0]
+        assert wrap_deg(dec.course_order_rad[0]) == pytest.approx(expected_deg), leg_deg
+
+
 def test_route_line_model_follows_the_route_guidance():
     """Route guidance steers leg course - atan(e / 600 m) for a 150 m ship (look-ahead 4
     lengths): the decision step recovers the cross-track error e from the route course it is

@@ -116,9 +116,15 @@ class Decider:
         cursor: ``(m,)`` node each pair resumes at.
         role_since_s, other_cog_at_role, other_sog_at_role: ``(m,)`` when the role was set and
             the other ship's course and speed then.
-        base_course_rad: ``(n,)`` course the ship's manoeuvre is taken from (NaN: on route).
+        base_course_rad: ``(n,)`` course the ship's manoeuvre is taken from: her course over
+            ground when it began (NaN: on route).
+        base_leg_rad: ``(n,)`` the course of her route leg (:attr:`line_course_rad`) then.
         candidate: ``(n,)`` int the arbitration candidate it runs, kept while it resumes its
             route (-1: none, back on route).
+        resuming: ``(n,)`` bool, resuming her route after the last decision step. A manoeuvre
+            asked while she resumes takes up the one she ran, from its base course, unless her
+            route has turned onto another leg since it began: then it starts afresh from her
+            present course.
         course_order_rad, speed_factor: ``(n,)`` the orders (NaN course: follow the route, at
             ``speed_factor`` x route speed).
         kept_distance_m: ``(n,)`` the CPA distance the running manoeuvre keeps; resuming keeps
@@ -147,7 +153,9 @@ class Decider:
     other_sog_at_role: np.ndarray
     same_role_periods: np.ndarray
     base_course_rad: np.ndarray
+    base_leg_rad: np.ndarray
     candidate: np.ndarray
+    resuming: np.ndarray
     course_order_rad: np.ndarray
     speed_factor: np.ndarray
     kept_distance_m: np.ndarray
@@ -208,7 +216,8 @@ class Decider:
             memory=memory, request=np.full((4, m), np.nan), cursor=cursor,
             role_since_s=np.full(m, np.nan), other_cog_at_role=np.full(m, np.nan),
             other_sog_at_role=np.full(m, np.nan), same_role_periods=np.zeros(m, dtype=np.int64),
-            base_course_rad=np.full(n, np.nan), candidate=np.full(n, -1, dtype=np.int64),
+            base_course_rad=np.full(n, np.nan), base_leg_rad=np.full(n, np.nan),
+            candidate=np.full(n, -1, dtype=np.int64), resuming=np.zeros(n, dtype=bool),
             course_order_rad=np.full(n, np.nan), speed_factor=np.ones(n),
             kept_distance_m=np.zeros(n), line_north_m=np.full(n, np.nan),
             line_east_m=np.full(n, np.nan), line_course_rad=np.full(n, np.nan),
@@ -424,10 +433,16 @@ class Decider:
         ships = np.flatnonzero(~idle)  # the asking ships, ascending
         # back to the route only where it passes every ship at the distance the last manoeuvre
         # kept (Rule 8(d): resuming must not make a new close-quarters situation)
+        # asked again while resuming, on a route leg other than the one the manoeuvre began on:
+        # its base course is stale, a new manoeuvre starts from the present course
+        stale = ~idle & self.resuming & (self.line_course_rad != self.base_leg_rad)
+        self.base_course_rad[stale] = np.nan
+        self.candidate[stale] = -1
         resuming = idle & (self.candidate >= 0)
         if resuming.any():
             idle &= ~resuming | self._resume(resuming, own_state, own_vel, other,
                                              route_course_rad, route_speed_mps)
+        self.resuming = resuming & ~idle
         self.base_course_rad[idle] = np.nan
         self.candidate[idle] = -1
         self.course_order_rad[idle] = np.nan
@@ -441,6 +456,7 @@ class Decider:
         self.base_course_rad[start] = np.where(
             np.hypot(vn, ve) < features.COURSE_MIN_SPEED_MPS, own_state[2, start],
             np.arctan2(ve, vn))
+        self.base_leg_rad[start] = self.line_course_rad[start]
         slot = np.full(n, -1, dtype=np.int64)
         slot[ships] = np.arange(ships.size)
         pairs = np.flatnonzero(slot[o] >= 0)
