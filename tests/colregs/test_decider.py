@@ -429,11 +429,10 @@ def test_route_line_model_follows_the_route_guidance():
         route = math.degrees(-math.atan(east / 600.0))
         decide(dec, 10.0, ships, route_deg=[route, 180.0])
         assert dec.line_course_rad[0] == 0.0
-        assert dec._cross_track_m(snapshot(dec, ships)[0], np.arange(1))[0] == pytest.approx(east)
+        assert dec.cross_track_m[0] == pytest.approx(east)
     decide(dec, 20.0, [(500.0, -1200.0, 0.0, V), far], route_deg=[90.0, 180.0])
     assert dec.line_course_rad[0] == pytest.approx(math.radians(90.0))
-    assert dec._cross_track_m(snapshot(dec, [(500.0, -1200.0, 0.0, V), far])[0],
-                             np.arange(1))[0] == 0.0
+    assert dec.cross_track_m[0] == 0.0
 
 
 def _overtaken_ship_ahead() -> tuple[Decider, float]:

@@ -131,6 +131,7 @@ class Decider:
             it too, plus :data:`RESUME_MARGIN`.
         line_north_m, line_east_m, line_course_rad: ``(n,)`` a point and the course of the
             route leg each ship follows, as inferred from its route course (:meth:`_route_line`).
+        cross_track_m: ``(n,)`` each ship's distance from that line, m (+ = starboard of it).
         last_known_s: ``(m,)`` when each observer last knew its target (NaN: never).
         lost_track_s: ``(m,)`` how long a lost track keeps the pair's encounter (the observer's
             rules file's ``lost_track_min``).
@@ -162,6 +163,7 @@ class Decider:
     line_north_m: np.ndarray
     line_east_m: np.ndarray
     line_course_rad: np.ndarray
+    cross_track_m: np.ndarray
     last_known_s: np.ndarray
     lost_track_s: np.ndarray
     start_cursor: np.ndarray
@@ -221,6 +223,7 @@ class Decider:
             course_order_rad=np.full(n, np.nan), speed_factor=np.ones(n),
             kept_distance_m=np.zeros(n), line_north_m=np.full(n, np.nan),
             line_east_m=np.full(n, np.nan), line_course_rad=np.full(n, np.nan),
+            cross_track_m=np.full(n, np.nan),
             last_known_s=np.full(m, np.nan),
             lost_track_s=lost[ship_net[obs]], start_cursor=cursor.copy())
 
@@ -351,13 +354,8 @@ class Decider:
         first leg.
         """
         _route_line_model(own_state[0], own_state[1], length_m, route_course_rad,
-                          self.line_north_m, self.line_east_m, self.line_course_rad)
-
-    def _cross_track_m(self, own_state: np.ndarray, ships: np.ndarray) -> np.ndarray:
-        """Distance of each of ``ships`` from its route line model, m (+ = starboard of it)."""
-        c = self.line_course_rad[ships]
-        return (-(own_state[0, ships] - self.line_north_m[ships]) * np.sin(c)
-                + (own_state[1, ships] - self.line_east_m[ships]) * np.cos(c))
+                          self.line_north_m, self.line_east_m, self.line_course_rad,
+                          self.cross_track_m)
 
     def _resume(self, ships_mask: np.ndarray, own_state: np.ndarray, own_vel: np.ndarray,
                 other: np.ndarray, route_course_rad: np.ndarray,
@@ -399,7 +397,7 @@ class Decider:
         ps = slot[o[pairs]]
         route = route_course_rad[r]
         chi = self.line_course_rad[r]
-        e = self._cross_track_m(own_state, r)
+        e = self.cross_track_m[r]
         ordered = np.where(np.isnan(self.course_order_rad[r]), route, self.course_order_rad[r])
         slow = np.where(self.speed_factor[r] < 1.0, self.speed_factor[r], DEFAULT_SLOW_FACTOR)
         c = np.ascontiguousarray
@@ -571,11 +569,12 @@ def _memory_rows(t_s: float, own_role: np.ndarray, role_since_s: np.ndarray,
 @kernel
 def _route_line_model(north: np.ndarray, east: np.ndarray, length_m: np.ndarray,
                       route_course_rad: np.ndarray, line_north_m: np.ndarray,
-                      line_east_m: np.ndarray, line_course_rad: np.ndarray) -> None:
+                      line_east_m: np.ndarray, line_course_rad: np.ndarray,
+                      cross_track_m: np.ndarray) -> None:
     """:meth:`Decider._route_line` over ships, in place: the course guidance would steer on
     the line model, ``chi_leg - atan(e / Delta)``, against the route course asked now; off
     by more than :data:`_LINE_TOL_RAD` (or no model yet), the model restarts through the
-    ship's position along the route course."""
+    ship's position along the route course (``e = 0``)."""
     for i in range(north.shape[0]):
         c = line_course_rad[i]
         cc, sc = cos_sin(c)
@@ -584,6 +583,8 @@ def _route_line_model(north: np.ndarray, east: np.ndarray, length_m: np.ndarray,
         if not abs(signed_angle(predicted - route_course_rad[i])) <= _LINE_TOL_RAD:
             line_north_m[i], line_east_m[i] = north[i], east[i]
             line_course_rad[i] = route_course_rad[i]
+            e = 0.0
+        cross_track_m[i] = e
 
 
 @kernel
