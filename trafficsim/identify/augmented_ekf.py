@@ -33,6 +33,10 @@ carry over.
 Noise (not given in the paper; our choices): measurement covariance from the smoother's standard
 deviations at each sample (floored), state process noise 10 % of it, coefficient process noise
 zero (constant coefficients, as eq 8.1).
+
+The coefficients' standard deviations are the filter's covariance and come out too narrow, the
+more so the noisier the measured states: the augmented EKF neglects how its gain depends on the
+coefficients (Ljung, IEEE TAC 24(1), 1979). The output-error fit gives the intervals to quote.
 """
 
 from __future__ import annotations

@@ -93,7 +93,11 @@ def markdown(report: Mapping[str, Any]) -> str:
     if report.get("ekf"):
         ekf = report["ekf"]
         lines += ["## Augmented-state EKF", "", f"{ekf['recursions']} recursions in "
-                  f"{ekf['elapsed_s']:.2f} s.", "", "| coefficient | estimate | std |",
+                  f"{ekf['elapsed_s']:.2f} s. The std is the filter's own (the root of its "
+                  "covariance): it leaves out how the gain depends on the coefficients "
+                  "(Ljung 1979) and is too narrow where the measured states are noisy; the "
+                  "output-error fit's intervals are the ones to quote.", "",
+                  "| coefficient | estimate | filter std |",
                   "|---|---|---|"]
         for name, c in ekf["coefficients"].items():
             lines.append(f"| {name} | {_fmt(c['value'])} | {_fmt(c['std'], 2)} |")
