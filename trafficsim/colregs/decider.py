@@ -58,7 +58,7 @@ from trafficsim.colregs.vocabulary import (
 )
 from trafficsim.control.guidance import LOOKAHEAD_L, signed_angle
 from trafficsim.errors import InputError
-from trafficsim.geometry import atan, cos_sin, hypot_below
+from trafficsim.geometry import atan, atan2, cos_sin, hypot_below
 from trafficsim.jit import kernel
 from trafficsim.sensors import mod_2pi_scalar
 from trafficsim.sensors.radar import directed_pairs
@@ -552,14 +552,18 @@ def _memory_rows(t_s: float, own_role: np.ndarray, role_since_s: np.ndarray,
     without a role), and the observer's ordered course change from its route (deg, 0 on the
     route). ``other`` ``(4, m)``: what the observer knows of the other ship."""
     for k in range(obs.shape[0]):
-        has_role = own_role[k] != NO_ROLE
-        cog = math.atan2(other[3, k], other[2, k])
-        sog = math.hypot(other[2, k], other[3, k])
-        time_in_role_min[k] = (t_s - role_since_s[k]) / 60.0 if has_role else 0.0
-        change = abs(signed_angle(cog - cog_at_role[k]))
-        other_course_change_deg[k] = change * _DEG_PER_RAD if has_role else 0.0
-        floor = sog_at_role[k] if sog_at_role[k] >= 1e-6 or math.isnan(sog_at_role[k]) else 1e-6
-        other_speed_change_ratio[k] = sog / floor if has_role else 1.0
+        if own_role[k] != NO_ROLE:
+            vn, ve = other[2, k], other[3, k]
+            cog, sog = atan2(ve, vn), math.sqrt(vn * vn + ve * ve)
+            time_in_role_min[k] = (t_s - role_since_s[k]) / 60.0
+            other_course_change_deg[k] = abs(signed_angle(cog - cog_at_role[k])) * _DEG_PER_RAD
+            floor = sog_at_role[k]
+            if not (floor >= 1e-6 or math.isnan(floor)):
+                floor = 1e-6
+            other_speed_change_ratio[k] = sog / floor
+        else:
+            time_in_role_min[k], other_course_change_deg[k] = 0.0, 0.0
+            other_speed_change_ratio[k] = 1.0
         i = obs[k]
         order = course_order_rad[i]
         own = 0.0 if math.isnan(order) else signed_angle(order - route_course_rad[i])
