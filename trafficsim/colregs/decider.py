@@ -291,26 +291,13 @@ class Decider:
 
     def _merge(self, idx: np.ndarray, dec: network.Decision, t_s: float,
                other: np.ndarray) -> None:
-        """Fold a decision's action fields into the memory of the pairs ``idx``."""
-        role = dec.action("role")
-        new_role = ~np.isnan(role) & (role != self._mem("own_role")[idx])
-        changed = idx[new_role]
-        self.role_since_s[changed] = t_s
-        self.other_cog_at_role[changed] = np.arctan2(other[3, changed], other[2, changed])
-        self.other_sog_at_role[changed] = np.hypot(other[2, changed], other[3, changed])
-        for field_name, mem_name in (("role", "own_role"), ("encounter", "encounter"),
-                                     ("other_role", "other_role"),
-                                     ("manoeuvre", "own_manoeuvre")):
-            value = dec.action(field_name)
-            row = self._mem(mem_name)
-            row[idx] = np.where(np.isnan(value), row[idx], value)
-        # a pair that drops its role forgets what it asked (a later encounter starts afresh)
-        dropped = idx[(role == NO_ROLE)]
-        self.request[:, dropped] = np.nan
-        for r, field_name in enumerate(("direction", "course_change_deg", "speed_factor",
-                                        "pass_distance_nm")):
-            value = dec.action(field_name)
-            self.request[r, idx] = np.where(np.isnan(value), self.request[r, idx], value)
+        """Fold a decision's action fields into the memory of the pairs ``idx``
+        (:func:`_merge_actions`)."""
+        rows = np.array([dec.action_fields.index(f) for f in _MERGED_FIELDS], dtype=np.int64)
+        _merge_actions(idx, dec.actions, rows, float(t_s), other, self._mem("own_role"),
+                       self._mem("encounter"), self._mem("other_role"),
+                       self._mem("own_manoeuvre"), self.role_since_s, self.other_cog_at_role,
+                       self.other_sog_at_role, self.request)
 
     def _blind_spots(self, t_s: float) -> None:
         role = self._mem("own_role")
@@ -536,6 +523,42 @@ class Decider:
         """Blind spots as records: ship, other ship, role, time first seen."""
         return [{"ship": names[b.ship], "other": names[b.other], "role": b.role,
                  "from_s": b.from_s} for b in self.blind_spots]
+
+
+#: the action fields :meth:`Decider._merge` folds in: four into the pair memory, four requests
+_MERGED_FIELDS = ("role", "encounter", "other_role", "manoeuvre", "direction",
+                  "course_change_deg", "speed_factor", "pass_distance_nm")
+
+
+@kernel
+def _merge_actions(idx: np.ndarray, actions: np.ndarray, rows: np.ndarray, t_s: float,
+                   other: np.ndarray, own_role: np.ndarray, encounter: np.ndarray,
+                   other_role: np.ndarray, own_manoeuvre: np.ndarray, role_since_s: np.ndarray,
+                   cog_at_role: np.ndarray, sog_at_role: np.ndarray, request: np.ndarray
+                   ) -> None:
+    """The action fields ``actions[rows]`` (:data:`_MERGED_FIELDS`) of the pairs ``idx``, in
+    place: a field set (not NaN) replaces the memory's or the request's value. A new role
+    stamps its time and the other ship's course and speed then; a pair that drops its role
+    (``no_role``) forgets what it asked before its new requests count (a later encounter starts
+    afresh)."""
+    mem = (own_role, encounter, other_role, own_manoeuvre)
+    for q in range(idx.shape[0]):
+        k = idx[q]
+        role = actions[rows[0], q]
+        if not math.isnan(role) and role != own_role[k]:
+            role_since_s[k] = t_s
+            cog_at_role[k] = math.atan2(other[3, k], other[2, k])
+            sog_at_role[k] = math.hypot(other[2, k], other[3, k])
+        for f in range(4):
+            value = actions[rows[f], q]
+            if not math.isnan(value):
+                mem[f][k] = value
+        for r in range(4):
+            if role == NO_ROLE:
+                request[r, k] = math.nan
+            value = actions[rows[4 + r], q]
+            if not math.isnan(value):
+                request[r, k] = value
 
 
 _DEG_PER_RAD = 180.0 / math.pi  # (the factor of np.degrees)
