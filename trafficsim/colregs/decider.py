@@ -416,13 +416,13 @@ class Decider:
         idle = np.ones(n, dtype=bool)
         idle[o[asking]] = False
         ships = np.flatnonzero(~idle)  # the asking ships, ascending
-        # back to the route only where it passes every ship at the distance the last manoeuvre
-        # kept (Rule 8(d): resuming must not make a new close-quarters situation)
         # asked again while resuming, on a route leg other than the one the manoeuvre began on:
         # its base course is stale, a new manoeuvre starts from the present course
         stale = ~idle & self.resuming & (self.line_course_rad != self.base_leg_rad)
         self.base_course_rad[stale] = np.nan
         self.candidate[stale] = -1
+        # back to the route only where it passes every ship at the distance the last manoeuvre
+        # kept (Rule 8(d): resuming must not make a new close-quarters situation)
         resuming = idle & (self.candidate >= 0)
         if resuming.any():
             idle &= ~resuming | self._resume(resuming, own_state, own_vel, other,
