@@ -228,7 +228,7 @@ def _features_loop(kind: int, own_n: np.ndarray, own_e: np.ndarray, own_vn: np.n
         out[ASPECT, i] = aspect
         out[ASPECT_ABS, i] = abs(aspect)
         out[COURSE_DIFF, i] = _deg(atan2(own_cn * oth_ce - own_ce * oth_cn,
-                                              own_cn * oth_cn + own_ce * oth_ce))
+                                         own_cn * oth_cn + own_ce * oth_ce))
         out[COURSE_DIFF_ABS, i] = abs(out[COURSE_DIFF, i])
 
         # CPA [colregs.md section 4]; DCPA from the cross product (no cancellation near CPA)
