@@ -445,8 +445,10 @@ def _network(draw: st.DrawFn) -> dict[str, Any]:
                 if target not in reached:
                     reached.add(target)
                     frontier.append(target)
-    return {"schema_version": 1, "name": "random", "start": "n0", "parameters": PARAMS,
-            "nodes": {name: spec for name, spec in nodes.items() if name in reached}}
+    kept = {name: spec for name, spec in nodes.items() if name in reached}
+    text = repr(kept)  # a file may declare no parameter that nothing uses
+    return {"schema_version": 1, "name": "random", "start": "n0",
+            "parameters": {k: v for k, v in PARAMS.items() if f"'{k}'" in text}, "nodes": kept}
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -507,10 +509,17 @@ _PY_OPS = {"<": lambda x, c: x < c, "<=": lambda x, c: x <= c, ">": lambda x, c:
 _SAMPLES = [-math.inf, -3.0, -2.0, -0.0, 0.0, 1.0, 2.5, 4.0, 7.0, math.inf, NAN]
 
 
+_TINY_PARAMS = {"lim": "2.5", "lo_p": "-2", "hi_p": "4", "lvl": "high"}
+
+
 def _tiny_file(tmp_path: Path, test: str) -> Path:
+    """A three-node file testing ``test``; it declares the parameters ``test`` uses (a file
+    may declare no parameter that nothing uses)."""
     path = tmp_path / "tiny.yaml"
+    used = ", ".join(f"{k}: {v}" for k, v in _TINY_PARAMS.items()
+                     if re.search(rf"\b{k}\b", test))
     path.write_text("schema_version: 1\nname: tiny\nstart: t\n"
-                    "parameters: {lim: 2.5, lo_p: -2, hi_p: 4, lvl: high}\nnodes:\n"
+                    f"parameters: {{{used}}}\nnodes:\n"
                     f"  t: {{test: {test}, yes: {{to: y, next: true}}, "
                     "no: {to: n, next: true}}\n"
                     "  y: {test: true, yes: {to: t, next: true}}\n"

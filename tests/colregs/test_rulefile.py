@@ -22,6 +22,7 @@ from trafficsim.colregs.rulefile import (
     AnyOf,
     Comparison,
     Edge,
+    EngineParameter,
     Literal,
     Not,
     Operand,
@@ -50,7 +51,10 @@ VOCAB = Vocabulary(
              "manoeuvre": ActionField(("keep_course", "alter_course", "reduce_speed")),
              "direction": ActionField(("port", "starboard")),
              "course_change_deg": ActionField(),
-             "speed_factor": ActionField()})
+             "speed_factor": ActionField((), "fraction of the route speed", (0.0, 1.0))},
+    engine_parameters={"horizon_min": EngineParameter("the look-ahead, minutes"),
+                       "memory_min": EngineParameter("how long a lost track is kept, minutes",
+                                                     at_least=True)})
 
 ONE_NODE = """\
 schema_version: 1
@@ -792,7 +796,8 @@ def test_bundled_variants_change_only_what_they_say() -> None:
 
 def test_override_breaking_the_bundled_look_ahead_names_every_use(tmp_path: Path) -> None:
     """A child of rules/colregs.yaml with a negative look-ahead: one error per use of the
-    parameter, each at the override and naming the line of the use in the parent."""
+    parameter, each at the override and naming the line of the use in the parent, then the
+    decision step's own bound on it."""
     from trafficsim.colregs.vocabulary import VOCABULARY
 
     parent = RULES / "colregs.yaml"
@@ -808,7 +813,9 @@ def test_override_breaking_the_bundled_look_ahead_names_every_use(tmp_path: Path
     assert [str(e) for e in info.value.errors] == [
         f"{child}:5: parameters.look_ahead_min: between needs lo <= hi, got "
         f"[0, look_ahead_min] = [0, -3]; the value of 'look_ahead_min' set here is used at "
-        f"{parent}:{line} ({key})" for line, key in zip(uses, keys, strict=True)]
+        f"{parent}:{line} ({key})" for line, key in zip(uses, keys, strict=True)] + [
+        f"{child}:5: parameters.look_ahead_min: parameter 'look_ahead_min' (the look-ahead of "
+        "time to domain entry and of the arbitration, minutes) must be > 0, got -3"]
 
 
 # ------------------------------------------------------------------------------------------

@@ -89,15 +89,39 @@ class ActionField:
         constants: the enum constants the field accepts; empty means the field takes a number
             (written as a number or a parameter name).
         description: shown in documentation and explanations.
+        bounds: the smallest and largest number a numeric field takes (both allowed).
     """
 
     constants: tuple[str, ...] = ()
     description: str = ""
+    bounds: tuple[float, float] = (-math.inf, math.inf)
 
     @property
     def numeric(self) -> bool:
         """True if the field takes numbers, False if it takes enum constants."""
         return not self.constants
+
+
+@dataclass(frozen=True)
+class EngineParameter:
+    """A parameter the caller reads from a rule set itself (not only through its nodes).
+
+    Attributes:
+        description: what the caller does with it.
+        above: the value must be greater than this (``at_least`` False) or not below it.
+        at_least: whether ``above`` itself is allowed.
+    """
+
+    description: str
+    above: float = 0.0
+    at_least: bool = False
+
+    def admits(self, value: float) -> bool:
+        return value >= self.above if self.at_least else value > self.above
+
+    @property
+    def condition(self) -> str:
+        return f"{'>=' if self.at_least else '>'} {self.above:g}"
 
 
 @dataclass(frozen=True)
@@ -111,6 +135,9 @@ class Vocabulary:
             so ``[own_role, ==, give_way]`` compares the feature with ``enums["give_way"]``).
         actions: action field name -> :class:`ActionField`, in the row order of the merged
             action array of a decision.
+        engine_parameters: parameter name -> :class:`EngineParameter`, the parameters the
+            caller reads itself: a file may set them without a node using them, and their
+            values are checked against the bound. Any other parameter must be used by a node.
 
     Raises:
         ValueError: duplicate or clashing names, or an action field listing an unknown constant.
@@ -119,6 +146,7 @@ class Vocabulary:
     features: tuple[str, ...]
     enums: Mapping[str, float] = field(default_factory=dict)
     actions: Mapping[str, ActionField] = field(default_factory=dict)
+    engine_parameters: Mapping[str, EngineParameter] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "features", tuple(self.features))
@@ -495,6 +523,8 @@ class _Checker:
             self.at(self.owner[key])
             nodes.append(self.read_node(key, nodes_data[key], names))
         self.check_added_parameters()
+        self.check_unused_parameters()
+        self.check_engine_parameters()
         if entry is not None and self.edges_ok:
             self.check_graph(entry, names)
         if self.errors:
@@ -662,6 +692,44 @@ class _Checker:
                        "that extends another may override the parameters it inherits, or add "
                        "parameters for its own nodes")
 
+    def check_unused_parameters(self) -> None:
+        """A file read alone may declare only parameters its nodes use, or that the caller
+        reads itself (the vocabulary's engine parameters): any other name is most likely
+        misspelt, and its value would change nothing. (A file that extends another is checked
+        by :meth:`check_added_parameters`; the files it extends were checked alone.) Checked
+        only in an otherwise sound file: a node with an error may be the unread use."""
+        if self.top != 0 or self.errors:
+            return
+        self.at(0)
+        engine = list(self.vocab.engine_parameters)
+        for pname in self.declared:
+            if ((pname, 0) in self.used or pname in self.vocab.engine_parameters
+                    or pname in self.bad_parameters):
+                continue
+            hint = _close(pname, engine)
+            reads = (f"one the decision step reads ({', '.join(engine)})" if engine
+                     else "read by the decision step")
+            self.error(("parameters", pname),
+                       f"parameter '{pname}' is used by no node and is not {reads}{hint}; "
+                       "remove it or use it in a node")
+
+    def check_engine_parameters(self) -> None:
+        """The parameters the caller reads must hold numbers within their bounds; located at
+        the file whose value counts."""
+        for pname, spec in self.vocab.engine_parameters.items():
+            if pname not in self.param_level:
+                continue
+            self.at(self.param_level[pname])
+            if pname in self.constants:
+                self.error(("parameters", pname),
+                           f"parameter '{pname}' ({spec.description}) must hold a number, got "
+                           f"the enum constant '{self.constants[pname]}'")
+            elif not spec.admits(self.parameters[pname]):
+                self.error(("parameters", pname),
+                           f"parameter '{pname}' ({spec.description}) must be "
+                           f"{spec.condition}, got {self.parameters[pname]:g}")
+        self.at(self.top)
+
     def hint(self, loc: Sequence[str | int]) -> str:
         """Why the text at ``loc`` of the current file was not read as a number, if it looks
         like one (quotes, a leading zero, an exponent without a dot, ...)."""
@@ -809,7 +877,22 @@ class _Checker:
                             f"action field '{key}' takes a number or a parameter name")
             return None
         number = self.number(raw, loc)
-        return None if number is None else Operand(raw, number)
+        return None if number is None else self.within_bounds(key, spec, Operand(raw, number),
+                                                              loc)
+
+    def within_bounds(self, key: str, spec: ActionField, operand: Operand,
+                      loc: tuple[str | int, ...]) -> Operand | None:
+        """``operand`` if the numeric field ``key`` takes its value (located at a later
+        file's override of the parameter, if one set it)."""
+        lo, hi = spec.bounds
+        if lo <= operand.value <= hi:
+            return operand
+        shown_value = (f"{operand.written} = {operand.value:g}"
+                       if isinstance(operand.written, str) else f"{operand.value:g}")
+        self.value_error([operand.written], loc,
+                         f"action field '{key}' ({spec.description}) takes numbers in "
+                         f"[{lo:g}, {hi:g}], got {shown_value}")
+        return None
 
     def parameter_in_action(self, key: str, spec: ActionField, name: str,
                             loc: tuple[str | int, ...]) -> Operand | None:
@@ -823,7 +906,7 @@ class _Checker:
                                           "number or a parameter holding a number")
             return None
         if spec.numeric:
-            return operand
+            return self.within_bounds(key, spec, operand, loc)
         allowed = ", ".join(spec.constants)
         if constant is None:
             self.value_error([name], loc, f"parameter '{name}' holds a number, but action "

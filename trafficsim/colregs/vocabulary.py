@@ -38,8 +38,10 @@ at the closest point of approach the manoeuvre must achieve).
 
 from __future__ import annotations
 
+import math
+
 from trafficsim.colregs import features
-from trafficsim.colregs.rulefile import ActionField, Vocabulary
+from trafficsim.colregs.rulefile import ActionField, EngineParameter, Vocabulary
 
 ROLES = ("no_role", "give_way", "stand_on", "mutual_give_way")
 ENCOUNTERS = ("no_encounter", "head_on", "crossing", "overtaking", "overtaken",
@@ -72,9 +74,20 @@ ACTIONS: dict[str, ActionField] = {
     "other_role": ActionField(ROLES, "the role expected of the other ship"),
     "manoeuvre": ActionField(MANOEUVRES, "what this encounter asks of the own ship"),
     "direction": ActionField(DIRECTIONS, "side of a course alteration"),
-    "course_change_deg": ActionField((), "least course alteration, degrees"),
-    "speed_factor": ActionField((), "largest speed as a fraction of the route speed"),
-    "pass_distance_nm": ActionField((), "distance at CPA the manoeuvre must achieve, NM"),
+    "course_change_deg": ActionField((), "least course alteration, degrees", (0.0, 180.0)),
+    "speed_factor": ActionField((), "largest speed as a fraction of the route speed",
+                                (0.0, 1.0)),
+    "pass_distance_nm": ActionField((), "distance at CPA the manoeuvre must achieve, NM",
+                                    (0.0, math.inf)),
 }
 
-VOCABULARY = Vocabulary(features=FEATURES, enums=ENUMS, actions=ACTIONS)
+#: parameters the decision step reads from a rules file itself (defaults in the decider)
+ENGINE_PARAMETERS: dict[str, EngineParameter] = {
+    "look_ahead_min": EngineParameter("the look-ahead of time to domain entry and of the "
+                                      "arbitration, minutes"),
+    "lost_track_min": EngineParameter("how long a lost track keeps its encounter, minutes",
+                                      at_least=True),
+}
+
+VOCABULARY = Vocabulary(features=FEATURES, enums=ENUMS, actions=ACTIONS,
+                        engine_parameters=ENGINE_PARAMETERS)
