@@ -126,6 +126,46 @@ def test_dask_without_an_address_exits_2_before_anything_is_made(write_spec, tmp
     assert not out.exists()
 
 
+def test_a_spec_no_encounter_can_be_drawn_from_is_refused_before_anything_is_made(
+        write_spec, tmp_path, capsys):
+    """Same-speed ships cannot overtake: the campaign says so at the spec's line of
+    encounter_types.overtaking and makes no folder, so that the corrected spec runs in the
+    same --out (a folder would record the faulty spec's inputs and refuse the corrected one)."""
+    from tests.conftest import error_line
+
+    spec = write_spec(n=2, duration=120,
+                      extra="encounter_types: {overtaking: 1}\nspeed_fraction: [1.0, 1.0]")
+    spec.write_text(spec.read_text().replace("{cargo: 2, container: 1, fishing: 1}",
+                                             "{cargo: 1}"))
+    out = tmp_path / "o"
+    line = error_line(capsys, ["campaign", spec, "--out", out, "--workers", "1",
+                               "--no-progress"])
+    assert line.startswith(f"trafficsim: error: {spec}:9: encounter_types.overtaking: no "
+                           "geometry for overtaking in 1000 draws")
+    assert not out.exists()
+    spec.write_text(spec.read_text().replace("[1.0, 1.0]", "[0.6, 1.0]"))
+    assert main(["campaign", str(spec), "--out", str(out), "--workers", "1",
+                 "--no-progress"]) == 0
+
+
+def test_a_bad_ship_file_is_refused_before_anything_is_made(write_spec, tmp_path, capsys):
+    """A ship file with a misspelt coefficient is located in that file before a folder is
+    made (before, the campaign recorded it in campaign.json and then failed in a chunk)."""
+    from tests.conftest import error_line
+    from trafficsim.ships.library import LIBRARY_DIR
+
+    text = (LIBRARY_DIR / "cargo.yaml").read_text()
+    (tmp_path / "typo.yaml").write_text(text.replace("  K_prime:", "  K_prim:"))
+    spec = write_spec(n=2, duration=120)
+    spec.write_text(spec.read_text().replace("{cargo: 2,", "{typo.yaml: 2,"))
+    out = tmp_path / "o"
+    line = error_line(capsys, ["campaign", spec, "--out", out, "--workers", "1",
+                               "--no-progress"])
+    assert line.startswith(f"trafficsim: error: {tmp_path / 'typo.yaml'}:")
+    assert "coefficients.K_prim: unknown coefficient" in line
+    assert not out.exists()
+
+
 def test_a_damaged_chunk_is_run_again(write_spec, tmp_path):
     """A chunk file that no longer reads (garbage, emptied) is redone, not a traceback."""
     spec = write_spec(n=3, chunk=1, duration=300)

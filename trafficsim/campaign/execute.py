@@ -182,8 +182,13 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
     """
     from tqdm import tqdm
 
+    from trafficsim.campaign.generator import spec_errors
+
     spec = load_spec(spec_path)
     assert spec.path is not None
+    errors = spec_errors(spec)  # before anything is made: a folder records its inputs
+    if errors:
+        raise errors[0]
     out = Path(out_dir)
     workers = (os.cpu_count() or 1) if workers is None else workers
     with _executor(executor, workers, address) as pool:  # (a bad executor flag: nothing made)
