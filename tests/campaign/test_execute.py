@@ -126,6 +126,37 @@ def test_dask_without_an_address_exits_2_before_anything_is_made(write_spec, tmp
     assert not out.exists()
 
 
+@pytest.mark.parametrize("address", ["garbage", "tcp://", "tcp://host:notaport",
+                                     "http://127.0.0.1:8786", "tcp://[::1", "tcp://:8786",
+                                     "tcp://host:0", "inproc://"])
+def test_a_bad_dask_address_exits_2_naming_the_flag_before_anything_is_made(
+        write_spec, tmp_path, capsys, address):
+    from tests.conftest import error_line
+
+    out = tmp_path / "o"
+    line = error_line(capsys, ["campaign", write_spec(), "--out", out, "--executor", "dask",
+                               "--address", address])
+    assert line == ("trafficsim: error: --address: expected a Dask scheduler address "
+                    f"tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786), got '{address}'")
+    assert not out.exists()
+
+
+def test_no_dask_scheduler_at_the_address_exits_2_naming_the_flag(write_spec, tmp_path,
+                                                                    capsys):
+    import dask
+
+    from tests.conftest import error_line
+
+    out = tmp_path / "o"
+    with dask.config.set({"distributed.comm.timeouts.connect": "0.2s"}):
+        line = error_line(capsys, ["campaign", write_spec(), "--out", out, "--executor",
+                                   "dask", "--address", "tcp://127.0.0.1:1"])
+    assert line.startswith("trafficsim: error: --address: no Dask scheduler reached at "
+                           "'tcp://127.0.0.1:1' (Timed out trying to connect")
+    assert line.endswith("expected the address of a running scheduler, tcp://HOST:PORT")
+    assert not out.exists()
+
+
 def test_a_spec_no_encounter_can_be_drawn_from_is_refused_before_anything_is_made(
         write_spec, tmp_path, capsys):
     """Same-speed ships cannot overtake: the campaign says so at the spec's line of

@@ -151,6 +151,31 @@ def _check_folder(out: Path, spec: CampaignSpec, digest: str) -> None:
     write_json(manifest, record)
 
 
+#: what ``--address`` takes, for its messages
+DASK_ADDRESS = "a Dask scheduler address tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786)"
+
+
+def _dask_address(address: str) -> str:
+    """``address`` if it reads as a scheduler address (``[tcp|tls|ws|wss|ucx]://HOST:PORT``,
+    ``HOST:PORT``, or a ``LocalCluster``'s ``inproc://`` one).
+
+    Raises:
+        InputError: at ``--address``, anything else.
+    """
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme == "inproc" and location:
+            return address
+        host, port = parse_host_port(location)
+        if scheme not in ("tcp", "tls", "ws", "wss", "ucx") or not host or not 0 < port < 65536:
+            raise ValueError(address)
+    except (ValueError, TypeError):
+        raise InputError(f"expected {DASK_ADDRESS}, got '{address}'", key="--address") from None
+    return address
+
+
 @contextmanager
 def _executor(kind: str, workers: int, address: str | None) -> Iterator[cf.Executor | None]:
     if kind == "dask":
@@ -159,7 +184,14 @@ def _executor(kind: str, workers: int, address: str | None) -> Iterator[cf.Execu
         if address is None:
             raise InputError("--executor dask needs --address (a scheduler address, or a "
                              "distributed.LocalCluster's)")
-        with Client(address) as client:
+        address = _dask_address(address)
+        try:
+            client = Client(address)
+        except (OSError, ValueError, TypeError) as exc:  # (a timeout is an OSError)
+            raise InputError(f"no Dask scheduler reached at '{address}' ({exc}); expected "
+                             "the address of a running scheduler, tcp://HOST:PORT",
+                             key="--address") from None
+        with client:
             yield client.get_executor(pure=False)
         return
     if workers <= 1:
@@ -178,7 +210,8 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
     """Run (or finish) the campaign of ``spec_path`` into ``out_dir``; return the summary.
 
     Raises:
-        InputError: a faulty spec (located), or ``out_dir`` holding another spec's results.
+        InputError: a faulty spec (located), a bad ``address``, or ``out_dir`` holding
+            another spec's results.
     """
     from tqdm import tqdm
 
