@@ -212,6 +212,28 @@ def test_a_damaged_chunk_is_run_again(write_spec, tmp_path):
     assert paths[1].stat().st_mtime_ns == untouched  # only the damaged ones ran again
 
 
+@pytest.mark.parametrize("name", ["chunks/00000000-00000002.parquet", "chunks",
+                                  "summary.json", "encounters.parquet", "campaign.json"])
+def test_a_folder_or_file_where_the_campaign_expects_the_other_is_named(base, tmp_path, capsys,
+                                                                        name):
+    """Resuming with a folder in place of a chunk file (or of a file the campaign writes, or
+    a file in place of chunks/) names that path and what was expected, not a temp file."""
+    from tests.conftest import error_line
+
+    spec, base_out, _ = base
+    out = _copy(base_out, tmp_path)
+    path = out / name
+    shutil.rmtree(path) if path.is_dir() else path.unlink()
+    path.write_text("") if name == "chunks" else path.mkdir()
+    line = error_line(capsys, ["campaign", spec, "--out", out, "--workers", "1",
+                               "--no-progress"])
+    what = ("the folder of the campaign's chunks (or nothing), found a file" if name == "chunks"
+            else "a chunk file of the campaign's results (or nothing), found a folder"
+            if name.startswith("chunks/") else
+            f"the campaign's {name} (or nothing), found a folder")
+    assert line == f"trafficsim: error: {path}: expected {what}; remove it"
+
+
 # --------------------------------------------------------------------------------------------
 # resuming after an interruption at any point, and the chunking, workers and executors
 # --------------------------------------------------------------------------------------------

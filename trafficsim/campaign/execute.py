@@ -54,12 +54,13 @@ def _chunk_done(path: Path, digest: str) -> bool:
     a chunk is run again, as its rows are fixed by the inputs.
 
     Raises:
-        InputError: the chunk holds results of other inputs.
+        InputError: the chunk holds results of other inputs, or is no file.
     """
     import pyarrow.parquet as pq
 
     if not path.exists():
         return False
+    _expect_file(path, "a chunk file of the campaign's results")
     try:  # the whole table: damage inside the data leaves the footer readable
         meta = pq.read_table(path).schema.metadata or {}
     except (OSError, ValueError):  # (pyarrow's ArrowInvalid is a ValueError)
@@ -123,10 +124,29 @@ def _write_chunk(path: Path, rows: dict[str, Any], digest: str) -> None:
     atomic_write(path, lambda fh: pq.write_table(table, fh))
 
 
+#: what the campaign writes into its folder beside ``chunks/``
+OUTPUTS = ("campaign.json", "encounters.parquet", "summary.json", "cpa_histogram.png",
+           "rates_by_type.png")
+
+
+def _expect_file(path: Path, what: str) -> None:
+    """Refuse a folder (or other non-file) where the campaign reads or writes a file."""
+    if path.exists() and not path.is_file():
+        found = "a folder" if path.is_dir() else "something other than a file"
+        raise InputError(f"expected {what} (or nothing), found {found}; remove it",
+                         path=str(path))
+
+
 def _check_folder(out: Path, spec: CampaignSpec, digest: str) -> None:
-    """Refuse a folder of another campaign's results; record this one's (the spec's path is
-    updated when the same inputs come from another place, for ``replay``)."""
+    """Refuse a folder of another campaign's results, or one with a folder where the campaign
+    writes a file; record this one's (the spec's path is updated when the same inputs come
+    from another place, for ``replay``)."""
     assert spec.path is not None
+    for name in OUTPUTS:
+        _expect_file(out / name, f"the campaign's {name}")
+    if (out / "chunks").exists() and not (out / "chunks").is_dir():
+        raise InputError("expected the folder of the campaign's chunks (or nothing), found a "
+                         "file; remove it", path=str(out / "chunks"))
     manifest = out / "campaign.json"
     record = {"spec": str(spec.path), "spec_sha256": _spec_hash(spec.path),
               "inputs_sha256": digest, "name": spec.name, "n_encounters": spec.n_encounters,
