@@ -138,10 +138,13 @@ def _expect_file(path: Path, what: str) -> None:
 
 
 def _check_folder(out: Path, spec: CampaignSpec, digest: str) -> None:
-    """Refuse a folder of another campaign's results, or one with a folder where the campaign
-    writes a file; record this one's (the spec's path is updated when the same inputs come
-    from another place, for ``replay``)."""
+    """Refuse a folder of another campaign's results or of a run's, or one with a folder where
+    the campaign writes a file; record this one's (the spec's path is updated when the same
+    inputs come from another place, for ``replay``)."""
+    from trafficsim.folders import refuse_other_results
+
     assert spec.path is not None
+    refuse_other_results(out, "campaign", "a campaign")
     for name in OUTPUTS:
         _expect_file(out / name, f"the campaign's {name}")
     if (out / "chunks").exists() and not (out / "chunks").is_dir():
@@ -231,7 +234,7 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
 
     Raises:
         InputError: a faulty spec (located), a bad ``address``, or ``out_dir`` holding
-            another spec's results.
+            another spec's results or a run's.
     """
     from tqdm import tqdm
 
