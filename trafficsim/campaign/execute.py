@@ -6,7 +6,9 @@ point and started again with the same command runs only the missing chunks (and 
 damaged from outside, which no longer reads). ``OUT/campaign.json`` and every chunk record the
 hash of the campaign's inputs (:func:`inputs_digest`: the spec and the ship and rules files it
 names), so a folder or a chunk holding results of other inputs is refused: an edited ship file
-cannot mix its results with the old ones. When every chunk
+cannot mix its results with the old ones (and so is a run's folder,
+:mod:`trafficsim.folders`). The ship files are built and one encounter of every type is drawn
+before anything is made. When every chunk
 is there the rows are gathered in encounter order into ``encounters.parquet`` with
 ``summary.json`` and the figures. A chunk's rows do not depend on which executor, worker or
 chunk neighbours computed it (:mod:`trafficsim.campaign.runner`), so the results are the same on
