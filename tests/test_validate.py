@@ -164,3 +164,43 @@ def test_a_ship_files_model_checks_run_and_are_located(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     want = f"trafficsim: error: {ship}:{at + 2}: coefficients.rudder_fade_speed_mps: "
     assert len(err) == 2 and all(line.startswith(want) for line in err)
+
+
+CAMPAIGN = ("schema_version: 1\nname: c\nn_encounters: 4\nseed: 1\nduration_s: 60\n"
+            "ship_types: {ships}\nencounter_types: {types}\nspeed_fraction: [1.0, 1.0]\n")
+
+
+def test_a_campaigns_ship_files_are_loaded_and_built_as_the_campaign_does(tmp_path, capsys):
+    """A misspelt coefficient in a ship file, or a scenario file named as a ship, is found by
+    validate, located in that file, as ``campaign`` finds it."""
+    from trafficsim.ships.library import LIBRARY_DIR
+
+    text = (LIBRARY_DIR / "cargo.yaml").read_text()
+    line = next(k for k, t in enumerate(text.splitlines(), 1) if t.startswith("  K_prime:"))
+    (tmp_path / "typo.yaml").write_text(text.replace("  K_prime:", "  K_prim:"))
+    typo = tmp_path / "c1.yaml"
+    typo.write_text(CAMPAIGN.format(ships="{cargo: 1, typo.yaml: 1}", types="{head_on: 1}"))
+    as_ship = tmp_path / "c2.yaml"
+    as_ship.write_text(CAMPAIGN.format(ships=f"{{{SCENARIOS / 'head_on.yaml'}: 1}}",
+                                       types="{head_on: 1}"))
+    code, out, err = _run([typo, as_ship])
+    assert code == EXIT_INVALID and out == ""
+    lines = err.splitlines()
+    assert lines[0] == (f"trafficsim: error: {tmp_path / 'typo.yaml'}:{line}: "
+                        "coefficients.K_prim: unknown coefficient 'K_prim' for model 'nomoto' "
+                        "(did you mean 'K_prime'?)")
+    assert lines[1].startswith(f"trafficsim: error: {SCENARIOS / 'head_on.yaml'}:")
+    assert "missing required key 'model'" in lines[1] and len(lines) > 2
+
+
+def test_a_campaign_whose_encounters_cannot_be_drawn_is_invalid(tmp_path):
+    """Same-speed ships cannot overtake: validate draws one encounter of each weighted type
+    and reports the type at its line in the spec, as ``campaign`` would fail on it; the
+    head-on type of the same spec draws."""
+    path = tmp_path / "c.yaml"
+    path.write_text(CAMPAIGN.format(ships="{cargo: 1}", types="{head_on: 1, overtaking: 1}"))
+    (error,) = validate_file(path)
+    assert (error.path, error.line, error.key) == (str(path), 7, "encounter_types.overtaking")
+    assert error.message.startswith("no geometry for overtaking in 1000 draws")
+    path.write_text(CAMPAIGN.format(ships="{cargo: 1}", types="{head_on: 1, overtaking: 0}"))
+    assert check_file(path) == ([], "ok")

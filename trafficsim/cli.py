@@ -530,8 +530,11 @@ def _cmd_render(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from trafficsim.folders import refuse_other_results
     from trafficsim.render.report import write_report
 
+    if args.out is not None:
+        refuse_other_results(args.out, "report", "a report")
     rep = write_report(args.campaign_dir, args.out, args.worst, progress=not args.no_progress)
     print(f"report with {len(rep.worst)} worst encounters in {rep.seconds:.1f} s: {rep.path}")
     return 0

@@ -266,7 +266,10 @@ def write_run(out_dir: Path, rec: Recorder, sim: Simulation, summary: dict[str, 
 def run_scenario(path: Path, out_dir: Path, on_record: RecordHook | None = None
                  ) -> dict[str, Any]:
     """Simulate the scenario at ``path``; write results to ``out_dir``; return the summary."""
+    from trafficsim.folders import refuse_other_results
+
     scn = load_scenario(path)
+    refuse_other_results(Path(out_dir), "run", "a run")  # (not a campaign's folder)
     ships, env = scenario_setups(scn)
     batch = build_batch(ships, [env])
     decider = scenario_decider(scn, batch)

@@ -2,9 +2,10 @@
 
 The kind of a file is told by its top-level keys: a rules file has ``nodes`` or ``extends``
 (checked against the COLREGS vocabulary, :data:`trafficsim.colregs.vocabulary.VOCABULARY`), a
-ship file has ``model`` and no ``ships``, a campaign spec has ``n_encounters``, anything else is
-read as a scenario (whose ship files are checked too). The rules file a scenario or campaign
-names is checked with it.
+ship file has ``model`` and no ``ships``, a campaign spec has ``n_encounters`` (its ship files are
+checked too, and one encounter of each type it asks for is drawn), anything else is read as a
+scenario (whose ship files are checked too). The rules file a scenario or campaign names is
+checked with it.
 """
 
 from __future__ import annotations
@@ -91,9 +92,14 @@ def check_file(path: Path) -> tuple[list[InputError], str]:
         if isinstance(doc.data, dict) and "model" in doc.data and "ships" not in doc.data:
             _check_ship(path.resolve())
         elif isinstance(doc.data, dict) and "n_encounters" in doc.data:
+            from trafficsim.campaign.generator import spec_errors
             from trafficsim.campaign.spec import load_spec
 
-            rules = load_spec(path).rules
+            spec = load_spec(path)
+            found = spec_errors(spec)  # its ship files, and a type no draw can place
+            if found:
+                return [e for err in found for e in _errors(err)], ""
+            rules = spec.rules
         else:
             from trafficsim.io.scenario import load_scenario
 

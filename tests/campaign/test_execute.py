@@ -126,6 +126,77 @@ def test_dask_without_an_address_exits_2_before_anything_is_made(write_spec, tmp
     assert not out.exists()
 
 
+@pytest.mark.parametrize("address", ["garbage", "tcp://", "tcp://host:notaport",
+                                     "http://127.0.0.1:8786", "tcp://[::1", "tcp://:8786",
+                                     "tcp://host:0", "inproc://"])
+def test_a_bad_dask_address_exits_2_naming_the_flag_before_anything_is_made(
+        write_spec, tmp_path, capsys, address):
+    from tests.conftest import error_line
+
+    out = tmp_path / "o"
+    line = error_line(capsys, ["campaign", write_spec(), "--out", out, "--executor", "dask",
+                               "--address", address])
+    assert line == ("trafficsim: error: --address: expected a Dask scheduler address "
+                    f"tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786), got '{address}'")
+    assert not out.exists()
+
+
+def test_no_dask_scheduler_at_the_address_exits_2_naming_the_flag(write_spec, tmp_path,
+                                                                    capsys):
+    import dask
+
+    from tests.conftest import error_line
+
+    out = tmp_path / "o"
+    with dask.config.set({"distributed.comm.timeouts.connect": "0.2s"}):
+        line = error_line(capsys, ["campaign", write_spec(), "--out", out, "--executor",
+                                   "dask", "--address", "tcp://127.0.0.1:1"])
+    assert line.startswith("trafficsim: error: --address: no Dask scheduler reached at "
+                           "'tcp://127.0.0.1:1' (Timed out trying to connect")
+    assert line.endswith("expected the address of a running scheduler, tcp://HOST:PORT")
+    assert not out.exists()
+
+
+def test_a_spec_no_encounter_can_be_drawn_from_is_refused_before_anything_is_made(
+        write_spec, tmp_path, capsys):
+    """Same-speed ships cannot overtake: the campaign says so at the spec's line of
+    encounter_types.overtaking and makes no folder, so that the corrected spec runs in the
+    same --out (a folder would record the faulty spec's inputs and refuse the corrected one)."""
+    from tests.conftest import error_line
+
+    spec = write_spec(n=2, duration=120,
+                      extra="encounter_types: {overtaking: 1}\nspeed_fraction: [1.0, 1.0]")
+    spec.write_text(spec.read_text().replace("{cargo: 2, container: 1, fishing: 1}",
+                                             "{cargo: 1}"))
+    out = tmp_path / "o"
+    line = error_line(capsys, ["campaign", spec, "--out", out, "--workers", "1",
+                               "--no-progress"])
+    assert line.startswith(f"trafficsim: error: {spec}:9: encounter_types.overtaking: no "
+                           "geometry for overtaking in 1000 draws")
+    assert not out.exists()
+    spec.write_text(spec.read_text().replace("[1.0, 1.0]", "[0.6, 1.0]"))
+    assert main(["campaign", str(spec), "--out", str(out), "--workers", "1",
+                 "--no-progress"]) == 0
+
+
+def test_a_bad_ship_file_is_refused_before_anything_is_made(write_spec, tmp_path, capsys):
+    """A ship file with a misspelt coefficient is located in that file before a folder is
+    made (before, the campaign recorded it in campaign.json and then failed in a chunk)."""
+    from tests.conftest import error_line
+    from trafficsim.ships.library import LIBRARY_DIR
+
+    text = (LIBRARY_DIR / "cargo.yaml").read_text()
+    (tmp_path / "typo.yaml").write_text(text.replace("  K_prime:", "  K_prim:"))
+    spec = write_spec(n=2, duration=120)
+    spec.write_text(spec.read_text().replace("{cargo: 2,", "{typo.yaml: 2,"))
+    out = tmp_path / "o"
+    line = error_line(capsys, ["campaign", spec, "--out", out, "--workers", "1",
+                               "--no-progress"])
+    assert line.startswith(f"trafficsim: error: {tmp_path / 'typo.yaml'}:")
+    assert "coefficients.K_prim: unknown coefficient" in line
+    assert not out.exists()
+
+
 def test_a_damaged_chunk_is_run_again(write_spec, tmp_path):
     """A chunk file that no longer reads (garbage, emptied) is redone, not a traceback."""
     spec = write_spec(n=3, chunk=1, duration=300)
@@ -139,6 +210,28 @@ def test_a_damaged_chunk_is_run_again(write_spec, tmp_path):
     run_campaign(spec, out, workers=1, progress=False)
     _same(before, _table(out))
     assert paths[1].stat().st_mtime_ns == untouched  # only the damaged ones ran again
+
+
+@pytest.mark.parametrize("name", ["chunks/00000000-00000002.parquet", "chunks",
+                                  "summary.json", "encounters.parquet", "campaign.json"])
+def test_a_folder_or_file_where_the_campaign_expects_the_other_is_named(base, tmp_path, capsys,
+                                                                        name):
+    """Resuming with a folder in place of a chunk file (or of a file the campaign writes, or
+    a file in place of chunks/) names that path and what was expected, not a temp file."""
+    from tests.conftest import error_line
+
+    spec, base_out, _ = base
+    out = _copy(base_out, tmp_path)
+    path = out / name
+    shutil.rmtree(path) if path.is_dir() else path.unlink()
+    path.write_text("") if name == "chunks" else path.mkdir()
+    line = error_line(capsys, ["campaign", spec, "--out", out, "--workers", "1",
+                               "--no-progress"])
+    what = ("the folder of the campaign's chunks (or nothing), found a file" if name == "chunks"
+            else "a chunk file of the campaign's results (or nothing), found a folder"
+            if name.startswith("chunks/") else
+            f"the campaign's {name} (or nothing), found a folder")
+    assert line == f"trafficsim: error: {path}: expected {what}; remove it"
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,5 +1,6 @@
 import math
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -408,23 +409,72 @@ def test_without_sensors_ships_have_perfect_knowledge(tmp_path):
         assert s.filter == "none"
 
 
+def _same_speed_overtaking(tmp_path, weights="{overtaking: 1}"):
+    path = tmp_path / "x.yaml"
+    path.write_text(SPEC.format(n=5, seed=1, chunk=5, extra="").replace(
+        "{cargo: 1, container: 1, fishing: 1}", "{cargo: 1}")
+        + f"encounter_types: {weights}\nspeed_fraction: [1, 1]\ndcpa_nm: [0, 0]\n")
+    line = path.read_text().splitlines().index(f"encounter_types: {weights}") + 1
+    return path, line
+
+
 def test_an_impossible_geometry_is_an_input_error_naming_the_key(tmp_path, monkeypatch):
     """Overtaking between ships of the same speed on a collision course cannot be drawn: with
     equal speeds w is square to the mean course, so each ship sees the other within 15 deg of
-    the beam, never abaft it. The draw gives up with an InputError at encounter_types."""
+    the beam, never abaft it. The draw gives up with an InputError at the spec's line of
+    encounter_types.overtaking, located where it is raised (a worker process), and so it
+    stays when pickled back to the campaign."""
+    import pickle
+
     from trafficsim.campaign import generator as gen
     from trafficsim.errors import InputError
 
     monkeypatch.setattr(gen, "MAX_TRIES", 3)
     monkeypatch.setattr(gen, "TRIES_PER_SHIP", 20)
-    path = tmp_path / "x.yaml"
-    path.write_text(SPEC.format(n=5, seed=1, chunk=5, extra="").replace(
-        "{cargo: 1, container: 1, fishing: 1}", "{cargo: 1}")
-        + "encounter_types: {overtaking: 1}\nspeed_fraction: [1, 1]\ndcpa_nm: [0, 0]\n")
+    path, line = _same_speed_overtaking(tmp_path)
     with pytest.raises(InputError) as info:
         gen.draw(load_spec(path), 3)
-    assert info.value.key == "encounter_types"
-    assert "encounter 3" in str(info.value) and "overtaking" in str(info.value)
+    back = pickle.loads(pickle.dumps(info.value))
+    for err in (info.value, back):
+        assert (err.path, err.line, err.key) == (str(path), line, "encounter_types.overtaking")
+        assert str(err).startswith(f"{path}:{line}: encounter_types.overtaking: encounter 3: "
+                                   "no geometry for overtaking in 3 draws")
+    assert "the overtaking ship must be the faster" in str(info.value)
+
+
+def test_drawing_errors_name_each_type_no_draw_can_place(tmp_path, monkeypatch):
+    """One draw of every weighted type: overtaking fails (same speeds), head-on does not; the
+    error names the type's key, not an encounter index. A spec whose types all draw has none."""
+    from trafficsim.campaign import generator as gen
+
+    monkeypatch.setattr(gen, "MAX_TRIES", 3)
+    monkeypatch.setattr(gen, "TRIES_PER_SHIP", 20)
+    path, line = _same_speed_overtaking(tmp_path, "{head_on: 1, overtaking: 1, overtaken: 0}")
+    errors = gen.drawing_errors(load_spec(path))
+    assert [(e.line, e.key) for e in errors] == [(line, "encounter_types.overtaking")]
+    assert "encounter 0" not in errors[0].message
+    assert gen.drawing_errors(_spec(tmp_path, "encounter_types: {overtaking: 1, multi: 1}")) == []
+
+
+def test_ship_errors_load_and_build_every_ship_type(tmp_path):
+    """A ship file with a misspelt coefficient, or a scenario file named as a ship, is an
+    error located in that file, as the campaign meets it when it builds the ships."""
+    from trafficsim.campaign.generator import ship_errors
+    from trafficsim.ships.library import LIBRARY_DIR
+
+    text = (LIBRARY_DIR / "cargo.yaml").read_text()
+    assert "  K_prime:" in text
+    (tmp_path / "typo.yaml").write_text(text.replace("  K_prime:", "  K_prim:"))
+    (tmp_path / "scenario.yaml").write_text("schema_version: 1\nname: s\nduration_s: 60\n"
+                                            "ships: []\n")
+    spec = _spec(tmp_path).model_copy(
+        update={"ship_types": {"cargo": 1.0, "typo.yaml": 1.0, "scenario.yaml": 1.0}})
+    spec._path = tmp_path / "g.yaml"
+    errors = ship_errors(spec)
+    assert [Path(e.path).name for e in errors] == ["typo.yaml", "scenario.yaml"]
+    assert errors[0].key == "coefficients.K_prim" and "did you mean 'K_prime'" in str(errors[0])
+    assert "missing required key 'model'" in str(errors[1])
+    assert ship_errors(_spec(tmp_path)) == []
 
 
 # --------------------------------------------------------------------------------------------

@@ -6,7 +6,9 @@ point and started again with the same command runs only the missing chunks (and 
 damaged from outside, which no longer reads). ``OUT/campaign.json`` and every chunk record the
 hash of the campaign's inputs (:func:`inputs_digest`: the spec and the ship and rules files it
 names), so a folder or a chunk holding results of other inputs is refused: an edited ship file
-cannot mix its results with the old ones. When every chunk
+cannot mix its results with the old ones (and so is a run's folder,
+:mod:`trafficsim.folders`). The ship files are built and one encounter of every type is drawn
+before anything is made. When every chunk
 is there the rows are gathered in encounter order into ``encounters.parquet`` with
 ``summary.json`` and the figures. A chunk's rows do not depend on which executor, worker or
 chunk neighbours computed it (:mod:`trafficsim.campaign.runner`), so the results are the same on
@@ -54,12 +56,13 @@ def _chunk_done(path: Path, digest: str) -> bool:
     a chunk is run again, as its rows are fixed by the inputs.
 
     Raises:
-        InputError: the chunk holds results of other inputs.
+        InputError: the chunk holds results of other inputs, or is no file.
     """
     import pyarrow.parquet as pq
 
     if not path.exists():
         return False
+    _expect_file(path, "a chunk file of the campaign's results")
     try:  # the whole table: damage inside the data leaves the footer readable
         meta = pq.read_table(path).schema.metadata or {}
     except (OSError, ValueError):  # (pyarrow's ArrowInvalid is a ValueError)
@@ -123,10 +126,32 @@ def _write_chunk(path: Path, rows: dict[str, Any], digest: str) -> None:
     atomic_write(path, lambda fh: pq.write_table(table, fh))
 
 
+#: what the campaign writes into its folder beside ``chunks/``
+OUTPUTS = ("campaign.json", "encounters.parquet", "summary.json", "cpa_histogram.png",
+           "rates_by_type.png")
+
+
+def _expect_file(path: Path, what: str) -> None:
+    """Refuse a folder (or other non-file) where the campaign reads or writes a file."""
+    if path.exists() and not path.is_file():
+        found = "a folder" if path.is_dir() else "something other than a file"
+        raise InputError(f"expected {what} (or nothing), found {found}; remove it",
+                         path=str(path))
+
+
 def _check_folder(out: Path, spec: CampaignSpec, digest: str) -> None:
-    """Refuse a folder of another campaign's results; record this one's (the spec's path is
-    updated when the same inputs come from another place, for ``replay``)."""
+    """Refuse a folder of another campaign's results or of a run's, or one with a folder where
+    the campaign writes a file; record this one's (the spec's path is updated when the same
+    inputs come from another place, for ``replay``)."""
+    from trafficsim.folders import refuse_other_results
+
     assert spec.path is not None
+    refuse_other_results(out, "campaign", "a campaign")
+    for name in OUTPUTS:
+        _expect_file(out / name, f"the campaign's {name}")
+    if (out / "chunks").exists() and not (out / "chunks").is_dir():
+        raise InputError("expected the folder of the campaign's chunks (or nothing), found a "
+                         "file; remove it", path=str(out / "chunks"))
     manifest = out / "campaign.json"
     record = {"spec": str(spec.path), "spec_sha256": _spec_hash(spec.path),
               "inputs_sha256": digest, "name": spec.name, "n_encounters": spec.n_encounters,
@@ -151,6 +176,31 @@ def _check_folder(out: Path, spec: CampaignSpec, digest: str) -> None:
     write_json(manifest, record)
 
 
+#: what ``--address`` takes, for its messages
+DASK_ADDRESS = "a Dask scheduler address tcp://HOST:PORT (e.g. tcp://127.0.0.1:8786)"
+
+
+def _dask_address(address: str) -> str:
+    """``address`` if it reads as a scheduler address (``[tcp|tls|ws|wss|ucx]://HOST:PORT``,
+    ``HOST:PORT``, or a ``LocalCluster``'s ``inproc://`` one).
+
+    Raises:
+        InputError: at ``--address``, anything else.
+    """
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme == "inproc" and location:
+            return address
+        host, port = parse_host_port(location)
+        if scheme not in ("tcp", "tls", "ws", "wss", "ucx") or not host or not 0 < port < 65536:
+            raise ValueError(address)
+    except (ValueError, TypeError):
+        raise InputError(f"expected {DASK_ADDRESS}, got '{address}'", key="--address") from None
+    return address
+
+
 @contextmanager
 def _executor(kind: str, workers: int, address: str | None) -> Iterator[cf.Executor | None]:
     if kind == "dask":
@@ -159,7 +209,14 @@ def _executor(kind: str, workers: int, address: str | None) -> Iterator[cf.Execu
         if address is None:
             raise InputError("--executor dask needs --address (a scheduler address, or a "
                              "distributed.LocalCluster's)")
-        with Client(address) as client:
+        address = _dask_address(address)
+        try:
+            client = Client(address)
+        except (OSError, ValueError, TypeError) as exc:  # (a timeout is an OSError)
+            raise InputError(f"no Dask scheduler reached at '{address}' ({exc}); expected "
+                             "the address of a running scheduler, tcp://HOST:PORT",
+                             key="--address") from None
+        with client:
             yield client.get_executor(pure=False)
         return
     if workers <= 1:
@@ -178,12 +235,18 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
     """Run (or finish) the campaign of ``spec_path`` into ``out_dir``; return the summary.
 
     Raises:
-        InputError: a faulty spec (located), or ``out_dir`` holding another spec's results.
+        InputError: a faulty spec (located), a bad ``address``, or ``out_dir`` holding
+            another spec's results or a run's.
     """
     from tqdm import tqdm
 
+    from trafficsim.campaign.generator import spec_errors
+
     spec = load_spec(spec_path)
     assert spec.path is not None
+    errors = spec_errors(spec)  # before anything is made: a folder records its inputs
+    if errors:
+        raise errors[0]
     out = Path(out_dir)
     workers = (os.cpu_count() or 1) if workers is None else workers
     with _executor(executor, workers, address) as pool:  # (a bad executor flag: nothing made)

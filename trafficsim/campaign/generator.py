@@ -37,7 +37,7 @@ import numpy as np
 
 from trafficsim.batch import EncounterEnv, ShipSetup
 from trafficsim.campaign.spec import ENCOUNTER_TYPES, CampaignSpec
-from trafficsim.errors import InputError
+from trafficsim.errors import InputError, ScenarioError
 from trafficsim.navigation import merge_sensors
 from trafficsim.noise import generator
 from trafficsim.ships.library import load_ship
@@ -51,6 +51,10 @@ ABAFT_LOW, ABAFT_HIGH = math.radians(112.5), math.radians(247.5)  # Rule 13(b) s
 ROGUES = ("turn_port", "late_action")
 MAX_TRIES = 1000
 TRIES_PER_SHIP = 100
+
+
+class NoGeometryError(ScenarioError):
+    """A draw found no start geometry of its encounter type in :data:`MAX_TRIES` tries."""
 
 
 @dataclass(frozen=True)
@@ -212,9 +216,14 @@ def _ships(spec: CampaignSpec, pair_kinds: list[str], types: list[str],
     return setups, dcpas, tcpas
 
 
-def draw(spec: CampaignSpec, index: int, ships_cache: dict[str, Any] | None = None
-         ) -> Encounter:
-    """Encounter ``index`` of the campaign (see the module docstring)."""
+def draw(spec: CampaignSpec, index: int, ships_cache: dict[str, Any] | None = None,
+         kind: str | None = None) -> Encounter:
+    """Encounter ``index`` of the campaign (see the module docstring); ``kind`` forces its type
+    (the draws that follow then differ from the campaign's encounter ``index``).
+
+    Raises:
+        NoGeometryError: no start geometry of the type found.
+    """
     rng = generator(spec.seed, index, 0, "encounter")
     cache = {} if ships_cache is None else ships_cache
     base_dir = spec.path.parent if spec.path is not None else None
@@ -225,7 +234,9 @@ def draw(spec: CampaignSpec, index: int, ships_cache: dict[str, Any] | None = No
         return cache[type_]
 
     types = list(spec.ship_types)
-    kind = _weighted(spec.encounter_types, ENCOUNTER_TYPES, rng)
+    drawn_kind = _weighted(spec.encounter_types, ENCOUNTER_TYPES, rng)
+    forced = kind is not None
+    kind = kind or drawn_kind
     if kind == "multi":
         n_other = int(rng.integers(spec.multi_ships[0], spec.multi_ships[1] + 1)) - 1
         weights = {k: w for k, w in spec.encounter_types.items() if k != "multi"}
@@ -239,10 +250,63 @@ def draw(spec: CampaignSpec, index: int, ships_cache: dict[str, Any] | None = No
         if drawn is not None:
             break
     else:
-        raise InputError(f"encounter {index}: no geometry for {', '.join(pair_kinds)} in "
-                         f"{MAX_TRIES} draws with these ship types, speeds, DCPA and TCPA "
-                         "ranges", key="encounter_types")
+        raise _no_geometry(spec, kind, pair_kinds, "" if forced else f"encounter {index}: ")
     setups, dcpas, tcpas = drawn
     env = EncounterEnv(from_kn(rng.uniform(*spec.current_kn)), rng.uniform(0.0, 2.0 * math.pi),
                        rng.uniform(*spec.wind_mps), rng.uniform(0.0, 2.0 * math.pi))
     return Encounter(index, kind, setups, env, pair_kinds, dcpas, tcpas)
+
+
+def _no_geometry(spec: CampaignSpec, kind: str, pair_kinds: list[str], what: str
+                 ) -> NoGeometryError:
+    """The error of a draw that found no start geometry, at ``encounter_types.KIND`` of the
+    spec file (located here: it may be raised in a worker process)."""
+    from trafficsim.io.yamlio import locate
+
+    hint = ""
+    if kind in ("overtaking", "overtaken"):
+        hint = ("; the overtaking ship must be the faster: give speed_fraction a range, or "
+                "ship types of different service speeds")
+    err = NoGeometryError(
+        f"{what}no geometry for {', '.join(pair_kinds)} in {MAX_TRIES} draws with these ship "
+        f"types, speeds, DCPA and TCPA ranges{hint}",
+        path=None if spec.path is None else str(spec.path), key=f"encounter_types.{kind}")
+    locate(err)
+    return err
+
+
+def drawing_errors(spec: CampaignSpec) -> list[NoGeometryError]:
+    """Draw one encounter of every type the spec weights, as the campaign draws them; the
+    errors of the types that find no start geometry (a geometry so rare that a draw seldom
+    finds it may fail here, and would fail in the campaign too)."""
+    cache: dict[str, Any] = {}
+    errors = []
+    for kind in ENCOUNTER_TYPES:
+        if spec.encounter_types.get(kind, 0.0) > 0.0:
+            try:
+                draw(spec, 0, cache, kind)
+            except NoGeometryError as err:
+                errors.append(err)
+    return errors
+
+
+def ship_errors(spec: CampaignSpec) -> list[InputError]:
+    """The errors of the ships the spec's ``ship_types`` name, each loaded and its model family
+    built as the campaign builds them (located in the ship file)."""
+    from trafficsim.ships.base import families
+
+    base_dir = spec.path.parent if spec.path is not None else None
+    errors = []
+    for type_ in spec.ship_types:
+        try:
+            ship = load_ship(type_, base_dir)
+            families()[ship["model"]].build([ship])
+        except InputError as err:
+            errors.append(err)
+    return errors
+
+
+def spec_errors(spec: CampaignSpec) -> list[InputError]:
+    """What a campaign of a schema-valid spec would stumble on once running: its ship files
+    (:func:`ship_errors`), then encounter types no draw can place (:func:`drawing_errors`)."""
+    return ship_errors(spec) or list(drawing_errors(spec))

@@ -72,13 +72,16 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
     :func:`trafficsim.run.record_run`.
 
     Raises:
-        InputError: see :func:`campaign_spec`; an encounter index outside the campaign; a
-            record period that is not a positive multiple of the campaign's step.
+        InputError: see :func:`campaign_spec`; ``out_dir`` holding a campaign's results; an
+            encounter index outside the campaign; a record period that is not a positive
+            multiple of the campaign's step.
     """
     from trafficsim.campaign.runner import prepare
+    from trafficsim.folders import refuse_other_results
     from trafficsim.run import raise_if_diverged, record_run, run_summary, write_run
 
     spec = campaign_spec(campaign_dir)
+    refuse_other_results(Path(out_dir), "run", "a replay (a run folder)")
     if not 0 <= encounter < spec.n_encounters:
         raise InputError(f"expected an encounter index 0 .. {spec.n_encounters - 1}, got "
                          f"{encounter}", key="--encounter")

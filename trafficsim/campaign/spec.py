@@ -44,6 +44,7 @@ Every range is ``[low, high]`` with ``low <= high`` and is sampled uniformly.
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 from pathlib import Path
@@ -60,6 +61,7 @@ from trafficsim.io.scenario import (
     rules_file_errors,
 )
 from trafficsim.io.yamlio import (
+    FieldError,
     Integer,
     Number,
     Strict,
@@ -157,6 +159,17 @@ class CampaignSpec(Strict):
     @classmethod
     def _low_high(cls, value: tuple[float, float]) -> tuple[float, float]:
         return _ordered(value)
+
+    @field_validator("encounter_types", mode="before")
+    @classmethod
+    def _known_types(cls, weights: Any) -> Any:
+        for kind in weights if isinstance(weights, dict) else ():
+            if isinstance(kind, str) and kind not in ENCOUNTER_TYPES:
+                close = difflib.get_close_matches(kind, ENCOUNTER_TYPES, n=1, cutoff=0.6)
+                hint = (f"did you mean '{close[0]}'?" if close
+                        else f"expected one of {', '.join(ENCOUNTER_TYPES)}")
+                raise FieldError(f"unknown encounter type '{kind}' ({hint})", loc=(kind,))
+        return weights
 
     @field_validator("encounter_types", "ship_types")
     @classmethod
