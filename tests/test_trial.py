@@ -3,6 +3,7 @@ the command-line flags, and the instrument columns of ``--sensors``."""
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -10,7 +11,7 @@ import pytest
 from trafficsim.errors import InputError
 from trafficsim.ships import base, manoeuvres
 from trafficsim.ships.library import LIBRARY_DIR, load_ship
-from trafficsim.trial import run_trial, sensor_columns
+from trafficsim.trial import SP_RANGE_M2PS3, run_trial, sensor_columns
 from trafficsim.units import KN
 
 TRACK_COLUMNS = ["t_s", "north_m", "east_m", "heading_deg", "rudder_deg", "rpm", "u_mps",
@@ -273,3 +274,85 @@ def test_trial_with_sensors_takes_a_receiver_given_by_drms(tmp_path):
     _, col = _read_csv(tmp_path / "out" / "trial.csv")
     sigma = 10.0 / math.sqrt(2.0)  # per axis
     assert 0.75 * sigma < np.std(col["gnss_fix_north_m"] - col["north_m"]) < 1.25 * sigma
+
+
+# --- flags out of range and manoeuvres that never complete -------------------------------------
+
+
+@pytest.mark.parametrize("manoeuvre, kw, flag, message", [
+    ("turning", {"speed": 1e-6}, "--speed-kn",
+     "expected at least 0.1 times the service speed of 'container' (22 kn), got 1e-06 kn"),
+    ("zigzag", {"heading": 400.0}, "--heading-deg",
+     "expected a heading change from 1 to 90 deg, got 400"),
+    ("zigzag", {"heading": 1e-9}, "--heading-deg",
+     "expected a heading change from 1 to 90 deg, got 1e-09"),
+    ("zigzag", {"heading": 170.0, "rudder": 5.0}, "--heading-deg",
+     "expected a heading change from 1 to 90 deg, got 170"),
+    ("turning", {"sensors": True, "sp_m2ps3": 1e300}, "--sp",
+     "expected a receiver filter S_p from 1e-06 to 10000 m^2/s^3, got 1e+300"),
+    ("turning", {"sensors": True, "sp_m2ps3": 1e-7}, "--sp",
+     "expected a receiver filter S_p from 1e-06 to 10000 m^2/s^3, got 1e-07"),
+])
+def test_flags_out_of_range_are_refused_under_their_flag(tmp_path, manoeuvre, kw, flag, message):
+    """The audit's values: 1e-6 kn gave NaN advance and tactical diameter, a 400 or 1e-9 deg
+    zig-zag meaningless indices, S_p 1e300 406 NaN cells in trial.csv."""
+    out = tmp_path / "out"
+    with pytest.raises(InputError) as err:
+        _trial(out, "container", manoeuvre, **kw)
+    assert err.value.key == flag and err.value.message == message
+    assert not out.exists()
+
+
+def test_sp_at_its_limits_gives_finite_receiver_columns(tmp_path):
+    """Both ends of the range are accepted and the receiver's columns stay finite."""
+    for sp in SP_RANGE_M2PS3:
+        _trial(tmp_path / str(sp), "fishing", "turning", sensors=True, sp_m2ps3=sp)
+        _, col = _read_csv(tmp_path / str(sp) / "trial.csv")
+        for key in SENSOR_COLUMNS[2:6]:
+            assert np.isfinite(col[key]).all(), (sp, key)
+
+
+@pytest.mark.parametrize("manoeuvre, kw, flag, message", [
+    ("zigzag", {"rudder": 0.1, "heading": 90.0}, "--heading-deg",
+     r"^the zig-zag did not complete: with 0\.1 deg rudder the heading changed by at most "
+     r"[0-9.]+ deg in 3 h; give a smaller --heading-deg than 90 or a larger --rudder-deg$"),
+    ("turning", {"rudder": 0.01}, "--rudder-deg",
+     r"^the turn did not complete: the heading changed by [0-9.]+ deg in 6 h, not the 540 deg "
+     r"the indices need; give a larger rudder angle$"),
+])
+def test_a_manoeuvre_that_never_completes_is_an_error_naming_the_flag(tmp_path, manoeuvre, kw,
+                                                                      flag, message):
+    """A rudder too small for the heading change: the zig-zag never reversed (its overshoots
+    were NaN with exit code 0), the turn never came round; nothing is written."""
+    out = tmp_path / "out"
+    with pytest.raises(InputError) as err:
+        _trial(out, "tanker", manoeuvre, **kw)
+    assert err.value.key == flag and re.match(message, err.value.message), err.value.message
+    assert not out.exists()
+
+
+def test_a_crash_stop_that_never_stops_is_an_error_naming_the_ship_file(tmp_path):
+    """Astern power too weak to stop the ship in the 2 h the manoeuvre runs."""
+    text = (LIBRARY_DIR / "container.yaml").read_text()
+    ship = tmp_path / "weak.yaml"
+    ship.write_text(text.replace("  rps_min: -0.90", "  rps_min: -0.0001"))
+    with pytest.raises(InputError, match=r"^.*weak\.yaml: the crash stop did not complete: "
+                                         r"'container' was still making [0-9.e-]+ m/s after "
+                                         r"2 h of full astern \(its ship file's rps_min\)$"):
+        _trial(tmp_path / "out", str(ship), "crash-stop")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["container", "--manoeuvre", "turning", "--sensors", "--sp", "1e300"], "--sp: expected"),
+    (["container", "--manoeuvre", "turning", "--speed-kn", "1e-6"], "--speed-kn: expected"),
+    (["container", "--manoeuvre", "zigzag", "--heading-deg", "400"], "--heading-deg: expected"),
+    (["container", "--manoeuvre", "zigzag", "--heading-deg", "170", "--rudder-deg", "5"],
+     "--heading-deg: expected"),
+], ids=lambda a: "_".join(a[2:]) if isinstance(a, list) else None)
+def test_the_audits_commands_exit_2_with_one_line(tmp_path, capsys, args, expect):
+    from trafficsim import cli
+
+    assert cli.main(["trial", *args, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"trafficsim: error: {expect}")

@@ -102,20 +102,22 @@ def build_parser() -> argparse.ArgumentParser:
     trial.add_argument("--rudder-deg", type=_positive(float), default=None,
                        help="rudder angle (turning: 35, zigzag: 10 by default)")
     trial.add_argument("--heading-deg", type=_positive(float), default=None,
-                       help="zig-zag heading change (default: equal to the rudder angle)")
+                       help="zig-zag heading change, 1 to 90 deg (default: equal to the rudder "
+                            "angle)")
     trial.add_argument("--port", action="store_true",
                        help="turn to port (turning circle) or put the first rudder to port "
                             "(zig-zag)")
     trial.add_argument("--speed-kn", type=_positive(float), default=None,
-                       help="approach speed (default: the ship's service speed)")
+                       help="approach speed, 0.1 to 2 times the ship's service speed (default: "
+                            "the service speed)")
     trial.add_argument("--dt-s", type=_positive(float), default=None,
                        help="time step (default: 1 s, shorter for small ships)")
     trial.add_argument("--sensors", action="store_true",
                        help="also record GNSS receiver output (gnss_*) and the navigation "
                             "estimate (est_*) beside the truth")
     trial.add_argument("--sp", type=_positive(float), default=None,
-                       help="with --sensors: receiver filter spectral amplitude S_p, m^2/s^3 "
-                            "(default 0.01)")
+                       help="with --sensors: receiver filter spectral amplitude S_p, m^2/s^3, "
+                            "1e-6 to 1e4 (default 0.01)")
     trial.add_argument("--seed", type=_non_negative_int, default=None,
                        help="with --sensors: seed of the instrument noise (default 0)")
     trial.add_argument("--out", type=Path, required=True, help="output folder")

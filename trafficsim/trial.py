@@ -29,7 +29,12 @@ from trafficsim.ships.library import load_ship
 from trafficsim.units import compass_deg, to_kn
 
 #: the command-line flag of each manoeuvre argument
-_FLAGS = {"speed_kn": "--speed-kn", "rudder_deg": "--rudder-deg", "dt_s": "--dt-s"}
+_FLAGS = {"speed_kn": "--speed-kn", "rudder_deg": "--rudder-deg", "heading_deg": "--heading-deg",
+          "dt_s": "--dt-s"}
+#: receiver filter S_p accepted by ``--sp``, m^2/s^3: from a filter that lags a ship's turn by
+#: minutes to one that passes the raw fixes through (the tracking index sqrt(S_p dt^3) / sigma
+#: is then 50 at 1 s and 2 m); far beyond, its covariance overflows
+SP_RANGE_M2PS3 = (1e-6, 1e4)
 
 
 def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: float | None,
@@ -38,7 +43,11 @@ def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: 
               ) -> tuple[dict[str, float], dict[str, dict[str, Any]]]:
     """Run the manoeuvre; write ``trial.csv`` (trial-data format) and ``indices.json``.
 
-    A value the manoeuvre rejects is reported under its command-line flag (``--speed-kn``)."""
+    A value the manoeuvre rejects is reported under its command-line flag (``--speed-kn``), and
+    so is a manoeuvre that does not complete (its indices would be undefined)."""
+    if sensors and not SP_RANGE_M2PS3[0] <= sp_m2ps3 <= SP_RANGE_M2PS3[1]:
+        raise InputError(f"expected a receiver filter S_p from {SP_RANGE_M2PS3[0]:g} to "
+                         f"{SP_RANGE_M2PS3[1]:g} m^2/s^3, got {sp_m2ps3:g}", key="--sp")
     spec = load_ship(ship)
     try:
         if manoeuvre == "turning":
@@ -55,6 +64,7 @@ def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: 
         if err.key in _FLAGS:
             raise InputError(err.message, key=_FLAGS[err.key]) from None
         raise
+    _check_completed(manoeuvre, track, indices, spec)
     criteria = manoeuvres.imo_criteria(manoeuvre, indices)
     if sensors:
         track = {**track, **sensor_columns(track, spec, sp_m2ps3, seed)}
@@ -62,6 +72,29 @@ def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: 
     write_json(out_dir / "indices.json", {"ship": spec["name"], "manoeuvre": manoeuvre,
                                           "indices": indices, "imo_msc137": criteria})
     return indices, criteria
+
+
+def _check_completed(manoeuvre: str, track: Mapping[str, np.ndarray],
+                     indices: Mapping[str, float], spec: Mapping[str, Any]) -> None:
+    """Raise :class:`InputError` naming the flags to change if the manoeuvre never completed
+    within its time limit (an index it needs is undefined)."""
+    t_end = float(track["t_s"][-1])
+    change = np.degrees(np.abs(np.unwrap(np.radians(track["heading_deg"]))
+                               - np.radians(track["heading_deg"][0]))).max()
+    if manoeuvre == "turning" and not np.isfinite(indices["steady_diameter_m"]):
+        raise InputError(f"the turn did not complete: the heading changed by {change:.3g} deg "
+                         f"in {t_end / 3600:.3g} h, not the 540 deg the indices need; give a "
+                         "larger rudder angle", key="--rudder-deg")
+    if manoeuvre == "zigzag" and not np.isfinite(indices["second_overshoot_deg"]):
+        raise InputError(f"the zig-zag did not complete: with {abs(indices['rudder_deg']):g} deg "
+                         f"rudder the heading changed by at most {change:.3g} deg in "
+                         f"{t_end / 3600:.3g} h; give a smaller --heading-deg than "
+                         f"{indices['heading_deg']:g} or a larger --rudder-deg",
+                         key="--heading-deg")
+    if manoeuvre == "crash-stop" and float(track["u_mps"][-1]) > 0.0:
+        raise InputError(f"the crash stop did not complete: '{spec['name']}' was still making "
+                         f"{float(track['u_mps'][-1]):.3g} m/s after {t_end / 3600:.3g} h of "
+                         "full astern (its ship file's rps_min)", path=spec.get("path"))
 
 
 def sensor_columns(track: Mapping[str, np.ndarray], spec: Mapping[str, Any],

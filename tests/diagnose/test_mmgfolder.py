@@ -167,6 +167,7 @@ PARTICULARS = {"lpp": 4.0, "breadth": 0.5, "draft": 0.25, "mass_nd": 0.3, "x_lcg
                "maxtickness_rudder": 0.18, "rho_air": 1.225}
 PARAMS = {**{key: 0.001 * (i + 1) for i, key in enumerate(mmgfolder._COEFFICIENTS)},
           "IzzJzz_nd": 0.03, "Jmin": -0.5}
+PARAMS["xuu_nd"], PARAMS["coeff_drag_aft"] = -0.02, -0.03  # resistance: negative
 PARAMS["coeff_drag_fore"] = PARAMS["xuu_nd"]
 SWITCHES = {"switch_prop_x": 1, "switch_prop_y": 0, "switch_prop_n": 1, "switch_rudder": 0,
             "switch_wind": 1, "switch_windtype": 3, "switch_fn": 1, "switch_ur": 1}
@@ -377,3 +378,99 @@ def test_published_folder_gives_the_documented_mass_and_centre() -> None:
     p = mmgfolder.read_folder(FOLDER)["particulars"]
     assert p["displacement_m3"] * p["water_density_kgpm3"] == pytest.approx(244.6, abs=0.05)
     assert p["lcg_m"] == pytest.approx(0.094, abs=5e-4)
+
+
+# --- bytes, columns and ranges of a made-up folder ----------------------------------------------
+
+
+def _latin1_folder(tmp_path: Path) -> tuple[Path, int]:
+    """The audit's folder: a row with a Latin-1 'e acute' in its value (a non-UTF-8 byte)."""
+    folder = _write_folder(tmp_path / "lat")
+    path = folder / "MMG_params.csv"
+    lines = path.read_bytes().splitlines(keepends=True)
+    at = next(k for k, s in enumerate(lines) if s.startswith(b"massy_nd,"))
+    lines[at] = b"massy_nd, 0.3\xe9, 0.2, 0.4\n"
+    path.write_bytes(b"".join(lines))
+    return folder, at + 1
+
+
+def test_a_byte_that_is_not_utf8_is_located(tmp_path: Path) -> None:
+    """A Latin-1 byte in a value was a UnicodeDecodeError traceback; now the file and line."""
+    folder, line = _latin1_folder(tmp_path)
+    with pytest.raises(InputError) as info:
+        mmgfolder.read_folder(folder)
+    err = info.value
+    assert err.path == str(folder / "MMG_params.csv") and err.line == line
+    assert err.message == "file is not UTF-8 text (byte 0xE9); save it as UTF-8"
+
+
+@pytest.mark.parametrize("command", [
+    ["trial", "{folder}", "--manoeuvre", "turning", "--out", "{out}"],
+    ["diagnose", "--ship", "{folder}", "--data", "x.csv", "--out", "{out}"],
+    ["validate", "{scenario}"],
+    ["run", "{scenario}", "--out", "{out}"],
+], ids=lambda c: c[0])
+def test_a_non_utf8_folder_is_one_located_line_for_every_command(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: list[str]) -> None:
+    """``trial``, ``diagnose --ship`` and a scenario naming the folder as a ship type (run,
+    validate): exit 2 and one line with the file and line, no traceback."""
+    folder, line = _latin1_folder(tmp_path)
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("schema_version: 1\nname: s\nduration_s: 60\nships:\n"
+                        "  - {name: b, type: lat/, north_m: 0, east_m: 0, heading_deg: 0}\n")
+    args = [a.format(folder=folder, out=tmp_path / "o", scenario=scenario) for a in command]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert f"{folder / 'MMG_params.csv'}:{line}: file is not UTF-8 text (byte 0xE9)" in err
+
+
+def test_a_row_with_extra_columns_is_refused_at_its_line(tmp_path: Path) -> None:
+    """Two rows run together (a missing line break) make one row of 7 columns: refused at its
+    line and key, where it was read silently as its first 4 columns."""
+    folder, err = _bad(tmp_path, raw=("MMG_params.csv", "XX0,0.1,0,1massy_nd,0.3,0.2,0.4"))
+    assert err.path == str(folder / "MMG_params.csv") and err.key == "XX0"
+    assert err.line == len(PARAMS) + 2
+    assert err.message == ("expected at most 4 columns (parameter,params_init,params_min,"
+                           "params_max), got 7")
+    folder, err = _bad(tmp_path / "p", raw=("principal_particulars.csv", "HC,0.1,0.2"))
+    assert err.key == "HC" and err.message.startswith("expected at most 2 columns")
+
+
+def test_empty_cells_after_the_last_column_are_accepted(tmp_path: Path) -> None:
+    """A spreadsheet's trailing commas are not columns."""
+    folder = _write_folder(tmp_path / "f")
+    with (folder / "MMG_params.csv").open("a") as fh:
+        fh.write("XX0,0.1,0,1,,\n")
+    assert mmgfolder.read_folder(folder)["model"] == "mmg_berthing"
+
+
+@pytest.mark.parametrize(("change", "name", "key", "message"), [
+    ({"params": {"w_prop_zero": 1.0}}, "MMG_params.csv", "w_prop_zero",
+     "w_P0: must be < 1 (wake fraction; 1 - w_P0 scales the propeller inflow), got 1"),
+    ({"params": {"t_prop": 1.5}}, "MMG_params.csv", "t_prop",
+     "t_P: must be < 1 (thrust deduction fraction), got 1.5"),
+    ({"params": {"kt_coeff0": -0.1}}, "MMG_params.csv", "kt_coeff0",
+     "k_0: must be > 0 (open-water thrust coefficient at J = 0), got -0.1"),
+    ({"params": {"massx_nd": -0.1}}, "MMG_params.csv", "massx_nd",
+     "m_x: must be >= 0 (added mass, non-dimensional), got -0.1"),
+    ({"params": {"coeff_drag_aft": 0.03}}, "MMG_params.csv", "coeff_drag_aft",
+     "X_0A: must be < 0 (resistance coefficient astern, negative), got 0.03"),
+    ({"particulars": {"area_projected_trans": -0.1}}, "principal_particulars.csv",
+     "area_projected_trans", "windage_frontal_area_m2: must be >= 0 (frontal windage area), "
+                             "got -0.1"),
+    ({"particulars": {"LCW": 3.0}}, "principal_particulars.csv", "LCW",
+     "windage_centroid_from_bow_m = lpp / 2 - LCW: must be >= 0 (distance of the windage "
+     "centroid from the bow), got -1"),
+    ({"particulars": {"AOD": 0.6}}, "principal_particulars.csv", "AOD",
+     "windage_superstructure_area_m2: must be <= windage_lateral_area_m2 (0.5 m2, of which it "
+     "is a part), got 0.6"),
+], ids=lambda v: v if isinstance(v, str) and "," not in v and " " not in v else None)
+def test_a_value_outside_the_models_range_is_located_at_its_entry(
+        tmp_path: Path, change, name: str, key: str, message: str) -> None:
+    """The ranges ship files of the family are held to, at the entry that gives the value (a
+    derived value with its formula)."""
+    folder, err = _bad(tmp_path, **change)
+    assert err.message == message
+    assert err.path == str(folder / name) and err.key == key
+    assert err.line == _line(folder, name, key)

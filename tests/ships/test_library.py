@@ -220,3 +220,143 @@ def test_one_windage_area_without_the_other_is_refused(tmp_path, drop, kept):
     with pytest.raises(ShipLibraryError, match=f"{kept} is given without {drop}") as err:
         load_ship(str(path))
     assert err.value.line == _line_of(text, kept) and err.value.key == f"particulars.{kept}"
+
+
+# --- values outside their physical range, every family ---------------------------------------
+
+_G = "(volume of displacement)"
+
+
+@pytest.mark.parametrize("ship, old, new, key, expect", [
+    # mmg (kvlcc2): particulars, windage and the coefficients with a clear range
+    ("kvlcc2", "  rudder_area_m2: 112.5", "  rudder_area_m2: -112.5", "particulars.rudder_area_m2",
+     "must be > 0 (rudder area), got -112.5"),
+    ("kvlcc2", "  displacement_m3: 312600.0", "  displacement_m3: 0", "particulars.displacement_m3",
+     f"must be > 0 {_G}, got 0"),
+    ("kvlcc2", "  displacement_m3: 312600.0", "  displacement_m3: -5",
+     "particulars.displacement_m3", f"must be > 0 {_G}, got -5"),
+    ("kvlcc2", "  propeller_diameter_m: 9.86", "  propeller_diameter_m: 0",
+     "particulars.propeller_diameter_m", "must be > 0 (propeller diameter), got 0"),
+    ("kvlcc2", "  rudder_height_m: 15.80", "  rudder_height_m: 0", "particulars.rudder_height_m",
+     "must be > 0 (rudder span), got 0"),
+    ("kvlcc2", "  windage_mast_groups: 1", "  windage_mast_groups: -3",
+     "particulars.windage_mast_groups",
+     "must be a whole number >= 0 (number of mast groups), got -3"),
+    ("kvlcc2", "  windage_mast_groups: 1", "  windage_mast_groups: 1.5",
+     "particulars.windage_mast_groups",
+     "must be a whole number >= 0 (number of mast groups), got 1.5"),
+    ("kvlcc2", "  windage_perimeter_m: 400.0", "  windage_perimeter_m: 0",
+     "particulars.windage_perimeter_m", "must be > 0 (perimeter of the lateral windage), got 0"),
+    ("kvlcc2", "  windage_centroid_from_bow_m: 192.0", "  windage_centroid_from_bow_m: 330",
+     "particulars.windage_centroid_from_bow_m", "must be <= the length overall (320 m), got 330"),
+    ("kvlcc2", "  windage_superstructure_area_m2: 900.0",
+     "  windage_superstructure_area_m2: 4000", "particulars.windage_superstructure_area_m2",
+     "must be <= windage_lateral_area_m2 (3844 m2, of which it is a part), got 4000"),
+    ("kvlcc2", "  w_P0: 0.40", "  w_P0: 1.0", "coefficients.w_P0",
+     "must be < 1 (wake fraction; 1 - w_P0 scales the propeller inflow), got 1"),
+    ("kvlcc2", "  t_P: 0.220", "  t_P: 1.0", "coefficients.t_P",
+     "must be < 1 (thrust deduction fraction), got 1"),
+    ("kvlcc2", "  t_R: 0.387", "  t_R: 1.2", "coefficients.t_R",
+     "must be < 1 (rudder drag deduction fraction), got 1.2"),
+    ("kvlcc2", "  k_zz: 0.25", "  k_zz: 0", "coefficients.k_zz",
+     "must be > 0 and < 1 (yaw radius of gyration / length), got 0"),
+    ("kvlcc2", "  m_y: 0.223", "  m_y: -0.223", "coefficients.m_y",
+     "must be >= 0 (added mass, non-dimensional), got -0.223"),
+    ("kvlcc2", "  R0: 0.022", "  R0: -0.022", "coefficients.R0",
+     "must be > 0 (resistance coefficient), got -0.022"),
+    ("kvlcc2", "  k_0: 0.2931", "  k_0: 0", "coefficients.k_0",
+     "must be > 0 (open-water thrust coefficient at J = 0), got 0"),
+    ("kvlcc2", "  epsilon: 1.09", "  epsilon: 0", "coefficients.epsilon",
+     "must be > 0 (ratio of the rudder and propeller wakes), got 0"),
+    ("kvlcc2", "  f_alpha: 2.747", "  f_alpha: -2.747", "coefficients.f_alpha",
+     "must be > 0 (rudder lift gradient coefficient), got -2.747"),
+    ("kvlcc2", "  gamma_R_plus: 0.640", "  gamma_R_plus: -0.64", "coefficients.gamma_R_plus",
+     "must be >= 0 (flow-straightening coefficient), got -0.64"),
+    ("kvlcc2", "  C_2_plus: 1.6", "  C_2_plus: 0", "coefficients.C_2_plus",
+     "must be > 0 (wake ratio at large drift angles), got 0"),
+    ("kvlcc2", "  astern_thrust_ratio: 0.7", "  astern_thrust_ratio: -0.7",
+     "coefficients.astern_thrust_ratio", "must be >= 0 (astern / ahead bollard thrust), got -0.7"),
+    # nomoto (container)
+    ("container", "  surge_tau_s: 72.8", "  surge_tau_s: 0", "coefficients.surge_tau_s",
+     "must be > 0 (surge time constant), got 0"),
+    ("container", "  surge_tau_s: 72.8", "  surge_tau_s: -72.8", "coefficients.surge_tau_s",
+     "must be > 0 (surge time constant), got -72.8"),
+    ("container", "  rps_service: 1.8015", "  rps_service: 0", "coefficients.rps_service",
+     "must be > 0 (propeller speed at the service speed), got 0"),
+    ("container", "  rps_service: 1.8015", "  rps_service: -1.8", "coefficients.rps_service",
+     "must be > 0 (propeller speed at the service speed), got -1.8"),
+    ("container", "  K_prime: 2.850", "  K_prime: 0", "coefficients.K_prime",
+     "must be > 0 (rudder gain; positive rudder turns to starboard), got 0"),
+    ("container", "  rps_max: 1.965", "  rps_max: 0.5", "actuators.rps_max",
+     "must be >= coefficients.rps_service (1.8015, the propeller speed at the service speed), "
+     "got 0.5"),
+    ("container", "  displacement_m3: 21222.0", "  displacement_m3: 0",
+     "particulars.displacement_m3", f"must be > 0 {_G}, got 0"),
+    # modular (catfish)
+    ("catfish", "  mass_kg: 8500.0", "  mass_kg: 0", "particulars.mass_kg",
+     "must be > 0 (mass), got 0"),
+    ("catfish", "  X_uu: -269.84", "  X_uu: 269.84", "coefficients.X_uu",
+     "must be < 0 (resistance coefficient, negative), got 269.84"),
+    ("catfish", "  X_nn: 0.2772", "  X_nn: -0.2772", "coefficients.X_nn",
+     "must be > 0 (propeller thrust coefficient), got -0.2772"),
+    ("catfish", "  N_rdot: -0.001464", "  N_rdot: 0.001464", "coefficients.N_rdot",
+     "must be <= 0 (yaw added inertia derivative, -J_z), got 0.001464"),
+    # response (bulk_carrier)
+    ("bulk_carrier", "  c3: 1.9627e-4", "  c3: 1.9627e-4\n  rudder_fade_speed_mps: 0",
+     "coefficients.rudder_fade_speed_mps",
+     "must be > 0 (speed below which the rudder fades; 0 would turn a ship at rest), got 0"),
+])
+def test_a_value_outside_its_physical_range_is_located(tmp_path, ship, old, new, key, expect):
+    """Zero or negative masses, lengths, areas, time constants and propeller speeds, fractions
+    not below 1, a fractional number of masts, a service speed beyond the engine: each gave
+    NaN trials or a diverged run; now a located error at the value's line."""
+    text = (LIBRARY_DIR / f"{ship}.yaml").read_text()
+    assert old in text
+    text = text.replace(old, new, 1)
+    path = tmp_path / "ship.yaml"
+    path.write_text(text)
+    with pytest.raises(ShipLibraryError) as err:
+        load_ship(str(path))
+    assert err.value.key == key and err.value.message == expect
+    assert err.value.line == _line_of(text, new.strip().splitlines()[-1])
+    assert err.value.path == str(path.resolve())
+
+
+def test_every_value_out_of_range_is_listed(tmp_path):
+    """``trafficsim validate`` lists them all: the first by line names how many more."""
+    path, _ = _broken(tmp_path, "  t_P: 0.220", "  t_P: 1.0")
+    path.write_text(path.read_text().replace("  w_P0: 0.40", "  w_P0: 1.0")
+                    .replace("  rudder_area_m2: 112.5", "  rudder_area_m2: 0"))
+    with pytest.raises(ShipLibraryError) as err:
+        load_ship(str(path))
+    assert [e.key for e in err.value.errors] == [
+        "particulars.rudder_area_m2", "coefficients.t_P", "coefficients.w_P0"]
+    assert str(err.value).endswith("got 0 (and 2 more errors)")
+
+
+@pytest.mark.parametrize("command", [
+    ["validate", "{ship}"], ["validate", "{scenario}"], ["run", "{scenario}", "--out", "{out}"],
+    ["trial", "{ship}", "--manoeuvre", "turning", "--out", "{out}"],
+    ["campaign", "{campaign}", "--out", "{out}", "--workers", "1", "--no-progress"],
+], ids=lambda c: f"{c[0]}-{c[1][1:-1]}")
+def test_every_command_refuses_a_value_out_of_range(tmp_path, capsys, command):
+    """A zero surge time constant passed ``validate`` and gave an all-NaN trial, a diverged run
+    and 'DIVERGED' campaign encounters; now every command exits 2 with the located line."""
+    from trafficsim import cli
+
+    text = (LIBRARY_DIR / "container.yaml").read_text()
+    ship = tmp_path / "ship.yaml"
+    ship.write_text(text.replace("  surge_tau_s: 72.8", "  surge_tau_s: 0"))
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("schema_version: 1\nname: s\nduration_s: 60\nships:\n"
+                        "  - {name: a, type: ship.yaml, north_m: 0, east_m: 0, heading_deg: 0}\n")
+    campaign = tmp_path / "c.yaml"
+    campaign.write_text("schema_version: 1\nname: c\nn_encounters: 2\nduration_s: 60\n"
+                        "policy: no_avoidance\nship_types: {ship.yaml: 1}\n")
+    args = [a.format(ship=ship, scenario=scenario, campaign=campaign, out=tmp_path / "o")
+            for a in command]
+    assert cli.main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    line = _line_of(ship.read_text(), "surge_tau_s: 0")
+    assert err[-1].endswith(f"{ship}:{line}: coefficients.surge_tau_s: must be > 0 "
+                            "(surge time constant), got 0")

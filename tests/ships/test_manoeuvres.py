@@ -352,13 +352,30 @@ def test_zigzag_to_port_first_is_the_mirror_image_and_zero_is_refused():
         assert info.value.key == key
 
 
-@pytest.mark.parametrize("speed_kn", [0.0, -3.0])
-def test_an_approach_speed_not_above_zero_is_refused(speed_kn):
-    """A standard manoeuvre needs headway: 0 kn (or astern) gives no indices worth the name, so
-    it is an input error under ``speed_kn``."""
-    with pytest.raises(InputError, match="above 0 kn") as info:
+@pytest.mark.parametrize("speed_kn", [0.0, -3.0, 1e-6, 1.49])
+def test_an_approach_speed_below_a_tenth_of_the_service_speed_is_refused(speed_kn):
+    """A standard manoeuvre needs headway: below 10 % of the service speed (1.5 kn for cargo;
+    1e-6 kn gave NaN advance and tactical diameter) the indices are not defined, so it is an
+    input error under ``speed_kn``; 10 % itself is accepted."""
+    with pytest.raises(InputError, match=r"at least 0\.1 times the service speed of 'cargo' "
+                                         r"\(15 kn\)") as info:
         manoeuvres.turning_circle(load_ship("cargo"), speed_kn=speed_kn)
     assert info.value.key == "speed_kn"
+    _, ind = manoeuvres.turning_circle(load_ship("cargo"), speed_kn=1.5, turns_deg=90.0)
+    assert np.isfinite(ind["advance_m"])
+
+
+@pytest.mark.parametrize("heading_deg", [400.0, 170.0, 90.5, 0.99, 1e-9, -400.0])
+def test_a_zigzag_heading_change_outside_1_to_90_deg_is_refused(heading_deg):
+    """Below 1 deg the rudder reverses within a time step (1e-9 deg gave an 'initial turning
+    time' of 4e-7 s), beyond 90 deg the manoeuvre is a turn: an input error under
+    ``heading_deg``; 1 and 90 deg are accepted."""
+    with pytest.raises(InputError, match="expected a heading change from 1 to 90 deg") as info:
+        manoeuvres.zigzag(load_ship("fishing"), 10.0, heading_deg)
+    assert info.value.key == "heading_deg"
+    for ok in (1.0, 90.0):
+        _, ind = manoeuvres.zigzag(load_ship("fishing"), 10.0, ok)
+        assert np.isfinite(ind["second_overshoot_deg"])
 
 
 # ---------------------------------------------------------------------------------------------

@@ -4,8 +4,10 @@
 nothing of it is stored in the project.
 
 Every entry is either mapped or listed below as ignored; anything else, a missing entry, a
-repeated one, a value that is not a number or a switch the family does not implement is one
-:class:`~trafficsim.errors.InputError` naming the file, the line and the key.
+repeated one, a value that is not a number, a row with more cells than its header, a switch the
+family does not implement, a byte that is not UTF-8 or a value outside the range the family's
+ship files are held to (:func:`trafficsim.ships.base.limit_problems`, located at the entry that
+gives it) is one :class:`~trafficsim.errors.InputError` naming the file, the line and the key.
 
 ``principal_particulars.csv`` (``parameter,value``):
 
@@ -76,6 +78,7 @@ most 0.25 s (replays of the FRT-DS-ESSO runs with 0.3 s and with 0.01 s steps ag
 from __future__ import annotations
 
 import csv
+import io
 import math
 from pathlib import Path
 from typing import Any
@@ -135,8 +138,14 @@ class _Table:
         if not self.path.is_file():
             raise InputError(f"missing {name} in the MMG parameter folder (expected "
                              f"{', '.join(FILES)})", path=str(folder))
-        with self.path.open(newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(fh))
+        data = self.path.read_bytes()
+        try:
+            text = data.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            line = data.count(b"\n", 0, exc.start) + 1
+            raise InputError(f"file is not UTF-8 text (byte 0x{data[exc.start]:02X}); save it "
+                             "as UTF-8", path=str(self.path), line=line) from None
+        rows = list(csv.reader(io.StringIO(text, newline="")))
         header = tuple(c.strip() for c in rows[0]) if rows else ()
         if header != _HEADERS[name]:
             raise InputError(f"expected the header {','.join(_HEADERS[name])}, got "
@@ -147,6 +156,10 @@ class _Table:
             if not row or not "".join(row).strip():
                 continue
             key = row[0].strip()
+            if any(cell.strip() for cell in row[len(header):]):
+                raise InputError(f"expected at most {len(header)} columns "
+                                 f"({','.join(header)}), got {len(row)}",
+                                 path=str(self.path), line=line, key=key or None)
             if key in self.values:
                 raise InputError(f"'{key}' given twice (first on line {self.lines[key]})",
                                  path=str(self.path), line=line, key=key)
@@ -226,7 +239,7 @@ def read_folder(folder: Path) -> dict[str, Any]:
     coeffs["x_R"] = pp.values["x_location_rudder"] / length
     coeffs["delta_0"] = 0.0
     present = [k for k in IGNORED if k in pp.values or k in mp.values or k in sw.values]
-    return {
+    spec = {
         "schema_version": 1, "name": folder.name, "model": "mmg_berthing",
         "description": f"MMG parameter folder {folder} (Miyauchi et al. 2022 format), read at "
                        "run time",
@@ -256,3 +269,43 @@ def read_folder(folder: Path) -> dict[str, Any]:
                        "Miyauchi et al. 2022), read at run time; ignored entries: "
                        f"{', '.join(present)}, params_min/params_max"),
     }
+    _check_limits(spec, {FILES[0]: pp, FILES[1]: mp, FILES[2]: sw})
+    return spec
+
+
+#: spec key -> (file, entry, how the entry gives it) for the model's range checks
+_SOURCES: dict[str, tuple[str, str, str]] = {
+    **{f"particulars.{target}": (FILES[0], key, how) for target, key, how in (
+        ("length_m", "lpp", ""), ("beam_m", "breadth", ""), ("draught_m", "draft", ""),
+        ("displacement_m3", "mass_nd", " = mass_nd lpp^2 draft / 2"),
+        ("water_density_kgpm3", "rho_fresh", ""), ("lcg_m", "x_lcg", " = x_lcg lpp"),
+        ("propeller_diameter_m", "dia_prop", ""), ("propeller_pitch_ratio", "pitchr", ""),
+        ("rudder_area_m2", "area_rudder", ""),
+        ("rudder_height_m", "lambda_rudder", " = sqrt(lambda_rudder area_rudder)"),
+        ("windage_frontal_area_m2", "area_projected_trans", ""),
+        ("windage_lateral_area_m2", "area_projected_lateral", ""),
+        ("windage_superstructure_area_m2", "AOD", ""),
+        ("windage_centroid_from_bow_m", "LCW", " = lpp / 2 - LCW"))},
+    **{f"coefficients.{target}": (FILES[1], key, "") for key, target in _COEFFICIENTS.items()},
+    "coefficients.J_z": (FILES[1], "IzzJzz_nd", f" = IzzJzz_nd - mass_nd {K_ZZ:g}^2"),
+    "coefficients.f_alpha": (FILES[0], "lambda_rudder",
+                             " = 6.13 lambda_rudder / (lambda_rudder + 2.25)"),
+    "coefficients.x_R": (FILES[0], "x_location_rudder", " = x_location_rudder / lpp"),
+    **{f"coefficients.{target}": (FILES[2], key, "") for key, (_, target, _) in _SWITCHES.items()
+       if target is not None},
+}
+
+
+def _check_limits(spec: dict[str, Any], tables: dict[str, _Table]) -> None:
+    """The ranges the ``mmg_berthing`` family's ship files are held to, each located at the
+    entry that gives the value."""
+    from trafficsim.ships.base import families, limit_problems
+
+    problems = limit_problems(families()["mmg_berthing"], spec)
+    if not problems:
+        return
+    key, message = problems[0]
+    if key not in _SOURCES:  # (a value the folder does not give: one of the choices above)
+        raise InputError(f"{key}: {message}", path=str(tables[FILES[0]].path.parent))
+    name, entry, how = _SOURCES[key]
+    raise tables[name].error(entry, f"{key.split('.', 1)[1]}{how}: {message}")

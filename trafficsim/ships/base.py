@@ -88,6 +88,108 @@ def apparent_wind(x: np.ndarray, env: Env) -> tuple[np.ndarray, np.ndarray]:
     return np.hypot(ura, vra), np.arctan2(vra, ura)
 
 
+@dataclass(frozen=True)
+class Limit:
+    """Valid range of one ship-file number (bounds given are enforced; None: unbounded).
+
+    Attributes:
+        gt, ge, lt, le: exclusive and inclusive bounds.
+        whole: the value must be a whole number.
+        one_of: the value must be one of these.
+        what: what the number is, for the message.
+    """
+
+    gt: float | None = None
+    ge: float | None = None
+    lt: float | None = None
+    le: float | None = None
+    whole: bool = False
+    one_of: tuple[float, ...] = ()
+    what: str = ""
+
+    def problem(self, value: float) -> str | None:
+        """What is wrong with ``value`` (``must be ..., got ...``), or None."""
+        if self.one_of:
+            ok = value in self.one_of
+            want = f"one of {', '.join(f'{v:g}' for v in self.one_of)}"
+        else:
+            bounds = [(op, b) for op, b in ((">", self.gt), (">=", self.ge), ("<", self.lt),
+                                            ("<=", self.le)) if b is not None]
+            ok = all({">": value > b, ">=": value >= b, "<": value < b, "<=": value <= b}[op]
+                     for op, b in bounds)
+            ok = ok and (not self.whole or float(value).is_integer())
+            want = " and ".join(f"{op} {b:g}" for op, b in bounds)
+            if self.whole:
+                want = f"a whole number {want}".rstrip()
+        if ok:
+            return None
+        why = f" ({self.what})" if self.what else ""
+        return f"must be {want}{why}, got {value:g}"
+
+
+#: particulars any ship file may give, whatever its family (unused ones are checked too)
+PARTICULAR_LIMITS: Mapping[str, Limit] = {
+    "displacement_m3": Limit(gt=0, what="volume of displacement"),
+    "propeller_diameter_m": Limit(gt=0, what="propeller diameter"),
+    "propeller_pitch_ratio": Limit(gt=0, what="propeller pitch / diameter"),
+    "rudder_area_m2": Limit(gt=0, what="rudder area"),
+    "rudder_height_m": Limit(gt=0, what="rudder span"),
+    "water_density_kgpm3": Limit(gt=0, what="water density"),
+    "length_overall_m": Limit(gt=0, what="length overall"),
+    "windage_frontal_area_m2": Limit(ge=0, what="frontal windage area"),
+    "windage_lateral_area_m2": Limit(ge=0, what="lateral windage area"),
+    "windage_superstructure_area_m2": Limit(ge=0, what="lateral area of the superstructure"),
+    "windage_perimeter_m": Limit(gt=0, what="perimeter of the lateral windage"),
+    "windage_centroid_from_bow_m": Limit(ge=0, what="distance of the windage centroid from "
+                                                    "the bow"),
+    "windage_mast_groups": Limit(ge=0, whole=True, what="number of mast groups"),
+    "mass_kg": Limit(gt=0, what="mass"),
+    "yaw_inertia_kgm2": Limit(gt=0, what="yaw moment of inertia"),
+    "gear_ratio": Limit(gt=0, what="engine / propeller speed ratio"),
+}
+#: limits shared by the families' coefficients of the same meaning
+ADDED_MASS = Limit(ge=0, what="added mass, non-dimensional")
+GYRADIUS = Limit(gt=0, lt=1, what="yaw radius of gyration / length")
+THRUST_DEDUCTION = Limit(lt=1, what="thrust deduction fraction")
+WAKE_FRACTION = Limit(lt=1, what="wake fraction; 1 - w_P0 scales the propeller inflow")
+RUDDER_DRAG_DEDUCTION = Limit(lt=1, what="rudder drag deduction fraction")
+BOLLARD_THRUST = Limit(gt=0, what="open-water thrust coefficient at J = 0")
+FLOW_STRAIGHTENING = Limit(ge=0, what="flow-straightening coefficient")
+WAKE_RATIO = Limit(gt=0, what="ratio of the rudder and propeller wakes")
+LIFT_GRADIENT = Limit(gt=0, what="rudder lift gradient coefficient")
+
+
+def limit_problems(family: ModelFamily, ship: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """Out-of-range numbers of a ship spec: ``(dotted key, message)`` pairs, in file order of
+    sections (particulars, then coefficients, then the family's cross-checks)."""
+    out = []
+    for section, limits in (("particulars", PARTICULAR_LIMITS),
+                            ("coefficients", family.limits)):
+        values = ship.get(section, {})
+        for key, value in values.items():
+            limit = limits.get(key)
+            problem = limit.problem(float(value)) if limit is not None else None
+            if problem:
+                out.append((f"{section}.{key}", problem))
+    parts = ship.get("particulars", {})
+    if "windage_centroid_from_bow_m" in parts:
+        loa = float(parts.get("length_overall_m", parts["length_m"]))
+        if float(parts["windage_centroid_from_bow_m"]) > loa:
+            out.append(("particulars.windage_centroid_from_bow_m",
+                        f"must be <= the length overall ({loa:g} m), got "
+                        f"{float(parts['windage_centroid_from_bow_m']):g}"))
+    if "windage_superstructure_area_m2" in parts and "windage_lateral_area_m2" in parts:
+        a_ss, a_l = (float(parts[k]) for k in ("windage_superstructure_area_m2",
+                                                "windage_lateral_area_m2"))
+        if a_ss > a_l:
+            out.append(("particulars.windage_superstructure_area_m2",
+                        f"must be <= windage_lateral_area_m2 ({a_l:g} m2, of which it is a "
+                        f"part), got {a_ss:g}"))
+    if not out:
+        out.extend(family.cross_problems(ship))
+    return out
+
+
 class ModelFamily(Protocol):
     """A manoeuvring-model family: hydrodynamics only.
 
@@ -101,6 +203,11 @@ class ModelFamily(Protocol):
     #: coefficient name -> default value (None = required); the ship-file loader checks
     #: ``coefficients:`` against it, reporting unknown and missing keys with their line.
     coefficients: Mapping[str, float | None]
+    #: valid ranges of coefficients whose range is physically clear (see :class:`Limit`)
+    limits: Mapping[str, Limit]
+
+    def cross_problems(self, ship: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """Problems between numbers of one ship spec: ``(dotted key, message)`` pairs."""
 
     def build(self, ships: Sequence[Mapping[str, Any]]) -> Any:
         """Frozen dataclass of ``(n,)`` float arrays from ship-file dicts (``particulars``,

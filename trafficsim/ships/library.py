@@ -2,7 +2,10 @@
 
 A ship file holds particulars, actuator limits and the coefficients of one model family; its format
 is documented in the README ("Ship files"). Loading validates the file and checks ``coefficients``
-against the family's declared coefficient names, so a typo is reported with its line.
+against the family's declared coefficient names, so a typo is reported with its line, and every
+number whose valid range is physically clear (positive masses, lengths, areas and time constants,
+fractions below 1, whole mast counts: :data:`trafficsim.ships.base.PARTICULAR_LIMITS` and the
+family's ``limits``) against that range, each out-of-range value at its line.
 
 A path may also name an MMG parameter folder (``MMG_params.csv`` and its two companions, the
 format of Miyauchi et al. 2022): it is read at run time as an ``mmg_berthing`` ship
@@ -22,7 +25,14 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from trafficsim.errors import ScenarioError, ShipLibraryError
-from trafficsim.io.yamlio import FieldError, Strict, load_yaml, validate
+from trafficsim.io.yamlio import (
+    FieldError,
+    Strict,
+    load_yaml,
+    parse_loc,
+    raise_errors,
+    validate,
+)
 
 LIBRARY_DIR = Path(__file__).parent / "library"
 #: the file that makes a folder an MMG parameter folder
@@ -160,7 +170,7 @@ def _stamp(path: Path) -> str:
 @lru_cache(maxsize=256)
 def _load_cached(path: str, stamp: str) -> dict[str, Any]:
     """The validated ship file at ``path`` (``stamp``: :func:`_stamp`, part of the key only)."""
-    from trafficsim.ships.base import families
+    from trafficsim.ships.base import families, limit_problems
 
     if Path(path).is_dir():
         from trafficsim.diagnose.mmgfolder import read_folder
@@ -197,6 +207,13 @@ def _load_cached(path: str, stamp: str) -> dict[str, Any]:
     out = ship.model_dump()
     out["coefficients"] = coeffs
     out["path"] = path
+    problems = limit_problems(fams[ship.model], out)
+    if problems:  # (every one, for 'trafficsim validate')
+        try:
+            raise_errors([ScenarioError(message, path=path, line=doc.line_of(parse_loc(key)),
+                                        key=key) for key, message in problems])
+        except ScenarioError as err:
+            raise _as_ship_error(err) from None
     return out
 
 

@@ -30,6 +30,12 @@ DT_RANGE_S = (1e-3, 60.0)
 #: hold, the ship approaches at full power and slows; a fouled hull cannot hold its service
 #: speed, say, and its trial is still wanted)
 MAX_SPEED_FACTOR = 2.0
+#: slowest approach, times the service speed (the models are made for speeds near it: the
+#: ``nomoto`` family's yaw time constant stops scaling with speed below 10 % of it)
+MIN_SPEED_FACTOR = 0.1
+#: zig-zag heading changes accepted, deg (IMO MSC.137(76) asks for 10/10 and 20/20; below 1 deg
+#: the rudder reverses within a time step, beyond 90 deg the manoeuvre is a turn, not a zig-zag)
+ZIGZAG_HEADING_RANGE_DEG = (1.0, 90.0)
 
 
 class _Ship:
@@ -42,10 +48,12 @@ class _Ship:
         self.env = env
         self.length = float(spec["particulars"]["length_m"])
         speed = from_kn(speed_kn if speed_kn is not None else spec["service_speed_kn"])
-        if not speed > 0.0:
-            raise InputError(f"expected an approach speed above 0 kn, got {to_kn(speed):g} kn",
-                             key="speed_kn")
-        if not speed <= MAX_SPEED_FACTOR * from_kn(spec["service_speed_kn"]):
+        service = from_kn(spec["service_speed_kn"])
+        if not speed >= MIN_SPEED_FACTOR * service:
+            raise InputError(f"expected at least {MIN_SPEED_FACTOR:g} times the service speed "
+                             f"of '{spec['name']}' ({spec['service_speed_kn']:g} kn), got "
+                             f"{to_kn(speed):g} kn", key="speed_kn")
+        if not speed <= MAX_SPEED_FACTOR * service:
             raise InputError(f"expected at most {MAX_SPEED_FACTOR:g} times the service speed "
                              f"of '{spec['name']}' ({spec['service_speed_kn']:g} kn), got "
                              f"{to_kn(speed):g} kn", key="speed_kn")
@@ -210,9 +218,12 @@ def zigzag(spec: Mapping[str, Any], rudder_deg: float = 10.0, heading_deg: float
     heading_deg = rudder_deg if heading_deg is None else heading_deg
     ship = _Ship(spec, speed_kn, env)
     ship.check_rudder(rudder_deg)
-    for key, value in (("rudder_deg", rudder_deg), ("heading_deg", heading_deg)):
-        if not abs(value) > 0.0:
-            raise InputError(f"expected an angle other than 0, got {value:g}", key=key)
+    if not abs(rudder_deg) > 0.0:
+        raise InputError(f"expected an angle other than 0, got {rudder_deg:g}", key="rudder_deg")
+    low, high = ZIGZAG_HEADING_RANGE_DEG
+    if not low <= abs(heading_deg) <= high:
+        raise InputError(f"expected a heading change from {low:g} to {high:g} deg, got "
+                         f"{abs(heading_deg):g}", key="heading_deg")
     side = 1.0 if rudder_deg > 0.0 else -1.0  # first rudder to starboard (+1) or port
     heading_deg = abs(heading_deg)
     step = _auto_dt(ship, dt)

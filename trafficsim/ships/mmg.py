@@ -86,9 +86,19 @@ import numpy as np
 from trafficsim.jit import inline_kernel, kernel
 from trafficsim.ships import wind
 from trafficsim.ships.base import (
+    ADDED_MASS,
+    BOLLARD_THRUST,
+    FLOW_STRAIGHTENING,
+    GYRADIUS,
+    LIFT_GRADIENT,
     RHO_WATER,
     RPS,
     RUDDER,
+    RUDDER_DRAG_DEDUCTION,
+    THRUST_DEDUCTION,
+    WAKE_FRACTION,
+    WAKE_RATIO,
+    Limit,
     U,
     V,
     coefficient,
@@ -245,6 +255,23 @@ class MMGFamily:
         # rudder neutral offset, rad (propeller asymmetry; not in [YY15])
         "delta_0": 0.0,
     }
+    limits: Mapping[str, Limit] = {
+        "R0": Limit(gt=0, what="resistance coefficient"),
+        "m_x": ADDED_MASS, "m_y": ADDED_MASS, "J_z": ADDED_MASS, "k_zz": GYRADIUS,
+        "t_P": THRUST_DEDUCTION, "w_P0": WAKE_FRACTION, "k_0": BOLLARD_THRUST,
+        "C_1": Limit(ge=0, what="rate of the wake change with the drift angle"),
+        "C_2_plus": Limit(gt=0, what="wake ratio at large drift angles"),
+        "C_2_minus": Limit(gt=0, what="wake ratio at large drift angles"),
+        "t_R": RUDDER_DRAG_DEDUCTION,
+        "gamma_R_plus": FLOW_STRAIGHTENING, "gamma_R_minus": FLOW_STRAIGHTENING,
+        "epsilon": WAKE_RATIO, "kappa": Limit(ge=0, what="propeller race coefficient"),
+        "f_alpha": LIFT_GRADIENT,
+        "astern_thrust_ratio": Limit(ge=0, what="astern / ahead bollard thrust"),
+    }
+
+    def cross_problems(self, ship: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """No checks between numbers beyond the ranges of :attr:`limits`."""
+        return []
 
     def build(self, ships: Sequence[Mapping[str, Any]]) -> MMGParams:
         """Parameters from ship-file dicts (``particulars`` and ``coefficients``).

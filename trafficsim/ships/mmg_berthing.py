@@ -133,9 +133,19 @@ from trafficsim.errors import ShipLibraryError
 from trafficsim.jit import inline_kernel, kernel
 from trafficsim.ships import wind
 from trafficsim.ships.base import (
+    ADDED_MASS,
+    BOLLARD_THRUST,
+    FLOW_STRAIGHTENING,
+    GYRADIUS,
+    LIFT_GRADIENT,
     RHO_WATER,
     RPS,
     RUDDER,
+    RUDDER_DRAG_DEDUCTION,
+    THRUST_DEDUCTION,
+    WAKE_FRACTION,
+    WAKE_RATIO,
+    Limit,
     U,
     V,
     coefficient,
@@ -307,6 +317,23 @@ class MMGBerthingFamily:
         # rudder neutral offset, rad (propeller asymmetry; not in [M22])
         "delta_0": 0.0,
     }
+    limits: Mapping[str, Limit] = {
+        "X_0F": Limit(lt=0, what="resistance coefficient ahead, negative"),
+        "X_0A": Limit(lt=0, what="resistance coefficient astern, negative"),
+        "C_D": Limit(ge=0, what="cross-flow drag coefficient"),
+        "m_x": ADDED_MASS, "m_y": ADDED_MASS, "J_z": ADDED_MASS, "k_zz": GYRADIUS,
+        "t_P": THRUST_DEDUCTION, "w_P0": WAKE_FRACTION, "k_0": BOLLARD_THRUST,
+        "t_R": RUDDER_DRAG_DEDUCTION,
+        "gamma_R_plus": FLOW_STRAIGHTENING, "gamma_R_minus": FLOW_STRAIGHTENING,
+        "epsilon": WAKE_RATIO, "k_x": Limit(ge=0, what="propeller race coefficient"),
+        "f_alpha": LIFT_GRADIENT,
+        **{key: Limit(one_of=(0.0, 1.0), what="a switch") for key in (
+            "switch_prop_y", "switch_prop_n", "switch_rudder_astern")},
+    }
+
+    def cross_problems(self, ship: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """No checks between numbers beyond the ranges of :attr:`limits`."""
+        return []
 
     def build(self, ships: Sequence[Mapping[str, Any]]) -> BerthingParams:
         """Parameters from ship-file dicts (``particulars`` and ``coefficients``).

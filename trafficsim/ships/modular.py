@@ -149,6 +149,7 @@ from trafficsim.ships.base import (
     RHO_WATER,
     RPS,
     RUDDER,
+    Limit,
     R,
     U,
     V,
@@ -238,6 +239,17 @@ class ModularFamily:
         "N_d": None, "N_dd": None, "N_ddd": None,
         "Y_n": 0.0, "N_n": 0.0, "N_ndd": 0.0,
     }
+    limits: Mapping[str, Limit] = {
+        "X_udot": Limit(le=0, what="surge added mass derivative, -m_x"),
+        "Y_vdot": Limit(le=0, what="sway added mass derivative, -m_y"),
+        "N_rdot": Limit(le=0, what="yaw added inertia derivative, -J_z"),
+        "X_uu": Limit(lt=0, what="resistance coefficient, negative"),
+        "X_nn": Limit(gt=0, what="propeller thrust coefficient"),
+    }
+
+    def cross_problems(self, ship: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """No checks between numbers beyond the ranges of :attr:`limits`."""
+        return []
 
     def build(self, ships: Sequence[Mapping[str, Any]]) -> ModularParams:
         """Dimensionalise the ship-file coefficients (module table) into ``(n,)`` arrays."""

@@ -59,7 +59,7 @@ import numpy as np
 
 from trafficsim.errors import ShipLibraryError
 from trafficsim.jit import kernel
-from trafficsim.ships.base import RPS, RUDDER, U, V, register, stack
+from trafficsim.ships.base import RPS, RUDDER, Limit, U, V, register, stack
 from trafficsim.ships.base import R as YAW_RATE
 
 KNOT = 1852.0 / 3600.0  # m/s per knot
@@ -107,6 +107,24 @@ class NomotoFamily:
         "surge_tau_s": None,
         "n3_prime": 0.0,
     }
+    limits: Mapping[str, Limit] = {
+        "K_prime": Limit(gt=0, what="rudder gain; positive rudder turns to starboard"),
+        "T_prime": Limit(gt=0, what="yaw time constant; a ship unstable on its own diverges "
+                                    "open-loop"),
+        "n3_prime": Limit(ge=0, what="Norrbin's cubic yaw damping"),
+        "rps_service": Limit(gt=0, what="propeller speed at the service speed"),
+        "surge_tau_s": Limit(gt=0, what="surge time constant"),
+    }
+
+    def cross_problems(self, ship: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """The service speed must be within the engine's reach (``rps_max``)."""
+        rps_max, rps_service = (float(ship["actuators"]["rps_max"]),
+                                float(ship["coefficients"]["rps_service"]))
+        if rps_max < rps_service:
+            return [("actuators.rps_max", f"must be >= coefficients.rps_service "
+                                          f"({rps_service:g}, the propeller speed at the "
+                                          f"service speed), got {rps_max:g}")]
+        return []
 
     def build(self, ships: Sequence[Mapping[str, Any]]) -> NomotoParams:
         """Gather K', T', n3', length, service speed and surge constants into ``(n,)`` arrays."""

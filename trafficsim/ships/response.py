@@ -67,7 +67,7 @@ import numpy as np
 
 from trafficsim.errors import ShipLibraryError
 from trafficsim.jit import kernel
-from trafficsim.ships.base import RPS, RUDDER, U, V, register, stack
+from trafficsim.ships.base import RPS, RUDDER, Limit, U, V, register, stack
 from trafficsim.ships.base import R as YAW_RATE
 
 DEG_PER_RAD = 180.0 / np.pi
@@ -120,6 +120,14 @@ class ResponseFamily:
         **{k: None for k in _NAMES},
         "rudder_fade_speed_mps": 1.0,
     }
+    limits: Mapping[str, Limit] = {
+        "rudder_fade_speed_mps": Limit(gt=0, what="speed below which the rudder fades; 0 "
+                                                  "would turn a ship at rest"),
+    }
+
+    def cross_problems(self, ship: Mapping[str, Any]) -> list[tuple[str, str]]:
+        """No checks between numbers beyond the ranges of :attr:`limits`."""
+        return []
 
     def build(self, ships: Sequence[Mapping[str, Any]]) -> ResponseParams:
         """Convert the paper-unit coefficients of each ship file to SI ``(n,)`` arrays."""
