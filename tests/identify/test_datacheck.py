@@ -161,6 +161,9 @@ def test_a_ship_that_does_not_move(tmp_path: Path) -> None:
                                          r"training runs \(still, s2\)"):
         datacheck.check_motion(two, 160.93)
     datacheck.check_motion([*two, read_trial(_csv(tmp_path / "ok.csv", _rows()))], 160.93)
+    # no positions at all: left to the smoother's "no two consecutive samples"
+    blank = [[float(i), "", "", 0.5 * i, 10.0, 0.0] for i in range(30)]
+    datacheck.check_motion([read_trial(_csv(tmp_path / "blank.csv", blank))], 160.93)
 
 
 def test_turning_coefficients_need_rudder_and_heading_to_move(tmp_path: Path) -> None:

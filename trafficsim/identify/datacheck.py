@@ -172,11 +172,11 @@ def check_propeller(trials: Sequence[TrialData], spec: Mapping[str, Any],
                          f"rev/s = {60.0 * limit:.4g} rpm either way), got {{value}}")
 
 
-def _span(trial: TrialData) -> float:
-    """Largest extent of the track, m (NaN-aware; 0 without two finite positions)."""
+def _span(trial: TrialData) -> float | None:
+    """Largest extent of the track, m (NaN-aware; None without two finite positions)."""
     ok = np.isfinite(trial.north_m) & np.isfinite(trial.east_m)
     if ok.sum() < 2:
-        return 0.0
+        return None
     return float(np.hypot(np.ptp(trial.north_m[ok]), np.ptp(trial.east_m[ok])))
 
 
@@ -195,10 +195,12 @@ def _where(trials: Sequence[TrialData]) -> tuple[str | None, str, str]:
 
 
 def check_motion(trials: Sequence[TrialData], length_m: float) -> None:
-    """Refuse training runs in none of which the track spans the ship's length."""
-    span = max((_span(t) for t in trials), default=0.0)
-    if span >= length_m:
+    """Refuse training runs in none of which the track spans the ship's length (runs without
+    two positions are left to the smoother, which names them)."""
+    spans = [s for s in map(_span, trials) if s is not None]
+    if not spans or len(spans) < len(trials) or max(spans) >= length_m:
         return
+    span = max(spans)
     path, key, runs = _where(trials)
     raise InputError(f"the ship does not move in {runs}: its track spans {span:.3g} m, less "
                      f"than its length ({length_m:g} m); there is nothing to fit or replay",
