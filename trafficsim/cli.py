@@ -143,12 +143,14 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--bounds", type=_bound, nargs="+", default=[], metavar="NAME=LO:HI",
                        help="bounds of fitted coefficients")
     ident.add_argument("--horizon-s", type=_positive(float), default=None,
-                       help="replay window length (default 3 L/U)")
+                       help="replay window length (default 3 L/U; from two working intervals "
+                            "to the longest run)")
     ident.add_argument("--dt-s", type=_positive(float), default=None,
                        help="working sampling interval (default: the data's, thinned to "
-                            "L/(20 U))")
+                            "L/(20 U); from the data's interval to L/U)")
     ident.add_argument("--wind", choices=["auto", "ignore"], default="auto",
-                       help="use measured wind when the model has wind loads (default auto)")
+                       help="use measured wind when the model has wind loads (default auto; "
+                            "ignore only for such a model and runs with wind)")
     ident.add_argument("--reference", default=None,
                        help="known ship to compare the standard manoeuvres with "
                             "(simulated trials)")
@@ -175,11 +177,12 @@ def build_parser() -> argparse.ArgumentParser:
                       help="held-out runs (default: alternate windows of --data)")
     diag.add_argument("--out", type=Path, default=None, help="output folder")
     diag.add_argument("--effects", nargs="+", default=None,
-                      help="candidate effects (default: the whole library)")
+                      help="candidate effects, each once (default: every effect of the "
+                           "library that acts on the ship's model)")
     diag.add_argument("--horizon-s", type=_positive(float), default=None,
-                      help="replay window length (default 3 L/U)")
+                      help="replay window length (default 3 L/U; bounds as identify)")
     diag.add_argument("--dt-s", type=_positive(float), default=None,
-                      help="working sampling interval (default: as identify)")
+                      help="working sampling interval (default and bounds: as identify)")
     diag.add_argument("--refit", nargs="?", const="default", default=None,
                       metavar="NAME,...",
                       help="base coefficients fitted on the training runs jointly with every "

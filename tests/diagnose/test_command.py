@@ -45,12 +45,24 @@ def test_load_base_folder_without_mmg_files(tmp_path: Path) -> None:
 
 
 def test_candidates() -> None:
-    assert command._candidates(None) == effects.NAMES
-    assert command._candidates([]) == effects.NAMES
-    assert command._candidates(["wind", "current"]) == ("wind", "current")
-    with pytest.raises(InputError, match=r"^--effects.curent: unknown effect 'curent' \(did "
+    """The library's effects that act on the ship by default (no hull effects for a nomoto
+    ship); given ones each once and acting on it, else an error under --effects."""
+    kv, cargo = load_ship("kvlcc2"), load_ship("cargo")
+    assert command._candidates(None, kv) == effects.NAMES
+    assert command._candidates([], kv) == effects.NAMES
+    hull = ("resistance", "propeller_asymmetry", "shallow_water")
+    assert command._candidates(None, cargo) == tuple(n for n in effects.NAMES if n not in hull)
+    assert command._candidates(["wind", "current"], kv) == ("wind", "current")
+    with pytest.raises(InputError, match=r"^--effects: unknown effect 'curent' \(did "
                                          r"you mean 'current'\?\)"):
-        command._candidates(["current", "curent"])
+        command._candidates(["current", "curent"], kv)
+    with pytest.raises(InputError, match=r"^--effects: effect 'current' listed twice in "
+                                         r"current wind current$"):
+        command._candidates(["current", "wind", "current"], kv)
+    with pytest.raises(InputError, match=r"^--effects: effect 'resistance' acts on the hull "
+                                         r"model of the mmg and mmg_berthing families; ship "
+                                         r"'cargo' is a 'nomoto' model"):
+        command._candidates(["wind", "resistance"], cargo)
 
 
 def test_refit_names() -> None:
@@ -194,7 +206,11 @@ def test_self_test_writes_its_result_and_reports_progress(tmp_path, monkeypatch,
     (["diagnose", "--ship", "kvlcc2", "--data", "x.csv", "--out", "o", "--refit", "N_rr"],
      "--refit: unknown coefficient 'N_rr'"),
     (["diagnose", "--ship", "kvlcc2", "--data", "x.csv", "--out", "o", "--effects", "wnd"],
-     "--effects.wnd: unknown effect 'wnd' (did you mean 'wind'?)"),
+     "--effects: unknown effect 'wnd' (did you mean 'wind'?)"),
+    (["diagnose", "--ship", "kvlcc2", "--data", "x.csv", "--out", "o", "--effects", "wind",
+      "wind"], "--effects: effect 'wind' listed twice in wind wind"),
+    (["diagnose", "--ship", "cargo", "--data", "x.csv", "--out", "o", "--effects",
+      "shallow_water"], "--effects: effect 'shallow_water' acts on the hull model"),
     (["diagnose", "--ship", "kvlc2", "--data", "x.csv", "--out", "o"],
      "--ship: unknown ship 'kvlc2'"),
 ])
@@ -219,14 +235,38 @@ def test_cli_bad_self_test_count(capsys, value) -> None:
 
 
 def test_too_little_data_to_hold_out(tmp_path, capsys) -> None:
-    """One short run and a horizon longer than it: one window, nothing to hold out."""
+    """One short run and a horizon as long as it: one window, nothing to hold out."""
     t = np.arange(60.0)
     path = _write_csv(tmp_path / "short.csv", {
         "t_s": t, "north_m": 7 * t, "east_m": 0.01 * t * t, "heading_deg": 0.1 * t,
         "rudder_deg": t * 0 + 10, "rpm": t * 0 + 60})
     line = error_line(capsys, ["diagnose", "--ship", "kvlcc2", "--data", path, "--out",
-                                tmp_path / "o", "--horizon-s", "1000", "--effects", "current"])
+                                tmp_path / "o", "--horizon-s", "59", "--effects", "current"])
     assert "--data: too little data to hold any window out" in line
+
+
+@pytest.mark.parametrize("gap, extra, expect", [
+    (True, [], "run.csv:33: t_s: time jumps from 30 s to 1000000031 s"),
+    (False, ["--dt-s", "1e9"], "--dt-s: expected at most L/U = 40.13 s"),
+    (False, ["--dt-s", "1e-9"], "--dt-s: expected at least the data's sampling interval (1 s)"),
+    (False, ["--horizon-s", "1e9"], "--horizon-s: expected at most the longest run's duration "
+                                    "(59 s"),
+    (False, ["--horizon-s", "1e-9"], "--horizon-s: expected at least two working sampling "
+                                     "intervals"),
+])
+def test_cli_bad_data_or_interval_names_the_file_or_flag(tmp_path, capsys, gap, extra,
+                                                         expect) -> None:
+    """A time gap the smoother cannot bridge is located in the file (it once took the
+    machine's memory); a working interval or horizon out of range names its flag, not the
+    data."""
+    t = np.arange(60.0)
+    path = _write_csv(tmp_path / "run.csv", {
+        "t_s": t + 1e9 * (t > 30) * gap, "north_m": 7 * t, "east_m": 0.01 * t * t,
+        "heading_deg": 0.1 * t, "rudder_deg": 10.0 * (t > 5), "rpm": t * 0 + 60})
+    line = error_line(capsys, ["diagnose", "--ship", "kvlcc2", "--data", path, "--out",
+                                tmp_path / "o", "--effects", "current", *extra])
+    assert expect in line
+    assert not (tmp_path / "o").exists()
 
 
 @pytest.fixture(scope="module")

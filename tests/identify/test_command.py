@@ -224,6 +224,45 @@ def _csv_text(tmp_path: Path, name: str, text: str) -> Path:
      "--fit: coefficient listed twice"),
     (lambda p: _simple_run(p / "j.csv"), ["--bounds", "K_prime=3:1"],
      "--bounds: empty bounds for K_prime"),
+    (lambda p: _csv_text(p, "k.csv", "t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n"
+                         + "".join(f"{i + 1e9 * (i > 20)},{7 * i},0,{i},5,80\n"
+                                   for i in range(30))),
+     [], "k.csv:23: t_s: time jumps from 20 s to 1000000021 s, a gap of 1e+09 s"),
+    (lambda p: _csv_text(p, "l.csv", "t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n"
+                         + "".join(f"{i},{7 * i},{'inf' if i == 4 else 0},{i},5,80\n"
+                                   for i in range(30))),
+     [], "l.csv:6: east_m: expected a finite number (an empty cell for a missing value), "
+         "got inf"),
+    (lambda p: _csv_text(p, "m.csv", "t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n"
+                         + "".join(f"{i},{7 * i},0,{i},3000,80\n" for i in range(30))),
+     [], "m.csv:2: rudder_deg: expected a rudder angle of at most 90 deg either way, got 3000"),
+    (lambda p: _csv_text(p, "n.csv", "t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n"
+                         + "".join(f"{i},{7 * i},0,{i},5,-99999\n" for i in range(30))),
+     [], "n.csv:2: rpm: expected a propeller speed of at most 2 times the engine range of the "
+         "base ship 'cargo'"),
+    (lambda p: _csv_text(p, "o.csv", "t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n"
+                         + "".join(f"{i},0,0,0,0,0\n" for i in range(30))),
+     [], "o.csv: the ship does not move in the run: its track spans 0 m"),
+    (lambda p: _csv_text(p, "q.csv", "t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n"
+                         + "".join(f"{i},{7 * i},0,45,5,80\n" for i in range(30))),
+     [], "q.csv: K_prime, T_prime, n3_prime cannot be identified from this data"),
+    (lambda p: _simple_run(p / "r.csv"), ["--dt-s", "1e-9"],
+     "--dt-s: expected at least the data's sampling interval (1 s)"),
+    (lambda p: _simple_run(p / "s.csv"), ["--dt-s", "1e9"],
+     "--dt-s: expected at most L/U = 20.85 s"),
+    (lambda p: _simple_run(p / "t.csv", n=25), ["--dt-s", "9"],
+     "--dt-s: an interval of 9 s leaves 3 sample(s) of run 't' (24 s long)"),
+    (lambda p: _simple_run(p / "u.csv"), ["--horizon-s", "1e9"],
+     "--horizon-s: expected at most the longest run's duration (59 s"),
+    (lambda p: _simple_run(p / "v.csv"), ["--horizon-s", "1e-9"],
+     "--horizon-s: expected at least two working sampling intervals (2 s)"),
+    (lambda p: _simple_run(p / "w.csv"), ["--wind", "ignore"],
+     "--wind: applies only to models with wind loads (mmg, mmg_berthing); the nomoto model "
+     "has none"),
+    (lambda p: _simple_run(p / "x.csv"), ["--wind", "ignore", "--model", "mmg", "--base",
+                                          "kvlcc2"],
+     "--wind: applies only when the model has wind loads and the runs carry wind; the runs "
+     "carry no wind"),
 ])
 def test_bad_input_is_one_located_line(tmp_path, capsys, make, extra, expect) -> None:
     path = make(tmp_path)
@@ -231,6 +270,8 @@ def test_bad_input_is_one_located_line(tmp_path, capsys, make, extra, expect) ->
             tmp_path / "o", *extra]
     if "--base" in extra:
         argv[3:5] = []
+    if "--model" in extra:
+        argv[1:3] = []
     line = error_line(capsys, argv)
     assert expect in line
     assert not (tmp_path / "o").exists()

@@ -3,7 +3,9 @@ shrinks; and ``--self-test N``.
 
 Choices when not given (documented in the README): working sampling interval as in
 ``trafficsim identify`` (the data's, thinned to at most ``L / (20 U)``); replay windows of
-``3 L / U``; without ``--holdout`` the windows alternate between training and held-out. The
+``3 L / U``; without ``--holdout`` the windows alternate between training and held-out;
+candidates: every effect of the library that acts on the ship's model (no hull effects for
+``nomoto`` and ``response`` ships). The runs and the flags are checked as in ``identify``. The
 measured wind of the runs is never used by the diagnosis (a wind model is a candidate effect);
 when the runs carry it and ``wind`` is chosen, the fitted wind is compared with the logged one
 afterwards (``confirmation``).
@@ -12,7 +14,7 @@ afterwards (``confirmation``).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,8 +24,8 @@ from trafficsim import effects
 from trafficsim.diagnose import data as ddata
 from trafficsim.diagnose import fit, report
 from trafficsim.errors import InputError
-from trafficsim.identify import preprocess
-from trafficsim.identify.command import read_runs, working_interval_s
+from trafficsim.identify import datacheck, preprocess
+from trafficsim.identify.command import horizon_of, read_runs, working_interval_s
 from trafficsim.ships.library import load_ship
 from trafficsim.units import compass_deg
 
@@ -41,12 +43,32 @@ def load_base(ship: str) -> dict[str, Any]:
     return dict(load_ship(ship, flag="--ship"))
 
 
-def _candidates(names: Sequence[str] | None) -> tuple[str, ...]:
+def _candidates(names: Sequence[str] | None, spec: Mapping[str, Any]) -> tuple[str, ...]:
+    """The candidate effects: those given (each once, each acting on ``spec``'s family), or
+    every effect of the library that acts on it."""
     if not names:
-        return effects.NAMES
+        return tuple(n for n in effects.NAMES if _inapplicable(n, spec) is None)
     for name in names:
-        effects.check({name: {}}, where="--effects")
+        try:
+            effects.check({name: {}}, where="--effects")
+        except InputError as exc:
+            raise InputError(exc.message, key="--effects") from None
+        if names.count(name) > 1:
+            raise InputError(f"effect '{name}' listed twice in {' '.join(names)}",
+                             key="--effects")
+        why = _inapplicable(name, spec)
+        if why is not None:
+            raise InputError(why, key="--effects")
     return tuple(names)
+
+
+def _inapplicable(name: str, spec: Mapping[str, Any]) -> str | None:
+    """Why effect ``name`` cannot act on the ship ``spec`` (None: it can)."""
+    try:
+        effects.apply_spec(spec, effects.check({name: {}}))
+    except InputError as exc:
+        return exc.message
+    return None
 
 
 def _refit(spec: dict[str, Any], refit: str | Sequence[str] | None) -> tuple[str, ...]:
@@ -80,14 +102,16 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
     DEFAULT_FIT`; a comma-separated string or a sequence of names)."""
     start = time.perf_counter()
     spec = load_base(ship)
-    names = _candidates(candidates)
+    names = _candidates(candidates, spec)
     refit_names = _refit(spec, refit)
     length = float(spec["particulars"]["length_m"])
     u_service = float(spec["service_speed_kn"]) * KNOT
     train_files, hold_files, trials = read_runs(data, holdout)
+    datacheck.check_propeller(trials, spec)
+    datacheck.check_motion(trials[: len(train_files)], length)
     work_dt = working_interval_s(trials, length, u_service, dt_s)
+    horizon = horizon_of(trials, length, u_service, horizon_s, work_dt)
     kin = preprocess.smooth_runs(trials, length, u_service, dt_s=work_dt)
-    horizon = horizon_s if horizon_s is not None else 3.0 * length / u_service
     if hold_files:
         train = ddata.dataset(kin[: len(train_files)], horizon)
         hold = ddata.dataset(kin[len(train_files):], horizon)

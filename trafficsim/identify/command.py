@@ -14,17 +14,24 @@ output folder:
 Choices when not given (documented in the README):
 
 * working sampling interval: the data's, thinned to at most ``L / (20 U)`` (about 20 samples
-  per ship length travelled; 2 s for a 225 m ship at 13 kn, seed 001's T);
-* fit horizon: windows of ``3 L / U`` seconds, each replayed from its measured start;
+  per ship length travelled; 2 s for a 225 m ship at 13 kn, seed 001's T); a given one lies
+  between the data's interval and ``L / U`` and leaves every run 4 samples;
+* fit horizon: windows of ``3 L / U`` seconds, each replayed from its measured start; a given
+  one spans two working intervals at least and the longest run at most;
 * wind: used when the runs carry it and the model has wind loads (``mmg`` with windage
   particulars); the ``response`` and ``nomoto`` families have no wind model, so wind is then
-  ignored and its effect goes into the identified coefficients;
+  ignored and its effect goes into the identified coefficients (``--wind ignore`` is refused
+  where there is no wind to ignore);
 * starting values: the base ship's coefficients when it is of the identified family; for
   ``response`` the EKF starts from zero as in [seed 001, section 4.2]; for ``nomoto`` from
   another family: K' = T' = 2, n3' = 0, ``rps_service`` from the measured speed per rps at
   speeds above 30 % of the service speed, ``surge_tau_s = 5 L / U``. ``mmg`` needs an ``mmg``
   base ship (every coefficient not fitted comes from it), ``mmg_berthing`` an ``mmg_berthing``
   one (e.g. an MMG parameter folder, :mod:`trafficsim.diagnose.mmgfolder`).
+
+The runs are checked first (:mod:`trafficsim.identify.datacheck`): time gaps, non-finite and
+impossible values, propeller speeds against the base ship, and whether they excite what is
+fitted.
 """
 
 from __future__ import annotations
@@ -38,7 +45,14 @@ from typing import Any
 import numpy as np
 
 from trafficsim.errors import DataError, InputError
-from trafficsim.identify import augmented_ekf, output_error, preprocess, replay, validation
+from trafficsim.identify import (
+    augmented_ekf,
+    datacheck,
+    output_error,
+    preprocess,
+    replay,
+    validation,
+)
 from trafficsim.identify.parameters import DEFAULT_FIT, Parametrisation
 from trafficsim.identify.report import convergence_plot, write_reports
 from trafficsim.identify.shipfile import write_ship_file
@@ -74,7 +88,9 @@ def read_runs(data: Sequence[Path], holdout: Sequence[Path],
               columns: Mapping[str, str] | None = None
               ) -> tuple[list[Path], list[Path], list[TrialData]]:
     """Training and held-out files (folders expanded) and their runs, training first; a run is
-    named by its file's stem, with its folder where stems repeat."""
+    named by its file's stem, with its folder where stems repeat. Each run is checked
+    (:func:`trafficsim.identify.datacheck.check_run`: time gaps, non-finite values, impossible
+    readings)."""
     train_files = expand_paths(data, "--data")
     hold_files = expand_paths(holdout, "--holdout")
     files = [*train_files, *hold_files]
@@ -82,16 +98,57 @@ def read_runs(data: Sequence[Path], holdout: Sequence[Path],
     trials = [read_trial(p, p.stem if stems.count(p.stem) == 1 else f"{p.parent.name}/{p.stem}",
                          columns)
               for p in files]
+    for trial in trials:
+        datacheck.check_run(trial, columns)
     return train_files, hold_files, trials
 
 
 def working_interval_s(trials: Sequence[TrialData], length_m: float, u_service_mps: float,
                        dt_s: float | None) -> float:
-    """``dt_s`` if given, else the data's sampling thinned to at most ``L / (20 U)``."""
-    if dt_s is not None:
-        return dt_s
+    """``dt_s`` if given, else the data's sampling thinned to at most ``L / (20 U)``.
+
+    A given ``dt_s`` must lie between the finest sampling interval of the runs (runs are
+    thinned, never interpolated onto a finer grid) and ``L / U`` (a ship length per sample),
+    and leave every run at least 4 samples (the smoother's minimum); else an InputError
+    names ``--dt-s``."""
     native = min(t.dt_s for t in trials)
-    return native * max(1, int(np.floor(length_m / (20.0 * u_service_mps) / native + 1e-9)))
+    if dt_s is None:
+        return native * max(1, int(np.floor(length_m / (20.0 * u_service_mps) / native + 1e-9)))
+    most = length_m / u_service_mps
+    if dt_s < native * (1.0 - 1e-6):
+        raise InputError(f"expected at least the data's sampling interval ({native:.6g} s): "
+                         f"runs are thinned to the working interval, not interpolated; got "
+                         f"{dt_s:g}", key="--dt-s")
+    if dt_s > most:
+        raise InputError(f"expected at most L/U = {most:.4g} s (a ship length per sample; the "
+                         f"default thins to L/(20 U) = {most / 20.0:.4g} s), got {dt_s:g}",
+                         key="--dt-s")
+    for t in trials:
+        kept = int(np.floor(t.duration_s / dt_s + 1e-9)) + 1
+        if kept < 4:
+            raise InputError(f"an interval of {dt_s:g} s leaves {kept} sample(s) of run "
+                             f"'{t.name}' ({t.duration_s:.4g} s long); the smoother needs at "
+                             f"least 4 (at most {t.duration_s / 3.0:.4g} s for this run)",
+                             key="--dt-s")
+    return dt_s
+
+
+def horizon_of(trials: Sequence[TrialData], length_m: float, u_service_mps: float,
+               horizon_s: float | None, work_dt_s: float) -> float:
+    """``horizon_s`` if given, else ``3 L / U``. A given horizon must span at least two working
+    intervals and at most the longest run (a longer window replays the same); else an
+    InputError names ``--horizon-s``."""
+    if horizon_s is None:
+        return 3.0 * length_m / u_service_mps
+    longest = max(t.duration_s for t in trials)
+    if horizon_s < 2.0 * work_dt_s:
+        raise InputError(f"expected at least two working sampling intervals "
+                         f"({2.0 * work_dt_s:.6g} s), got {horizon_s:g}", key="--horizon-s")
+    if horizon_s > longest * (1.0 + 1e-9):
+        raise InputError(f"expected at most the longest run's duration ({longest:.6g} s; a "
+                         f"window that long replays each run whole), got {horizon_s:g}",
+                         key="--horizon-s")
+    return horizon_s
 
 
 def starting_spec(model: str, base: Mapping[str, Any], runs: Sequence[preprocess.Kinematics]
@@ -161,12 +218,21 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     if "ekf" in method and model != "response":
         raise InputError(f"the augmented EKF identifies the response model only, not {model}; "
                          "use --method oe", key="--method")
+    if wind not in ("auto", "ignore"):
+        raise InputError(f"expected auto or ignore, got '{wind}'", key="--wind")
+    if wind == "ignore" and model not in WIND_FAMILIES:
+        raise InputError(f"applies only to models with wind loads ({', '.join(WIND_FAMILIES)}); "
+                         f"the {model} model has none, so there is no wind to ignore",
+                         key="--wind")
     base_spec = load_ship(base, flag="--base")
     ref_spec = None if reference is None else load_ship(reference, flag="--reference")
     length = float(base_spec["particulars"]["length_m"])
     u_service = float(base_spec["service_speed_kn"]) * KNOT
     train_files, hold_files, trials = read_runs(data, holdout, columns)
+    datacheck.check_propeller(trials, base_spec, columns)
+    datacheck.check_motion(trials[: len(train_files)], length)
     work_dt = working_interval_s(trials, length, u_service, dt_s)
+    horizon = horizon_of(trials, length, u_service, horizon_s, work_dt)
     kin = preprocess.smooth_runs(trials, length, u_service,
                                  smoother or preprocess.SmootherSettings(), dt_s=work_dt)
     train, hold = kin[: len(train_files)], kin[len(train_files):]
@@ -175,22 +241,26 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     if model == "response" and base_spec["model"] != "response" and "ekf" not in method:
         raise InputError("the response model from a base ship of another family needs the "
                          "EKF's estimate to start from: use --method ekf+oe", key="--method")
+    if wind == "ignore" and not (_has_wind_loads(spec0) and any(t.has_wind for t in trials)):
+        lacking = ("the runs carry no wind" if _has_wind_loads(spec0) else
+                   f"the base ship '{base_spec['name']}' has no windage areas")
+        raise InputError(f"applies only when the model has wind loads and the runs carry "
+                         f"wind; {lacking}, so there is no wind to ignore", key="--wind")
     use_wind = wind == "auto" and _has_wind_loads(spec0) and any(t.has_wind for t in trials)
     wind_note = ("used (measured true wind, Isherwood loads)" if use_wind else
                  "ignored (--wind ignore)" if wind == "ignore" else
                  "ignored (the model has no wind loads)" if not _has_wind_loads(spec0) else
                  "none in the data")
-    horizon = horizon_s if horizon_s is not None else 3.0 * length / u_service
 
     names = tuple(fit_names) if fit_names else DEFAULT_FIT[model]
     param = Parametrisation.of(spec0, names, bounds)
+    if "ekf" in method and param.names != augmented_ekf.NAMES:
+        raise InputError("the augmented EKF estimates all 16 response coefficients; "
+                         "--fit applies to the output-error fit only (--method oe)", key="--fit")
+    datacheck.check_excitation(trials[: len(train_files)], param.names)
     x_start = param.initial()
     ekf_result = None
     if "ekf" in method:
-        if param.names != augmented_ekf.NAMES:
-            raise InputError("the augmented EKF estimates all 16 response coefficients; "
-                             "--fit applies to the output-error fit only (--method oe)",
-                             key="--fit")
         ekf_result = augmented_ekf.identify_response(train)
         x_start = np.clip(ekf_result.x, param.lower, param.upper)
     windows_train = replay.windows_from_runs(train, horizon, use_wind)

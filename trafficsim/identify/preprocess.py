@@ -6,7 +6,9 @@ eqs 6-9]; :func:`trafficsim.estimation.smoother.body_velocities` implements it. 
 prepares runs for it and keeps the result with the measured inputs:
 
 * a sampling that is not uniform is resampled onto a uniform grid (linear interpolation, angles
-  unwrapped first; samples farther than one interval from any measurement become NaN);
+  unwrapped first; samples farther than one interval from any measurement become NaN); a time
+  step longer than :data:`~trafficsim.identify.datacheck.MAX_GAP_INTERVALS` median intervals is
+  refused (:func:`~trafficsim.identify.datacheck.check_gaps`), shorter gaps are bridged;
 * repeated values (a receiver that did not update repeats its last output: the FRT-DS-ESSO
   files hold runs of identical positions and headings up to 2.5 s long) are treated as missing,
   so the smoother bridges them instead of reading a stop-and-go motion; counted in the report.
@@ -42,6 +44,7 @@ import numpy as np
 
 from trafficsim.errors import DataError
 from trafficsim.estimation.smoother import body_velocities, unwrap_finite
+from trafficsim.identify.datacheck import check_gaps
 from trafficsim.io.trialdata import TrialData
 
 _SQRT20 = np.sqrt(20.0)
@@ -115,8 +118,10 @@ def resample_uniform(trial: TrialData, dt_s: float | None = None) -> TrialData:
     Series, and the extra columns kept under their own names, are interpolated linearly over
     their finite samples (angles unwrapped first: the heading, course and wind direction, and
     extra columns in ``_rad``); grid points farther than ``dt_s`` from every finite sample of
-    a series are NaN.
+    a series are NaN. A time step longer than ``MAX_GAP_INTERVALS`` median intervals is a
+    DataError (:func:`~trafficsim.identify.datacheck.check_gaps`).
     """
+    check_gaps(trial)
     steps = np.diff(trial.t_s)
     dt = float(np.median(steps)) if dt_s is None else float(dt_s)
     if dt_s is None and np.all(np.abs(steps - dt) <= 0.01 * dt):

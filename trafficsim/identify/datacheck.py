@@ -1,0 +1,231 @@
+"""Checks of trial runs that the reader accepts as files but a fit cannot use.
+
+Each failure is one :class:`~trafficsim.errors.DataError` at the file, line and column (the
+column as the file names it, the value as the file holds it), or an
+:class:`~trafficsim.errors.InputError` naming ``--data`` when it concerns all training runs:
+
+* a time step longer than :data:`MAX_GAP_INTERVALS` typical (median) sampling intervals: gaps
+  up to that are bridged (resampled onto the uniform grid as missing samples, which the
+  smoother bridges), a longer one is refused (split the run at it), so the resampled run holds
+  at most ``MAX_GAP_INTERVALS`` times the samples of the file;
+* a value that is not finite (``inf``; an empty cell or ``nan`` is a missing value and allowed);
+* a value no instrument can read: a rudder angle beyond 90 deg either way, a position farther
+  than half the Earth's circumference from the origin, a negative speed over ground or wind
+  speed, a propeller speed beyond twice the base ship's engine range (``rps_min .. rps_max``,
+  whichever is larger in size; an rpm column holding rev/s reads 60 times too fast);
+* runs that do not excite what is fitted: a ship that does not move (its track spans less than
+  its length in every training run), and coefficients of the sway and yaw motion from runs in
+  none of which both the rudder and the heading move by :data:`MIN_EXCURSION_DEG` or more.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from trafficsim.errors import DataError, InputError
+from trafficsim.estimation.smoother import unwrap_finite
+from trafficsim.io import trialdata
+from trafficsim.io.trialdata import TrialData
+
+#: longest time step bridged, in median sampling intervals
+MAX_GAP_INTERVALS = 20
+#: largest rudder angle either way, deg
+MAX_RUDDER_DEG = 90.0
+#: largest distance of a position from the origin of its local frame, m
+MAX_POSITION_M = 2.0e7
+#: propeller speeds up to this multiple of the base ship's engine range
+RPS_FACTOR = 2.0
+#: smallest rudder and heading excursion (largest minus smallest) that excites the yaw, deg
+MIN_EXCURSION_DEG = 1.0
+#: coefficients a run without turning determines (surge and propulsion only)
+SURGE_ONLY = frozenset({"rps_service", "surge_tau_s", "R0", "X_0F", "X_0A", "a1", "a8", "a9"})
+
+#: trial-data CSV column of each TrialData field
+_CSV_COLUMN = {"t_s": "t_s", "north_m": "north_m", "east_m": "east_m", "psi_rad": "heading_deg",
+               "rudder_rad": "rudder_deg", "rps": "rpm", "u_mps": "u_mps", "v_mps": "v_mps",
+               "r_radps": "r_degps", "sog_mps": "sog_kn", "cog_rad": "cog_deg",
+               "wind_speed_mps": "wind_speed_mps", "wind_from_rad": "wind_from_deg"}
+#: FRT-DS-ESSO column of each TrialData field (and renamed extra column)
+_FRT_COLUMN = {(extra or field): header for header, (field, extra) in
+               trialdata.FRT_COLUMNS.items()}
+
+
+def _located(trial: TrialData, field: str, index: int,
+             columns: Mapping[str, str] | None) -> tuple[int | None, str, float | None]:
+    """File line, file column name and file value of sample ``index`` of ``field`` (a series
+    or an extra column); line and value None for a run not read from a file."""
+    column = field
+    line, value = None, None
+    header: list[str] = []
+    table, lines = np.empty((0, 0)), np.empty(0, dtype=int)
+    if trial.path:
+        try:
+            header, table, lines = trialdata._read_table(Path(trial.path))
+        except (DataError, OSError):
+            header = []
+    frt = "x_position_mid [m]" in header
+    if frt:
+        column = _FRT_COLUMN.get(field, field)
+    elif field in _CSV_COLUMN:
+        column = _CSV_COLUMN[field]
+        column = (columns or {}).get(column, column)
+    elif field.endswith("_replaced"):  # a column another one was read in place of
+        column = field.removesuffix("_replaced")
+    if column in header:
+        keep = ~np.all(np.isnan(table), axis=1)
+        rows = np.flatnonzero(keep)
+        if index < rows.size:
+            line = int(lines[rows[index]])
+            value = float(table[rows[index], header.index(column)])
+    return line, column, value
+
+
+def _error(trial: TrialData, field: str, index: int, columns: Mapping[str, str] | None,
+           message: str) -> DataError:
+    line, column, value = _located(trial, field, index, columns)
+    if value is not None:
+        message = message.replace("{value}", f"{value:.10g}")
+    else:
+        message = message.replace("{value}", "this value")
+    return DataError(message, path=trial.path or None, line=line, key=column)
+
+
+def check_gaps(trial: TrialData, columns: Mapping[str, str] | None = None) -> None:
+    """Refuse a time step longer than :data:`MAX_GAP_INTERVALS` median intervals."""
+    if trial.n < 3:
+        return
+    steps = np.diff(trial.t_s)
+    dt = float(np.median(steps))
+    longest = int(np.argmax(steps))
+    gap = float(steps[longest])
+    if gap <= MAX_GAP_INTERVALS * dt:
+        return
+    t0, t1 = float(trial.t_s[longest]), float(trial.t_s[longest + 1])
+    raise _error(trial, "t_s", longest + 1, columns,
+                 f"time jumps from {t0:.10g} s to {t1:.10g} s, a gap of {gap:.6g} s "
+                 f"({gap / dt:.6g} sampling intervals of {dt:.6g} s); gaps of up to "
+                 f"{MAX_GAP_INTERVALS} intervals ({MAX_GAP_INTERVALS * dt:.6g} s) are bridged, "
+                 "a longer one is not: split the run into two files at this line")
+
+
+def _series(trial: TrialData) -> Iterable[tuple[str, np.ndarray]]:
+    yield from trial.arrays().items()
+    yield from trial.extra.items()
+
+
+def _first(trial: TrialData, bad: Mapping[str, np.ndarray]) -> tuple[str, int] | None:
+    """The field and index of the earliest sample flagged in ``bad`` (per field)."""
+    found = [(int(np.argmax(mask)), field) for field, mask in bad.items() if mask.any()]
+    if not found:
+        return None
+    index, field = min(found)
+    return field, index
+
+
+def check_values(trial: TrialData, columns: Mapping[str, str] | None = None) -> None:
+    """Refuse infinite values and readings no instrument gives (module doc)."""
+    first = _first(trial, {k: np.isinf(v) for k, v in _series(trial)})
+    if first is not None:
+        raise _error(trial, *first, columns, "expected a finite number (an empty cell for a "
+                     "missing value), got {value}")
+    rad = np.radians(MAX_RUDDER_DEG)
+    limits = [
+        ({"rudder_rad": np.abs(trial.rudder_rad) > rad},
+         f"expected a rudder angle of at most {MAX_RUDDER_DEG:g} deg either way, got {{value}}"),
+        ({k: np.abs(getattr(trial, k)) > MAX_POSITION_M for k in ("north_m", "east_m")},
+         f"expected a position within {MAX_POSITION_M:g} m of the origin (half the Earth's "
+         "circumference), got {value}"),
+        ({k: getattr(trial, k) < 0.0 for k in ("sog_mps", "wind_speed_mps")
+          if getattr(trial, k) is not None},
+         "expected a speed of at least 0, got {value}"),
+    ]
+    for bad, message in limits:
+        first = _first(trial, bad)
+        if first is not None:
+            raise _error(trial, *first, columns, message)
+
+
+def check_run(trial: TrialData, columns: Mapping[str, str] | None = None) -> None:
+    """Time gaps, non-finite values and impossible readings of one run."""
+    check_gaps(trial, columns)
+    check_values(trial, columns)
+
+
+def check_propeller(trials: Sequence[TrialData], spec: Mapping[str, Any],
+                    columns: Mapping[str, str] | None = None) -> None:
+    """Refuse propeller speeds beyond :data:`RPS_FACTOR` times the base ship's engine range."""
+    act = spec.get("actuators", {})
+    most = max(abs(float(act.get("rps_max", 0.0))), abs(float(act.get("rps_min", 0.0))))
+    if not most > 0.0:
+        return
+    limit = RPS_FACTOR * most
+    for trial in trials:
+        first = _first(trial, {"rps": np.abs(trial.rps) > limit})
+        if first is not None:
+            raise _error(trial, *first, columns,
+                         f"expected a propeller speed of at most {RPS_FACTOR:g} times the "
+                         f"engine range of the base ship '{spec.get('name')}' ({limit:.4g} "
+                         f"rev/s = {60.0 * limit:.4g} rpm either way), got {{value}}")
+
+
+def _span(trial: TrialData) -> float | None:
+    """Largest extent of the track, m (NaN-aware; None without two finite positions)."""
+    ok = np.isfinite(trial.north_m) & np.isfinite(trial.east_m)
+    if ok.sum() < 2:
+        return None
+    return float(np.hypot(np.ptp(trial.north_m[ok]), np.ptp(trial.east_m[ok])))
+
+
+def _excursion_deg(values: np.ndarray, angle: bool = False) -> float:
+    v = unwrap_finite(values) if angle else np.asarray(values, float)
+    v = v[np.isfinite(v)]
+    return float(np.degrees(np.ptp(v))) if v.size else 0.0
+
+
+def _where(trials: Sequence[TrialData]) -> tuple[str | None, str, str]:
+    """(path, key, wording) to name the training runs in an error."""
+    if len(trials) == 1:
+        return trials[0].path or None, "", "the run"
+    names = ", ".join(t.name for t in trials)
+    return None, "--data", f"any of the {len(trials)} training runs ({names})"
+
+
+def check_motion(trials: Sequence[TrialData], length_m: float) -> None:
+    """Refuse training runs in none of which the track spans the ship's length (runs without
+    two positions are left to the smoother, which names them)."""
+    spans = [s for s in map(_span, trials) if s is not None]
+    if not spans or len(spans) < len(trials) or max(spans) >= length_m:
+        return
+    span = max(spans)
+    path, key, runs = _where(trials)
+    raise InputError(f"the ship does not move in {runs}: its track spans {span:.3g} m, less "
+                     f"than its length ({length_m:g} m); there is nothing to fit or replay",
+                     path=path, key=key or None)
+
+
+def check_excitation(trials: Sequence[TrialData], names: Sequence[str]) -> None:
+    """Refuse a fit of sway or yaw coefficients from runs in none of which both the rudder and
+    the heading move by :data:`MIN_EXCURSION_DEG` or more."""
+    turning = [n for n in names if n not in SURGE_ONLY]
+    if not turning or any(not np.isfinite(t.rudder_rad).any() for t in trials):
+        return  # (a run without any rudder reading is refused by the replay, named)
+    rudder = [_excursion_deg(t.rudder_rad) for t in trials]
+    heading = [_excursion_deg(t.psi_rad, angle=True) for t in trials]
+    if any(a >= MIN_EXCURSION_DEG and b >= MIN_EXCURSION_DEG for a, b in
+           zip(rudder, heading, strict=True)):
+        return
+    path, key, _ = _where(trials)
+    surge = [n for n in names if n in SURGE_ONLY]
+    instead = f" or fit only {', '.join(surge)} (--fit)" if surge else ""
+    where = ("in this run the rudder and the heading do not" if len(trials) == 1 else
+             f"in none of the {len(trials)} training runs ({', '.join(t.name for t in trials)})"
+             " do the rudder and the heading")
+    raise InputError(f"{', '.join(turning)} cannot be identified from this data: {where} both "
+                     f"move by {MIN_EXCURSION_DEG:g} deg or more (largest excursions: rudder "
+                     f"{max(rudder):.3g} deg, heading {max(heading):.3g} deg), so nothing "
+                     f"excites the turning motion; give runs with rudder manoeuvres (turns, "
+                     f"zig-zags){instead}", path=path, key=key or None)
