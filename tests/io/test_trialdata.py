@@ -80,7 +80,7 @@ def test_missing_cells_are_counted_not_fatal(tmp_path: Path) -> None:
     ("t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n0,0,0,0,0,60\n1,1,1,0,0\n", 3,
      "expected 6 values"),
     ("t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n0,0,0,0,0,60\n,1,1,0,0,60\n", 3,
-     "expected a time in every row"),
+     "expected a finite time in every row, got an empty cell or nan"),
     ("", 1, "empty file"),
     ("t_s,t_s,north_m\n", 1, "duplicate column"),
 ])
@@ -255,12 +255,15 @@ def test_not_text_folder_and_size_cap_name_the_file(tmp_path: Path, monkeypatch)
     # empty rows between do not shift the line of the offending row
     (["0,0,0,0,0,60", "", ",,,,,", "2,0,0,0,0,60", "", "1,0,0,0,0,60"], 7, "got 1 after 2"),
     # an infinite or 'NaN' time is not a time
-    (["0,0,0,0,0,60", "inf,0,0,0,0,60"], 3, "expected a time in every row"),
-    (["0,0,0,0,0,60", "1,0,0,0,0,60", "NaN,0,0,0,0,60"], 4, "expected a time in every row"),
+    (["0,0,0,0,0,60", "inf,0,0,0,0,60"], 3, "got an infinite value"),
+    (["0,0,0,0,0,60", "1,0,0,0,0,60", "NaN,0,0,0,0,60"], 4,
+     "expected a finite time in every row, got an empty cell or nan"),
     # a trailing comma is a seventh value
     (["0,0,0,0,0,60", "1,0,0,0,0,60,"], 3, "expected 6 values as in the header, got 7"),
     # a bad cell after blank lines, in the last column
     (["0,0,0,0,0,60", "", "1,0,0,0,0,sixty"], 4, "rpm: expected a number, got 'sixty'"),
+    # a control character is shown, not printed
+    (["0,0,0,0,0,60", "1,0,0,0,2.5\x00,60"], 3, "rudder_deg: expected a number, got '2.5\\x00'"),
 ])
 def test_errors_name_file_and_line_of_the_row(tmp_path: Path, rows, line, expect) -> None:
     path = _write(tmp_path, HEADER + "\n" + "\n".join(rows) + "\n")

@@ -312,7 +312,7 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
             try:
                 out.append(float(cell))
             except ValueError:
-                raise DataError(f"expected a number, got '{cell[:40]}'", path=str(path),
+                raise DataError(f"expected a number, got {cell[:40]!r}", path=str(path),
                                 line=line, key=name) from None
         values.append(out)
         lines.append(line)
@@ -330,8 +330,10 @@ def _clean_rows(path: str | None, table: np.ndarray, lines: np.ndarray, time_col
     t = table[:, time_col]
     bad = ~np.isfinite(t)
     if bad.any():
-        raise DataError("expected a time in every row, got an empty cell", path=path,
-                        line=int(lines[np.argmax(bad)]), key="time")
+        i = int(np.argmax(bad))
+        got = "an infinite value" if np.isinf(t[i]) else "an empty cell or nan"
+        raise DataError(f"expected a finite time in every row, got {got}", path=path,
+                        line=int(lines[i]), key="time")
     back = np.diff(t) <= 0.0
     if back.any():
         i = int(np.argmax(back)) + 1
