@@ -164,3 +164,23 @@ def test_a_ship_files_model_checks_run_and_are_located(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     want = f"trafficsim: error: {ship}:{at + 2}: coefficients.rudder_fade_speed_mps: "
     assert len(err) == 2 and all(line.startswith(want) for line in err)
+
+
+@pytest.mark.parametrize("drop, kind, key", [
+    ("model", "ship", "model"), ("n_encounters", "campaign", "n_encounters")])
+def test_a_file_without_its_deciding_key_is_told_by_its_other_keys(tmp_path, drop, kind, key):
+    from trafficsim.ships.library import LIBRARY_DIR
+    from trafficsim.validate import file_kind
+
+    source = (LIBRARY_DIR / "container.yaml" if kind == "ship"
+              else Path(__file__).parent.parent / "scenarios" / "campaign_default.yaml")
+    text = "\n".join(line for line in source.read_text().splitlines()
+                     if not line.startswith((f"{drop}:", "rules:")))
+    path = tmp_path / "f.yaml"
+    path.write_text(text + "\n")
+    import yaml
+
+    assert file_kind(yaml.safe_load(text)) == kind
+    errors = validate_file(path)
+    assert len(errors) == 1 and errors[0].key == key, [str(e) for e in errors]
+    assert "missing" in errors[0].message
