@@ -229,7 +229,8 @@ def test_trial_with_sensors_records_the_receiver_lag_of_seed_000(tmp_path):
 
 
 @pytest.mark.parametrize("flag", [["--frames-every-s", "10"], ["--follow", "tanker"],
-                                  ["--measurements"], ["--size", "640x480"], ["--fps", "5"]])
+                                  ["--measurements"], ["--size", "640x480"], ["--fps", "5"],
+                                  ["--size", "960x720"], ["--dpi", "96"]])
 def test_frame_flags_without_frames_are_refused_not_ignored(tmp_path, flag):
     scenario = Path(__file__).parent.parent / "scenarios" / "head_on.yaml"
     line = one_line_error(cli("run", scenario, "--out", tmp_path / "o", *flag))
@@ -978,3 +979,187 @@ def test_replay_refuses_an_encounter_the_campaign_does_not_have(capsys, campaign
                                tmp_path / "r", "--record-every-s", "1.5"])
     assert "--record-every-s: expected a whole multiple of the campaign's step (1 s)" in line
     assert not (tmp_path / "r").exists()
+
+
+# --- bad input of run, render, explain and validate ------------------------------------------
+
+
+@pytest.mark.parametrize("change, expect", [
+    (lambda s: [], "summary.json: expected a JSON object"),
+    (lambda s: {**s, "record_every_s": "x"}, "summary.json:1: record_every_s: expected a "
+     "positive number, got 'x'"),
+    (lambda s: {**s, "ships": [{**s["ships"][0], "length_m": "big"}, *s["ships"][1:]]},
+     "summary.json:1: ships[0].length_m: expected a positive number"),
+    (lambda s: {**s, "ships": [{**s["ships"][0], "route_m": [[1, "a"]]}, *s["ships"][1:]]},
+     "summary.json:1: ships[0].route_m[0][1]: expected a finite number"),
+    (lambda s: {**s, "duration_s": [1]}, "summary.json:1: duration_s: expected a finite number"),
+])
+def test_a_damaged_summary_is_one_line_naming_the_file_and_key(capsys, tmp_path, run_folder,
+                                                              change, expect):
+    from tests.conftest import error_line
+
+    summary = json.loads((run_folder / "summary.json").read_text())
+    spoilt = _spoilt(run_folder, tmp_path, "summary.json", json.dumps(change(summary)))
+    line = error_line(capsys, ["render", spoilt, "--out", tmp_path / "f", "--no-progress"])
+    assert f"{spoilt}/{expect}" in line, line
+
+
+@pytest.mark.parametrize("command, name, column", [
+    ("render", "trajectories.parquet", "north_m"), ("render", "decisions.parquet", "t_s"),
+    ("explain", "decisions.parquet", "t_s")])
+def test_a_column_of_the_wrong_type_is_one_line_naming_file_and_column(
+        capsys, tmp_path, run_folder, command, name, column):
+    import pyarrow as pa
+
+    from tests.conftest import error_line
+
+    spoilt = _spoilt(run_folder, tmp_path, "summary.json",
+                     (run_folder / "summary.json").read_text())
+    table = pq.read_table(spoilt / name)
+    text = pa.array([str(v) for v in table.column(column).to_pylist()])
+    pq.write_table(table.set_column(table.column_names.index(column), column, text),
+                   spoilt / name)
+    argv = (["render", spoilt, "--out", tmp_path / "f", "--no-progress"] if command == "render"
+            else ["explain", spoilt, "--ship", "a"])
+    line = error_line(capsys, argv)
+    assert f"{spoilt}/{name}: {column}: expected numbers, got string values" in line, line
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["explain", "{run}", "--ship", "a", "--at-s", "1e9"], "--at-s"),
+    (["render", "{run}", "--out", "{tmp}/f", "--every-s", "1e9"], "--every-s"),
+    (["render", "{run}", "--out", "{tmp}/f", "--follow", "a", "--range-nm", "1e9"],
+     "--range-nm"),
+    (["render", "{run}", "--out", "{tmp}/f", "--measurements"], "--measurements"),
+    (["run", "{scenario}", "--out", "{tmp}/o", "--frames", "--frames-every-s", "1e9"],
+     "--frames-every-s"),
+    (["run", "{scenario}", "--out", "{tmp}/o", "--frames", "--measurements"], "--measurements"),
+])
+def test_flags_beyond_the_run_or_doing_nothing_are_refused(capsys, tmp_path, run_folder, argv,
+                                                          flag):
+    from tests.conftest import error_line
+
+    names = {"run": run_folder, "tmp": tmp_path, "scenario": _tiny_scenario(tmp_path)}
+    line = error_line(capsys, [a.format(**names) for a in argv])
+    assert line.startswith(f"trafficsim: error: {flag}: "), line
+    assert not (tmp_path / "o").exists() and not (tmp_path / "f").exists()
+
+
+@pytest.mark.parametrize("command", ["run", "render"])
+def test_an_empty_output_folder_is_refused(capsys, tmp_path, run_folder, command):
+    source = _tiny_scenario(tmp_path) if command == "run" else run_folder
+    line = usage_error(capsys, [command, source, "--out", ""])
+    assert "--out: expected a folder name, got an empty one" in line
+
+
+def test_a_scenario_too_big_for_memory_names_the_ships_key(capsys, tmp_path, monkeypatch):
+    from tests.conftest import error_line
+    from trafficsim import run
+
+    monkeypatch.setattr(run, "available_memory_bytes", lambda: 1000)
+    path = tmp_path / "s.yaml"
+    path.write_text(GOOD + "  - {name: b, type: cargo, north_m: 5000, east_m: 0, "
+                    "heading_deg: 180}\n")
+    line = error_line(capsys, ["run", path, "--out", tmp_path / "o"])
+    assert line.startswith(f"trafficsim: error: {path}:4: ships: 2 ships in one encounter "
+                           "make 1 ship pair(s)"), line
+    assert "0.0 GB free: at most about 1 ships fit" in line and not (tmp_path / "o").exists()
+
+
+def test_running_out_of_memory_is_one_line(capsys, tmp_path, monkeypatch):
+    import trafficsim.run
+
+    def exhausted(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(trafficsim.run, "run_scenario", exhausted)
+    from trafficsim import cli as cli_module
+
+    assert cli_module.main(["run", str(_tiny_scenario(tmp_path)), "--out",
+                            str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("trafficsim: error: out of memory in 'run'") and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+SHIP_B = ("  - name: b\n    type: {type}\n    north_m: 5000\n    east_m: 0\n"
+          "    heading_deg: 180\n")
+
+
+@pytest.mark.parametrize("extra, key, expect", [
+    ("    effects: {resistance: {scale: 2}}\n", "ships[1].effects.resistance",
+     "acts on the hull model of the mmg and mmg_berthing families"),
+    ("    sensors: {ais: {}}\n    effects: {ais_latency: {latency_s: 100000}}\n",
+     "ships[1].effects.ais_latency.latency_s",
+     "expected 0 to 12 s (the ship's AIS latency 2 s plus this must be <= 14 s), got 100000"),
+    ("    sensors: {actuators: {rudder_sigma_deg: -3}}\n",
+     "ships[1].sensors.actuators.rudder_sigma_deg", "must be >= 0.0, got -3.0"),
+    ("    filter: pv\n    sensors: {navigation: {pv_sp_m2ps3: 0}}\n",
+     "ships[1].sensors.navigation.pv_sp_m2ps3", "must be > 0.0, got 0.0"),
+    ("    sensors: {gnss: {gross_prob: 2}}\n", "ships[1].sensors.gnss.gross_prob",
+     "must be <= 1, got 2"),
+    ("    speed_kn: 60\n", "ships[1].speed_kn", "expected at most 2 times the service speed"),
+    ("    effects: {current: {north_mps: 1000}}\n", "ships[1].effects.current.north_mps",
+     "expected a current of at most 5.144 m/s = 10 kn"),
+    ("    effects: {wind: {east_mps: -1000}}\n", "ships[1].effects.wind.east_mps",
+     "expected a wind of at most 60 m/s"),
+    ("    effects: {compass_bias: {bias_deg: 720}}\n", "ships[1].effects.compass_bias.bias_deg",
+     "expected -180 to 180 deg, got 720"),
+    ("    effects: {propeller_asymmetry: {rudder_offset_deg: 1000}}\n",
+     "ships[1].effects.propeller_asymmetry.rudder_offset_deg", "within +-90 deg"),
+    ("    route: [[6000, 0], [6000, 0]]\n", "ships[1].route[1]", "a leg of no length"),
+    ("    route: [[5000, 0]]\n", "ships[1].route[0]", "is the ship's start position"),
+    ("    filter: pv\n    sensors: {navigation: {adaptive_window_steps: 10}}\n",
+     "ships[1].sensors.navigation.adaptive_window_steps", "needs filter: ekf, got filter: pv"),
+])
+@pytest.mark.parametrize("command", ["run", "validate"])
+def test_what_run_refuses_validate_refuses_at_the_line_and_key(capsys, tmp_path, extra, key,
+                                                               expect, command):
+    from tests.conftest import error_line
+
+    path = tmp_path / "s.yaml"
+    path.write_text(GOOD + SHIP_B.format(type="cargo") + extra)
+    argv = ["run", path, "--out", tmp_path / "o"] if command == "run" else ["validate", path]
+    line = error_line(capsys, argv)
+    assert re.match(rf"trafficsim: error: {re.escape(str(path))}:\d+: {re.escape(key)}: ", line)
+    assert expect in line, line
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("old, new, key, expect", [
+    ("north_m: 5000", "north_m: 50", "ships[1].north_m", "starts where its hull overlaps"),
+    ("duration_s: 20\n", "duration_s: 20\nrecord_every_s: 1000\n", "record_every_s",
+     "must not exceed duration_s (20 s), got 1000"),
+    ("duration_s: 20\n", "duration_s: 20\ndecision_period_s: 500\n", "decision_period_s",
+     "must not exceed duration_s (20 s), got 500"),
+])
+def test_doubtful_scenario_values_are_refused_at_their_key(capsys, tmp_path, old, new, key,
+                                                           expect):
+    from tests.conftest import error_line
+
+    path = tmp_path / "s.yaml"
+    text = (GOOD + SHIP_B.format(type="cargo")).replace(old, new, 1)
+    path.write_text(text)
+    for argv in (["run", path, "--out", tmp_path / "o"], ["validate", path]):
+        line = error_line(capsys, argv)
+        assert f": {key}: " in line and expect in line, line
+
+
+def test_a_lone_route_point_ahead_and_a_fast_but_possible_ship_still_run(capsys, tmp_path):
+    from trafficsim import cli as cli_module
+
+    path = tmp_path / "s.yaml"
+    path.write_text(GOOD + "    route: [[3000, 500]]\n" + SHIP_B.format(type="cargo")
+                    + "    speed_kn: 30\n")
+    assert cli_module.main(["run", str(path), "--out", str(tmp_path / "o")]) == 0
+
+
+def test_a_single_colregs_ship_with_a_broken_rules_file_is_refused(capsys, tmp_path):
+    from tests.conftest import error_line
+
+    (tmp_path / "rules.yaml").write_text("schema_version: 1\nname: x\nstart: a\nnodes:\n"
+                                         "  a: {test: [bogus, '>', 1]}\n")
+    path = tmp_path / "s.yaml"
+    path.write_text(GOOD.replace("ships:", "rules: rules.yaml\nships:"))
+    line = error_line(capsys, ["run", path, "--out", tmp_path / "o"])
+    assert f"{tmp_path / 'rules.yaml'}:5: nodes.a.test[0]: unknown feature 'bogus'" in line

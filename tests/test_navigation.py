@@ -333,9 +333,14 @@ def test_bad_receiver_fusion_or_adaptive_config_is_located_in_the_scenario(tmp_p
 
 
 def test_valid_second_receiver_and_adaptive_settings_load(tmp_path):
-    path, _ = _scenario_with(tmp_path, ["gnss2: {sigma_m: 2.0, antenna_x_m: 40}",
-                                        "fusion: {correlation: 0.2}",
-                                        "navigation: {adaptive_window_steps: 60}"])
+    path, text = _scenario_with(tmp_path, ["gnss2: {sigma_m: 2.0, antenna_x_m: 40}",
+                                           "fusion: {correlation: 0.2}",
+                                           "navigation: {adaptive_window_steps: 60}"])
+    # adaptive R is the ekf's: the pv filter the file gives the ship is refused at its key
+    with pytest.raises(InputError, match="needs filter: ekf, got filter: pv") as err:
+        load_scenario(path)
+    assert err.value.key == "ships[0].sensors.navigation.adaptive_window_steps"
+    path.write_text(text.replace("    filter: pv", "    filter: ekf", 1))
     load_scenario(path)
 
 
@@ -406,7 +411,7 @@ def test_merge_sensors_overrides_key_by_key_without_touching_the_ship_file():
     ({"gnss": {"sigma_m": -1.0}}, "gnss[0].sigma_m"),
     ({"compass": {"kind": "laser"}}, "compass[0].kind"),
     ({"navigation": {"pv_sp": 1.0}}, "navigation"),
-    ({"navigation": {"adaptive_min_samples": 5}}, "navigation"),
+    ({"navigation": {"adaptive_min_samples": 5}}, "navigation[0]"),
     ({"fusion": {"correlation": 0.2}}, "fusion"),
     ({"gnss2": {"sigma_m": 2.0}, "fusion": {"correlation": 1.0}}, "fusion"),
     ({"gnss2": {"sigma_m": 0.0}}, "gnss2"),
@@ -452,7 +457,7 @@ def test_unknown_filter_missing_specs_and_adaptive_pv_are_refused():
     with pytest.raises(InputError, match="needs filter: ekf") as err:
         Navigation.build([{"navigation": {"adaptive_window_steps": 20}}], ["pv"], x, 0, [0],
                          [0], 1.0)
-    assert err.value.key == "navigation"
+    assert err.value.key == "navigation[0].adaptive_window_steps"
 
 
 def test_filter_none_estimate_is_the_truth_and_its_ground_velocity_adds_the_current():

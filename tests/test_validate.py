@@ -204,3 +204,23 @@ def test_a_campaign_whose_encounters_cannot_be_drawn_is_invalid(tmp_path):
     assert error.message.startswith("no geometry for overtaking in 1000 draws")
     path.write_text(CAMPAIGN.format(ships="{cargo: 1}", types="{head_on: 1, overtaking: 0}"))
     assert check_file(path) == ([], "ok")
+
+
+@pytest.mark.parametrize("drop, kind, key", [
+    ("model", "ship", "model"), ("n_encounters", "campaign", "n_encounters")])
+def test_a_file_without_its_deciding_key_is_told_by_its_other_keys(tmp_path, drop, kind, key):
+    from trafficsim.ships.library import LIBRARY_DIR
+    from trafficsim.validate import file_kind
+
+    source = (LIBRARY_DIR / "container.yaml" if kind == "ship"
+              else Path(__file__).parent.parent / "scenarios" / "campaign_default.yaml")
+    text = "\n".join(line for line in source.read_text().splitlines()
+                     if not line.startswith((f"{drop}:", "rules:")))
+    path = tmp_path / "f.yaml"
+    path.write_text(text + "\n")
+    import yaml
+
+    assert file_kind(yaml.safe_load(text)) == kind
+    errors = validate_file(path)
+    assert len(errors) == 1 and errors[0].key == key, [str(e) for e in errors]
+    assert "missing" in errors[0].message

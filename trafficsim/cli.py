@@ -57,6 +57,15 @@ def _finite(text: str) -> float:
     return value
 
 
+def _out_dir(text: str) -> Path:
+    """An output folder: an empty name would write into the working directory."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a folder name, got an empty one (the results "
+                                         "would land in the working directory; write '.' to "
+                                         "mean it)")
+    return Path(text)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="trafficsim", description="Fast-time multi-ship traffic and "
                 "collision-avoidance simulator.")
@@ -65,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="simulate a scenario file")
     run.add_argument("scenario", type=Path, help="scenario YAML file")
-    run.add_argument("--out", type=Path, required=True, help="output folder")
+    run.add_argument("--out", type=_out_dir, required=True, help="output folder")
     frames = run.add_argument_group("frames drawn as the run goes (into OUT/frames)")
     frames.add_argument("--frames", nargs="?", const="png", default=None,
                         choices=["png", "gif", "mp4"],
@@ -205,7 +214,7 @@ def build_parser() -> argparse.ArgumentParser:
     ren.add_argument("--every-s", type=_positive(float), default=None,
                      help="a frame every this many simulated seconds (a multiple of the "
                           "run's record period; default: every record)")
-    ren.add_argument("--out", type=Path, required=True, help="output folder")
+    ren.add_argument("--out", type=_out_dir, required=True, help="output folder")
     _frame_flags(ren)
     ren.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     ren.set_defaults(func=_cmd_render)
@@ -263,16 +272,19 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
-#: ``run``'s frame flags and their defaults: given without ``--frames`` they would do nothing
-_RUN_FRAME_FLAGS = {"--frames-every-s": None, "--size": (960, 720), "--dpi": 96.0,
-                    "--follow": None, "--range-nm": None, "--measurements": False, "--fps": None}
+#: ``run``'s frame flags and their value when not given (None, or False for a switch): given
+#: without ``--frames`` they would do nothing
+_RUN_FRAME_FLAGS = {"--frames-every-s": None, "--size": None, "--dpi": None, "--follow": None,
+                    "--range-nm": None, "--measurements": False, "--fps": None}
+#: frame size and dots per inch when ``--size`` and ``--dpi`` are not given
+DEFAULT_SIZE_PX, DEFAULT_DPI = (960, 720), 96.0
 
 
 def _frame_flags(group: argparse._ActionsContainer) -> None:
     """How frames look (``render`` and ``run --frames``)."""
-    group.add_argument("--size", type=_size, default=_RUN_FRAME_FLAGS["--size"],
+    group.add_argument("--size", type=_size, default=None,
                        help="frame size WIDTHxHEIGHT in pixels (default 960x720)")
-    group.add_argument("--dpi", type=_dpi, default=_RUN_FRAME_FLAGS["--dpi"],
+    group.add_argument("--dpi", type=_dpi, default=None,
                        help="dots per inch, 10 to 1200: text and lines scale with it "
                             "(default 96)")
     group.add_argument("--follow", default=None, metavar="SHIP",
@@ -298,13 +310,15 @@ def _fps(args: argparse.Namespace, fmt: str) -> float:
 
 
 def _frame_options(args: argparse.Namespace) -> FrameOptions:
-    from trafficsim.render.frame import MIN_RANGE_NM, FrameOptions
+    from trafficsim.render.frame import MAX_RANGE_NM, MIN_RANGE_NM, FrameOptions
 
     _only_with("--range-nm", args.range_nm is not None, args.follow is not None, "with --follow")
-    if args.range_nm is not None and args.range_nm < MIN_RANGE_NM:
-        raise InputError(f"expected a view range of at least {MIN_RANGE_NM:g} NM, got "
-                         f"{args.range_nm:g}", key="--range-nm")
-    return FrameOptions(size_px=args.size, dpi=args.dpi, follow=args.follow,
+    if args.range_nm is not None and not MIN_RANGE_NM <= args.range_nm <= MAX_RANGE_NM:
+        raise InputError(f"expected a view range of {MIN_RANGE_NM:g} to {MAX_RANGE_NM:g} NM "
+                         f"(the width of the scenario frame), got {args.range_nm:g}",
+                         key="--range-nm")
+    return FrameOptions(size_px=DEFAULT_SIZE_PX if args.size is None else args.size,
+                        dpi=DEFAULT_DPI if args.dpi is None else args.dpi, follow=args.follow,
                         range_nm=3.0 if args.range_nm is None else args.range_nm,
                         measurements=args.measurements)
 
@@ -585,6 +599,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into a command that stopped reading
         sys.stderr.close()
         return 0
+    except MemoryError:
+        print(f"trafficsim: error: out of memory in '{args.command}' (fewer ships, a shorter "
+              "run or a machine with more memory)", file=sys.stderr)
+        return EXIT_USER_ERROR
     except OSError as err:  # e.g. an --out folder that cannot be written
         where = f"{err.filename}: " if err.filename else ""
         print(f"trafficsim: error: {where}{err.strerror or err}", file=sys.stderr)

@@ -185,7 +185,29 @@ def check(effects: Mapping[str, Any] | None, where: str = "effects") -> dict[str
     return out
 
 
+#: fastest current and wind an effect may add, m/s: a scenario environment's caps (10 kn, 60 m/s)
+MAX_CURRENT_MPS, MAX_WIND_MPS = 10.0 * 1852.0 / 3600.0, 60.0
+#: largest compass error term and neutral rudder angle, deg
+MAX_COMPASS_DEG, MAX_RUDDER_OFFSET_DEG = 180.0, 90.0
+
+
 def _check_range(name: str, v: Mapping[str, float], where: str) -> None:
+    if name in ("current", "wind"):
+        most = MAX_CURRENT_MPS if name == "current" else MAX_WIND_MPS
+        speed = math.hypot(v["north_mps"], v["east_mps"])
+        if speed > most:
+            key = "north_mps" if abs(v["north_mps"]) >= abs(v["east_mps"]) else "east_mps"
+            cap = " = 10 kn" if name == "current" else ""
+            raise InputError(f"expected a {name} of at most {most:.4g} m/s{cap} (the scenario "
+                             f"environment's cap), got {speed:g} m/s", key=f"{where}.{key}")
+    if name == "compass_bias":
+        for key, value in v.items():
+            if abs(value) > MAX_COMPASS_DEG:
+                raise InputError(f"expected -{MAX_COMPASS_DEG:g} to {MAX_COMPASS_DEG:g} deg, "
+                                 f"got {value:g}", key=f"{where}.{key}")
+    if name == "propeller_asymmetry" and abs(v["rudder_offset_deg"]) >= MAX_RUDDER_OFFSET_DEG:
+        raise InputError(f"expected a neutral rudder angle within +-{MAX_RUDDER_OFFSET_DEG:g} "
+                         f"deg, got {v['rudder_offset_deg']:g}", key=f"{where}.rudder_offset_deg")
     if name in ("gnss_lag", "steering_lag", "ais_latency"):
         key = "latency_s" if name == "ais_latency" else "tau_s"
         if v[key] < 0.0:

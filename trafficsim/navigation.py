@@ -123,15 +123,18 @@ def _gate_params(configs: Sequence[Mapping[str, Any]]) -> gating.GateParams:
         raise InputError(str(err), key="gate") from None
 
 
-def check_sensor_config(config: Mapping[str, Any]) -> None:
-    """Raise :class:`InputError` (with the offending key) if a ship's sensor config is invalid."""
+def check_sensor_config(config: Mapping[str, Any], filter_name: str = "none",
+                        spec: Mapping[str, Any] | None = None) -> None:
+    """Raise :class:`InputError` (with the offending key) if a ship's sensor config is invalid;
+    with ``filter_name`` (and the ship file ``spec`` for the ekf) also what suits that filter."""
     for name in config:
         if name not in SENSOR_KEYS:
             raise InputError(f"unknown sensor '{name}'; expected one of {', '.join(SENSOR_KEYS)}",
                              key=name)
     # filter "none": every instrument and setting is built and checked; whether a setting suits
     # the ship's filter (adaptive R needs the ekf) is checked when the run starts
-    Navigation.build([dict(config)], ["none"], np.zeros((8, 1)), 0, [0], [0], 1.0)
+    Navigation.build([dict(config)], [filter_name], np.zeros((8, 1)), 0, [0], [0], 1.0,
+                     None if spec is None else [spec])
     if config.get("ekf") is not None:  # (built for ekf ships only when a run starts)
         try:
             ekf.build([{"gnss_sigma_m": 1.0, "compass_sigma_deg": 1.0, "log_sigma_mps": 0.1,
@@ -273,6 +276,7 @@ class Navigation:
             pv_sigma = pv_sigma.copy()
             pv_sigma[multi.idx] = np.sqrt(multi.var)
         # (a perfect receiver, sigma 0, is floored as the compass is for its gain below)
+        column(nav_cfg, "pv_sp_m2ps3", DEFAULT_PV_SP, "navigation", minimum=0.0, strictly=True)
         try:
             pv_p = pv.build([{"sigma_m": max(float(s), 1e-6),
                               "sp_m2ps3": c.get("pv_sp_m2ps3", DEFAULT_PV_SP), "dt_s": dt}
@@ -311,8 +315,8 @@ class Navigation:
         adapt_cfg = _adaptive_configs(nav_cfg)
         for i, (f, c) in enumerate(zip(filters, adapt_cfg, strict=True)):
             if c is not None and f == "pv":
-                raise InputError(f"ship {i}: adaptive_window_steps needs filter: ekf",
-                                 key="navigation")
+                raise InputError(f"needs filter: ekf, got filter: {f}",
+                                 key=f"navigation[{i}].adaptive_window_steps")
         adapt_rows = adapt_p = adapt_s = None
         rows = [j for j, i in enumerate(ekf_idx) if adapt_cfg[i] is not None]
         if rows:
@@ -883,8 +887,8 @@ def _adaptive_configs(nav_cfg: Sequence[Mapping[str, Any]]) -> list[dict[str, An
         cfg = {key[len("adaptive_"):]: value for key, value in c.items()
                if key.startswith("adaptive_")}
         if cfg and "window_steps" not in cfg:
-            raise InputError(f"ship {i}: adaptive_* keys need adaptive_window_steps",
-                             key="navigation")
+            raise InputError("adaptive_* keys need adaptive_window_steps",
+                             key=f"navigation[{i}]")
         if cfg:
             try:
                 adaptive.build([cfg], "gnss")

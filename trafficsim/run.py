@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import os
 import platform
 import time
 from collections.abc import Callable
@@ -19,7 +20,7 @@ from trafficsim import __version__
 from trafficsim.batch import Batch, EncounterEnv, ShipSetup, build_batch
 from trafficsim.colregs.decider import Decider
 from trafficsim.engine import Simulation, divergence_message, earth_velocity
-from trafficsim.errors import SimulationError
+from trafficsim.errors import ScenarioError, SimulationError
 from trafficsim.io.results import write_json, write_parquet
 from trafficsim.io.scenario import Scenario, load_scenario
 from trafficsim.navigation import merge_sensors
@@ -30,10 +31,19 @@ from trafficsim.units import compass_deg, from_kn, to_kn
 
 def scenario_decider(scn: Scenario, batch: Batch, record: bool = True) -> Decider | None:
     """The collision-avoidance decisions of a scenario (None when no ship decides or there is
-    no other ship); ``record`` keeps every decision step for ``decisions.parquet``."""
-    if batch.pair_i.size == 0 or all(b == "keep_course" for b in batch.behaviours):
-        return None
+    no other ship; the rules file it names is read all the same, so a faulty one is refused
+    as ``trafficsim validate`` refuses it); ``record`` keeps every decision step for
+    ``decisions.parquet``."""
     rules = None if scn.rules is None else Path(scn.path).parent / scn.rules
+    if batch.pair_i.size == 0 or all(b == "keep_course" for b in batch.behaviours):
+        from trafficsim.colregs import network
+        from trafficsim.colregs.decider import rules_file
+        from trafficsim.colregs.vocabulary import VOCABULARY
+
+        files = {rules_file(b, rules) for b in batch.behaviours} | {rules}
+        for path in sorted(str(f) for f in files if f is not None):
+            network.load(path, VOCABULARY)
+        return None
     decider = Decider.build(batch.behaviours, batch.pair_i, batch.pair_j, rules, scn.domain,
                             scn.visibility_nm)
     decider.record = record
@@ -263,6 +273,45 @@ def write_run(out_dir: Path, rec: Recorder, sim: Simulation, summary: dict[str, 
     write_json(out_dir / "summary.json", summary)
 
 
+#: memory a run takes per ship pair, bytes (measured: 600 cargo ships, 10-100 s): per pair
+#: (results and summary), and per directed pair and recorded decision step (decisions.parquet)
+PAIR_BYTES, DECISION_BYTES = 2600, 900
+
+
+def available_memory_bytes() -> int | None:
+    """Memory the machine has free for a new process (None where it cannot tell)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def check_pair_memory(scn: Scenario, available: int | None = None) -> None:
+    """Refuse, naming the ``ships`` key, a scenario whose ship pairs would not fit in memory
+    (pairs grow as the square of the ships of an encounter)."""
+    available = available_memory_bytes() if available is None else available
+    n = len(scn.ships)
+    if available is None or n < 2:
+        return
+    deciding = any(s.behaviour != "keep_course" for s in scn.ships)
+    steps = int(scn.duration_s // scn.decision_period_s) + 1 if deciding else 0
+
+    def need(ships: int) -> float:
+        pairs = ships * (ships - 1) / 2
+        return pairs * PAIR_BYTES + 2 * pairs * steps * DECISION_BYTES
+
+    if need(n) <= available:
+        return
+    most = n
+    while most > 1 and need(most) > available:
+        most = min(most - 1, int(most * 0.99))
+    raise ScenarioError(
+        f"{n} ships in one encounter make {n * (n - 1) // 2:,} ship pair(s), about "
+        f"{need(n) / 1e9:.1f} GB for this run, and this machine has {available / 1e9:.1f} GB "
+        f"free: at most about {most} ships fit (or a shorter duration_s, a longer "
+        "decision_period_s, or keep_course ships)", path=str(scn.path), key="ships")
+
+
 def run_scenario(path: Path, out_dir: Path, on_record: RecordHook | None = None
                  ) -> dict[str, Any]:
     """Simulate the scenario at ``path``; write results to ``out_dir``; return the summary."""
@@ -270,6 +319,7 @@ def run_scenario(path: Path, out_dir: Path, on_record: RecordHook | None = None
 
     scn = load_scenario(path)
     refuse_other_results(Path(out_dir), "run", "a run")  # (not a campaign's folder)
+    check_pair_memory(scn)
     ships, env = scenario_setups(scn)
     batch = build_batch(ships, [env])
     decider = scenario_decider(scn, batch)

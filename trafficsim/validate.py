@@ -3,9 +3,11 @@
 The kind of a file is told by its top-level keys: a rules file has ``nodes`` or ``extends``
 (checked against the COLREGS vocabulary, :data:`trafficsim.colregs.vocabulary.VOCABULARY`), a
 ship file has ``model`` and no ``ships``, a campaign spec has ``n_encounters`` (its ship files are
-checked too, and one encounter of each type it asks for is drawn), anything else is read as a
-scenario (whose ship files are checked too). The rules file a scenario or campaign names is
-checked with it.
+checked too, and one encounter of each type it asks for is drawn); without those, the keys only
+one kind of file has decide (``particulars``, ``coefficients``, ... a ship file;
+``encounter_types``, ``ship_types``, ... a campaign spec), so a file that lacks its deciding key
+is told so; anything else is read as a scenario (whose ship files are checked too). The rules
+file a scenario or campaign names is checked with it.
 """
 
 from __future__ import annotations
@@ -31,6 +33,31 @@ def is_rules_data(data: Any) -> bool:
     """True if loaded YAML data is a decision-network rules file (a mapping with ``nodes``, or
     with ``extends`` for a file that takes its nodes from another)."""
     return isinstance(data, dict) and any(key in data for key in _RULES_KEYS)
+
+
+#: top-level keys only a ship file has, and only a campaign spec has (a scenario has ``ships``)
+_SHIP_KEYS = frozenset({"model", "particulars", "service_speed_kn", "actuators", "coefficients",
+                        "autopilot", "integration", "source"})
+_CAMPAIGN_KEYS = frozenset({"n_encounters", "chunk_encounters", "policy", "encounter_types",
+                            "multi_ships", "dcpa_nm", "tcpa_min", "ship_types", "speed_fraction",
+                            "current_kn", "wind_mps", "rogue_fraction"})
+
+
+def file_kind(data: Any) -> str:
+    """``"ship"``, ``"campaign"`` or ``"scenario"``: what loaded YAML data (not a rules file) is
+    read as. The deciding key (``model``, ``n_encounters``, ``ships``) wins; without one, the
+    kind more of whose own keys the file has (a tie: a scenario)."""
+    if not isinstance(data, dict) or "ships" in data:
+        return "scenario"
+    if "model" in data:
+        return "ship"
+    if "n_encounters" in data:
+        return "campaign"
+    keys = set(data)
+    ship, campaign = len(keys & _SHIP_KEYS), len(keys & _CAMPAIGN_KEYS)
+    if ship > campaign:
+        return "ship"
+    return "campaign" if campaign > ship else "scenario"
 
 
 def _looks_like_rules(path: Path) -> bool:
@@ -89,9 +116,10 @@ def check_file(path: Path) -> tuple[list[InputError], str]:
         return _check_rules(path)
     rules = None
     try:
-        if isinstance(doc.data, dict) and "model" in doc.data and "ships" not in doc.data:
+        kind = file_kind(doc.data)
+        if kind == "ship":
             _check_ship(path.resolve())
-        elif isinstance(doc.data, dict) and "n_encounters" in doc.data:
+        elif kind == "campaign":
             from trafficsim.campaign.generator import spec_errors
             from trafficsim.campaign.spec import load_spec
 

@@ -5,6 +5,7 @@ Every ``scenarios/invalid/*.yaml`` starts with ``# expect: <line>: <substring of
 
 from __future__ import annotations
 
+import itertools
 import math
 import re
 import shutil
@@ -259,14 +260,16 @@ def test_ship_type_missing_path_located(tmp_path) -> None:
 def test_ship_lookup_gets_the_scenario_directory(tmp_path, monkeypatch) -> None:
     calls: list[tuple[str, Path]] = []
 
-    def fake_find_ship(kind: str, base_dir: Path) -> Path:
+    def fake_find_ship(kind: str, base_dir: Path | None) -> Path:
         calls.append((kind, base_dir))
-        return base_dir / f"{kind}.yaml"
+        return Path(kind) if base_dir is None else base_dir / f"{kind}.yaml"
 
     monkeypatch.setattr(library, "find_ship", fake_find_ship)
+    shutil.copy(library.LIBRARY_DIR / "kvlcc2.yaml", tmp_path / "kvlcc2.yaml")
     path = _write(tmp_path, MINIMAL.format(extra=""))
     scenario = load_scenario(path)
-    assert calls == [("kvlcc2", tmp_path.absolute())]
+    # (then the ship file is read from where the lookup found it, for the per-ship checks)
+    assert calls[0] == ("kvlcc2", tmp_path.absolute())
     assert scenario.ship_files == (tmp_path.absolute() / "kvlcc2.yaml",)
 
 
@@ -316,11 +319,18 @@ def scenarios(draw: st.DrawFn) -> dict:
     for name in names:
         ship = {"name": name, "type": "kvlcc2", "north_m": draw(COORD), "east_m": draw(COORD),
                 "heading_deg": draw(DIRECTION)}
+        if draw(st.booleans()):  # (at most twice the kvlcc2's 15.5 kn)
+            ship["speed_kn"] = draw(st.floats(0.0, 31.0) | st.integers(0, 31))
         if draw(st.booleans()):
-            ship["speed_kn"] = draw(st.floats(0.0, 60.0) | st.integers(0, 60))
-        if draw(st.booleans()):
-            ship["route"] = draw(st.lists(st.lists(COORD, min_size=2, max_size=2), max_size=4))
+            route = draw(st.lists(st.lists(COORD, min_size=2, max_size=2), max_size=4))
+            # no point twice in a row, and a lone point away from the start
+            assume(all(a != b for a, b in itertools.pairwise(route)))
+            assume(route != [[ship["north_m"], ship["east_m"]]])
+            ship["route"] = route
         ships.append(ship)
+    # hulls apart at the start (the kvlcc2 is 320 m long)
+    assume(all(math.hypot(a["north_m"] - b["north_m"], a["east_m"] - b["east_m"]) > 400.0
+               for k, a in enumerate(ships) for b in ships[:k]))
     set_dt = draw(st.booleans())
     dt = draw(st.sampled_from([0.1, 0.25, 0.5, 1.0, 2.0, 10.0])) if set_dt else 1.0
     data: dict = {"schema_version": 1, "name": draw(NAMES),
@@ -330,6 +340,7 @@ def scenarios(draw: st.DrawFn) -> dict:
         data["dt_s"] = dt
         if draw(st.booleans()):
             data["record_every_s"] = dt * draw(st.integers(1, 100))
+            assume(data["record_every_s"] <= data["duration_s"])
     if draw(st.booleans()):
         data["seed"] = draw(st.integers(0, 2**64))
     if draw(st.booleans()):

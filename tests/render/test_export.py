@@ -116,7 +116,6 @@ def test_render_checks_its_options_before_reading_the_run(tmp_path):
     (13, 30.0, [0.0, 30.0, 60.0]),  # the last record (60 s) falls on the interval
     (12, 30.0, [0.0, 30.0]),  # the last record (55 s) does not: no frame of it
     (12, 55.0, [0.0, 55.0]),
-    (12, 60.0, [0.0]),  # an interval longer than the run: the first record only
 ])
 def test_frames_are_the_records_at_whole_intervals_from_the_start(synthetic_run, tmp_path,
                                                                   drawn, n_records, every_s,
@@ -127,6 +126,13 @@ def test_frames_are_the_records_at_whole_intervals_from_the_start(synthetic_run,
     assert done.frames == len(times)
     assert [p.name for p in done.paths] == [f"frame_{k:05d}.png" for k in range(len(times))]
     assert _files(tmp_path / "png") == [p.name for p in done.paths]
+
+
+def test_an_interval_longer_than_the_run_is_refused(synthetic_run, tmp_path):
+    run = synthetic_run(_ships(), 12)  # records 0 .. 55 s
+    with pytest.raises(InputError, match=r"at most the run's duration \(55 s\), got 60 s") as err:
+        render_run(run, tmp_path / "png", "png", every_s=60.0, options=SMALL)
+    assert err.value.key == "--every-s" and not (tmp_path / "png").exists()
 
 
 def test_png_frames_are_the_pictures_of_their_records(synthetic_run, tmp_path):

@@ -141,11 +141,11 @@ def test_vectorised_measure_matches_a_scalar_loop():
 
 
 @pytest.mark.parametrize(("cfg", "key"), [
-    ({"rudder_sigma_deg": -1.0}, "actuator_sensors[1].rudder_sigma_deg"),
-    ({"rudder_resolution_deg": math.inf}, "actuator_sensors[1].rudder_resolution_deg"),
-    ({"shaft_bias_rpm": "fast"}, "actuator_sensors[1].shaft_bias_rpm"),
-    ({"shaft_sigma_rpm": math.nan}, "actuator_sensors[1].shaft_sigma_rpm"),
-    ({"shaft_resolution_rps": 1.0}, "actuator_sensors[1]"),
+    ({"rudder_sigma_deg": -1.0}, "actuators[1].rudder_sigma_deg"),
+    ({"rudder_resolution_deg": math.inf}, "actuators[1].rudder_resolution_deg"),
+    ({"shaft_bias_rpm": "fast"}, "actuators[1].shaft_bias_rpm"),
+    ({"shaft_sigma_rpm": math.nan}, "actuators[1].shaft_sigma_rpm"),
+    ({"shaft_resolution_rps": 1.0}, "actuators[1]"),
 ])
 def test_config_errors_name_the_ship_and_key(cfg, key):
     with pytest.raises(InputError) as err:

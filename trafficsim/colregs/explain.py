@@ -15,7 +15,7 @@ import numpy as np
 from trafficsim.colregs import network
 from trafficsim.colregs.vocabulary import FEATURES, VOCABULARY
 from trafficsim.errors import InputError
-from trafficsim.io.results import read_parquet
+from trafficsim.io.results import check_numeric, read_parquet
 
 _STATE = ("decided_own_role", "decided_encounter", "decided_other_role", "decided_own_manoeuvre")
 
@@ -29,6 +29,7 @@ def _read(run_dir: Path) -> dict[str, np.ndarray]:
     table = read_parquet(path, "decisions file",
                          ("t_s", "ship", "other", "rules", "path", *_STATE, "course_order_deg",
                           *FEATURES))
+    check_numeric(table, path, ("t_s", "course_order_deg", *FEATURES))
     return {c: np.asarray(table.column(c).to_pylist()) for c in table.column_names}
 
 
@@ -72,7 +73,8 @@ def explain_run(run_dir: Path, ship: str, at_s: float | None = None) -> str:
     the last decision step at or before ``at_s``.
 
     Raises:
-        InputError: no decisions file, unknown ship, a time before the first decision, or a
+        InputError: no decisions file, unknown ship, a time before the first decision or after
+            the run's end (from its summary.json), a column of the wrong type, or a
             rules file changed since the run (its explanation would show other rules).
     """
     cols = _read(Path(run_dir))
@@ -89,6 +91,14 @@ def explain_run(run_dir: Path, ship: str, at_s: float | None = None) -> str:
         changed = [k for k, state_changed in _changes(cols, sel) if state_changed]
         rows = sel[times == (cols["t_s"][changed[-1]] if changed else times[-1])]
     else:
+        from trafficsim.render.data import read_summary
+
+        # (the run's end is in its summary; a folder of decisions alone has no end to check)
+        has_summary = (Path(run_dir) / "summary.json").is_file()
+        end = read_summary(Path(run_dir)).get("duration_s") if has_summary else None
+        if end is not None and at_s > end:
+            raise InputError(f"the run ends at t = {end:g} s, before --at-s {at_s:g}",
+                             key="--at-s")
         before = times[times <= at_s]
         if before.size == 0:
             raise InputError(f"the first decision is at t = {times.min():g} s, after "

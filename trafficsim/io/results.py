@@ -116,3 +116,18 @@ def write_csv(path: Path, columns: Mapping[str, np.ndarray], fmt: str = "%.6g") 
         np.savetxt(fh, data, delimiter=",", fmt=fmt)
 
     atomic_write(path, write)
+
+
+def check_numeric(table: Any, path: Path, columns: Sequence[str]) -> None:
+    """Raise :class:`DataError` naming the file and the column if one of ``columns`` of a
+    ``pyarrow.Table`` does not hold numbers (floats, integers, or booleans without gaps)."""
+    import pyarrow.types as pat
+
+    for name in columns:
+        kind = table.schema.field(name).type
+        if pat.is_boolean(kind) and table.column(name).null_count:
+            raise DataError("expected true or false in every row, got empty values", path=str(path),
+                            key=name)
+        if not (pat.is_integer(kind) or pat.is_floating(kind) or pat.is_boolean(kind)):
+            raise DataError(f"expected numbers, got {kind} values (written by another program? "
+                            "run it again)", path=str(path), key=name)

@@ -8,8 +8,9 @@ A scenario places one or more ships in an environment for a fixed duration::
     duration_s: 1800               # > 0, <= 30 days, a whole number of steps of dt_s
     dt_s: 1.0                      # optional, default 1.0; 0 < dt <= 60; dt <= duration
     seed: 1                        # optional int >= 0, default 0
-    record_every_s: 5.0            # optional positive multiple of dt_s (default: 1 s, rounded
-                                   #   up to a whole number of steps)
+    record_every_s: 5.0            # optional positive multiple of dt_s, <= duration_s
+                                   #   (default: 1 s, rounded up to a whole number of steps;
+                                   #   a period up to the default is fine in a shorter run)
     environment:                   # optional
       current: {speed_kn: 0.5, towards_deg: 90}   # 0 <= speed <= 10 kn, direction [0, 360)
       wind: {speed_mps: 10, from_deg: 45}          # 0 <= speed <= 60 m/s, direction [0, 360)
@@ -20,7 +21,9 @@ A scenario places one or more ships in an environment for a fixed duration::
         east_m: 0                  # required, likewise (route points too)
         heading_deg: 0             # required, [0, 360)
         speed_kn: 12               # optional (default: the ship's service speed), [0, 60]
-        route: [[5000, 0], [9000, 3000]]   # optional [north_m, east_m] waypoints
+                                   #   and at most twice the service speed
+        route: [[5000, 0], [9000, 3000]]   # optional [north_m, east_m] waypoints, none twice
+                                   #   in a row; a lone point not at the start position
         behaviour: colregs         # optional: colregs (default), keep_course, turn_port,
                                    #   late_action (see trafficsim.colregs.decider)
         effects:                   # optional sim-to-real effects (trafficsim.effects), e.g.
@@ -31,8 +34,11 @@ A scenario places one or more ships in an environment for a fixed duration::
     domain: coldwell               # optional ship domain: coldwell, goodwin, fujii, kijima
     visibility_nm: 10              # optional, default 10; below the rules' threshold the
                                    #   restricted-visibility mode (Rule 19) applies
-    decision_period_s: 10          # optional, a whole multiple of dt_s; default 10 s rounded
-                                   #   to a whole number of steps (dt_s 3: 9 s)
+    decision_period_s: 10          # optional, a whole multiple of dt_s, <= duration_s; default
+                                   #   10 s rounded to a whole number of steps (dt_s 3: 9 s)
+
+Ships whose hulls overlap at the start are refused, and so is what a run would refuse of a ship
+with its ship file (:func:`_ship_errors`).
 
 Values keep the file's units (knots, degrees); conversion to SI happens when the batch is built.
 """
@@ -178,6 +184,21 @@ class ShipEntry(Strict):
             loc = tuple((err.key or "").split(".")[1:])
             raise FieldError(err.message, loc=loc) from None
 
+    @field_validator("route")
+    @classmethod
+    def _legs_have_length(cls, route: tuple[tuple[float, float], ...], info: ValidationInfo
+                          ) -> tuple[tuple[float, float], ...]:
+        for k in range(1, len(route)):
+            if route[k] == route[k - 1]:
+                raise FieldError(f"repeats route[{k - 1}] {list(route[k])}: a leg of no length "
+                                 "has no course; give each point once", loc=(k,))
+        start = (info.data.get("north_m"), info.data.get("east_m"))
+        if len(route) == 1 and route[0] == start:
+            raise FieldError(f"the only route point {list(route[0])} is the ship's start "
+                             "position: there is no leg to follow (leave out route: to hold "
+                             "the initial course)", loc=(0,))
+        return route
+
     @field_validator("sensors")
     @classmethod
     def _valid_sensors(cls, sensors: dict[str, dict[str, Any]] | None
@@ -268,6 +289,8 @@ class Scenario(Strict):
             nearest = max(1, steps) * dt
             raise ValueError(f"must be a whole multiple of dt_s ({dt:g} s), got {every:g}; "
                              f"e.g. {nearest:g}")
+        _within_duration(every, info, max(1, math.ceil(1.0 / dt - _MULTIPLE_TOL)) * dt,
+                         "only the start would be recorded")
         return every
 
     @field_validator("decision_period_s", mode="before")
@@ -283,6 +306,8 @@ class Scenario(Strict):
             ratio = period / dt
             if round(ratio) < 1 or abs(ratio - round(ratio)) > _MULTIPLE_TOL:
                 raise ValueError(f"must be a whole multiple of dt_s ({dt:g} s), got {period:g}")
+        _within_duration(period, info, default_decision_period(None, dt),
+                         "the ships would decide once, at the start")
         return period
 
     @field_validator("environment", mode="before")
@@ -302,6 +327,16 @@ class Scenario(Strict):
                                  loc=(index, "name"))
             first[ship.name] = index
         return ships
+
+
+def _within_duration(period: float, info: ValidationInfo, default: float,
+                     otherwise: str) -> None:
+    """A period of the run (recording, deciding) must not exceed ``duration_s``, or its
+    ``default`` when that is longer (a run shorter than the default period is fine)."""
+    duration = info.data.get("duration_s")
+    if duration is not None and period > max(duration, default) * (1.0 + _MULTIPLE_TOL):
+        raise ValueError(f"must not exceed duration_s ({duration:g} s), got {period:g} "
+                         f"({otherwise})")
 
 
 def validate_sensors(sensors: dict[str, dict[str, Any]]) -> None:
@@ -366,6 +401,129 @@ def rules_file_errors(doc: Document, base_dir: Path) -> list[ScenarioError]:
     return [doc.error(f"rules file not found: {base_dir / rules}", ("rules",))]
 
 
+#: instrument settings the measurement effects add to, and the effect parameter that does
+_EFFECT_OF_SETTING = {("gnss", "antenna_x_m"): ("lever_arm", "x_m"),
+                      ("gnss", "antenna_y_m"): ("lever_arm", "y_m"),
+                      ("compass", "bias_deg"): ("compass_bias", "bias_deg"),
+                      ("compass", "deviation_deg"): ("compass_bias", "deviation_b_deg"),
+                      ("ais", "latency_s"): ("ais_latency", "latency_s"),
+                      ("navigation", "pv_sp_m2ps3"): ("gnss_lag", "tau_s")}
+
+
+def _key_parts(key: str | None) -> list[str]:
+    """``"ais[0].latency_s"`` -> ``["ais", "latency_s"]``."""
+    return [p for p in re.split(r"\[\d+\]|\.", key or "") if p]
+
+
+def _setting_error(doc: Document, index: int, ship: ShipEntry, err: InputError,
+                   sensors: dict[str, dict[str, Any]]) -> ScenarioError:
+    """An instrument error of a ship's configuration with its effects applied, located at the
+    effect that set the value, or else at the ship's ``sensors`` (the deepest key it holds)."""
+    from trafficsim.sensors.ais import MAX_LATENCY_S
+
+    parts = _key_parts(err.key)
+    found = _EFFECT_OF_SETTING.get(tuple(parts[:2]))
+    if found is not None and found[0] in (ship.effects or {}):
+        name, param = found
+        loc = ("ships", index, "effects", name, param)
+        value = ship.effects[name][param]  # type: ignore[index]
+        if found == ("ais_latency", "latency_s"):
+            own = float(sensors.get("ais", {}).get("latency_s", 2.0))
+            return doc.error(f"expected 0 to {MAX_LATENCY_S - own:g} s (the ship's AIS latency "
+                             f"{own:g} s plus this must be <= {MAX_LATENCY_S:g} s), got "
+                             f"{value:g}", loc)
+        return doc.error(f"{err.message} (the ship's {'.'.join(parts)} with this effect of "
+                         f"{value:g})", loc)
+    loc_parts: list[str] = []
+    node: Any = ship.sensors or {}
+    for part in parts:
+        if not isinstance(node, dict) or part not in node:
+            break
+        loc_parts.append(part)
+        node = node[part]
+    where = ".".join(parts)
+    message = err.message if where == ".".join(loc_parts) else f"{where}: {err.message}"
+    return doc.error(message, ("ships", index, "sensors", *loc_parts))
+
+
+def _ship_errors(doc: Document, scenario: Scenario, ship_files: dict[int, Path]
+                 ) -> list[ScenarioError]:
+    """What a run would refuse in the ships together with their ship files: a speed beyond
+    twice the service speed, effects the ship's model has no terms for or that carry an
+    instrument beyond its range, instruments the ship's filter cannot use, and ships whose
+    hulls overlap at the start."""
+    import numpy as np
+
+    from trafficsim import effects as registry
+    from trafficsim.geometry import hull_outlines, hulls_overlap
+    from trafficsim.navigation import check_sensor_config, merge_sensors
+    from trafficsim.ships.library import load_ship
+    from trafficsim.ships.manoeuvres import MAX_SPEED_FACTOR
+
+    errors: list[ScenarioError] = []
+    hulls: dict[int, tuple[float, float]] = {}
+    for index, ship in enumerate(scenario.ships):
+        try:
+            spec = load_ship(str(ship_files[index]))
+        except InputError:  # (reported with the ship file)
+            continue
+        p = spec["particulars"]
+        hulls[index] = float(p["length_m"]), float(p["beam_m"])
+        service = float(spec["service_speed_kn"])
+        if ship.speed_kn is not None and ship.speed_kn > MAX_SPEED_FACTOR * service:
+            errors.append(doc.error(
+                f"expected at most {MAX_SPEED_FACTOR:g} times the service speed of "
+                f"'{spec['name']}' ({service:g} kn), got {ship.speed_kn:g} kn",
+                ("ships", index, "speed_kn")))
+        found = ship.effects or {}
+        offset = found.get("propeller_asymmetry", {}).get("rudder_offset_deg", 0.0)
+        most = float(spec["actuators"]["rudder_max_deg"])
+        if abs(offset) >= most:
+            errors.append(doc.error(
+                f"expected a neutral rudder angle within the steering gear's +-{most:g} deg, "
+                f"got {offset:g}",
+                ("ships", index, "effects", "propeller_asymmetry", "rudder_offset_deg")))
+            continue
+        sensors = merge_sensors(spec.get("sensors"), ship.sensors)
+        try:
+            if sensors or ship.filter != "none":
+                check_sensor_config(sensors, ship.filter, spec)
+        except InputError as err:
+            errors.append(_setting_error(doc, index, ship, err, {}))
+            continue
+        try:
+            registry.apply_spec(spec, found)
+            applied = registry.apply_sensors(sensors, found, scenario.dt_s)
+        except InputError as err:
+            errors.append(doc.error(err.message, ("ships", index, *_key_parts(err.key))))
+            continue
+        if found:
+            try:
+                check_sensor_config(applied, ship.filter, spec)
+            except InputError as err:
+                errors.append(_setting_error(doc, index, ship, err, sensors))
+    done = sorted(hulls)
+    if len(done) > 1:
+        ships = [scenario.ships[k] for k in done]
+        north = np.array([s.north_m for s in ships])
+        east = np.array([s.east_m for s in ships])
+        size = np.array([hulls[k] for k in done])
+        outline = hull_outlines(north, east, np.radians([s.heading_deg for s in ships]),
+                                size[:, 0], size[:, 1])
+        reach = 0.5 * size.sum(axis=1)
+        for j in range(1, len(done)):  # the cheap test first: within reach of each other
+            near = np.flatnonzero(np.hypot(north[:j] - north[j], east[:j] - east[j])
+                                  < reach[:j] + reach[j])
+            hit = near[hulls_overlap(outline[near], np.repeat(outline[j:j + 1], near.size, 0))]
+            if hit.size:
+                other = ships[int(hit[0])].name
+                errors.append(doc.error(
+                    f"ship '{ships[j].name}' starts where its hull overlaps that of '{other}' "
+                    "(a collision at t = 0); start the ships apart",
+                    ("ships", done[j], "north_m")))
+    return errors
+
+
 def load_scenario(path: str | os.PathLike[str]) -> Scenario:
     """Load and validate a scenario file, resolving every ship's ``type`` to a ship file.
 
@@ -387,6 +545,9 @@ def load_scenario(path: str | os.PathLike[str]) -> Scenario:
     if errors:
         raise_errors(errors)
     assert scenario is not None
+    errors = _ship_errors(doc, scenario, ship_files)
+    if errors:
+        raise_errors(errors)
     for index, ship in enumerate(scenario.ships):
         ship._ship_file = ship_files[index]
     scenario._path = absolute

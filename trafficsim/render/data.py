@@ -9,14 +9,16 @@ running simulation records into (views, no copies), so frames can be drawn while
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from trafficsim.colregs import domains
 from trafficsim.errors import DataError, InputError
-from trafficsim.io.results import read_parquet
+from trafficsim.io.results import check_numeric, read_parquet
 from trafficsim.render.decisions import COLUMNS as DECISION_COLUMNS
 from trafficsim.render.decisions import DecisionSource, DecisionTable, LiveDecisions
 from trafficsim.units import KN
@@ -27,6 +29,9 @@ TRAJECTORY_COLUMNS = ("t_s", "ship", "north_m", "east_m", "heading_deg", "u_mps"
 TRACK_COLUMNS = ("t_s", "observer", "target", "tracked", "track_north_m", "track_east_m",
                  "track_sog_kn", "track_cog_deg")
 SHIP_KEYS = ("name", "length_m", "beam_m", "behaviour", "route_m")
+#: text columns of the tables (every other column read holds numbers)
+TEXT_COLUMNS = frozenset({"ship", "observer", "target", "other", "rules", "path",
+                          "decided_own_role", "decided_encounter", "decided_own_manoeuvre"})
 
 
 @dataclass(frozen=True)
@@ -105,10 +110,38 @@ def _need_dir(run_dir: Path) -> None:
 
 def _table(path: Path, columns: tuple[str, ...]) -> dict[str, np.ndarray]:
     table = read_parquet(path, "table", columns, only=True)
+    check_numeric(table, path, [c for c in columns if c not in TEXT_COLUMNS])
     return {c: table.column(c).to_numpy(zero_copy_only=False) for c in columns}
 
 
-def _summary(run_dir: Path) -> dict[str, Any]:
+def _number(value: Any, path: Path, key: str, positive: bool = False) -> float:
+    """A finite number of ``summary.json`` (``positive``: above 0), else a DataError."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if not ok or (positive and not value > 0):
+        what = "a positive number" if positive else "a finite number"
+        raise DataError(f"expected {what}, got {value!r} (run it again)", path=str(path),
+                        key=key)
+    return float(value)
+
+
+def _route(value: Any, path: Path, key: str) -> np.ndarray:
+    if not isinstance(value, list) or any(
+            not isinstance(p, list) or len(p) != 2 for p in value):
+        raise DataError(f"expected a list of [north_m, east_m] points, got {value!r}",
+                        path=str(path), key=key)
+    for k, point in enumerate(value):
+        for j, coordinate in enumerate(point):
+            _number(coordinate, path, f"{key}[{k}][{j}]")
+    return np.asarray(value, dtype=float).reshape(-1, 2)
+
+
+def read_summary(run_dir: Path) -> dict[str, Any]:
+    """``summary.json`` of a run folder, with every value drawing or explaining reads checked.
+
+    Raises:
+        InputError: the file is missing; DataError: it does not read as JSON, or a value is
+            missing or of the wrong type (names the file and the key).
+    """
     path = run_dir / "summary.json"
     if not path.is_file():
         raise InputError("missing (a complete run folder was expected)",
@@ -117,11 +150,37 @@ def _summary(run_dir: Path) -> dict[str, Any]:
         summary = json.loads(path.read_text())
     except (OSError, ValueError) as err:
         raise DataError(f"unreadable ({err})", path=str(path)) from None
+    if not isinstance(summary, dict):
+        raise DataError(f"expected a JSON object of the run's results, got "
+                        f"{type(summary).__name__} (run it again)", path=str(path))
     ships = summary.get("ships")
     if not isinstance(ships, list) or not ships or any(
             not isinstance(s, dict) or any(k not in s for k in SHIP_KEYS) for s in ships):
         raise DataError(f"ships: expected each ship's {', '.join(SHIP_KEYS)} "
                         "(written by an older trafficsim? run it again)", path=str(path))
+    for k, ship in enumerate(ships):
+        for key in ("name", "behaviour"):
+            if not isinstance(ship[key], str) or not ship[key]:
+                raise DataError(f"expected text, got {ship[key]!r}", path=str(path),
+                                key=f"ships[{k}].{key}")
+        for key in ("length_m", "beam_m"):
+            _number(ship[key], path, f"ships[{k}].{key}", positive=True)
+        _route(ship["route_m"], path, f"ships[{k}].route_m")
+    for key in ("record_every_s", "duration_s"):
+        if summary.get(key) is not None:
+            _number(summary[key], path, key, positive=key == "record_every_s")
+    for key in ("scenario", "domain"):
+        if key in summary and not isinstance(summary[key], str):
+            raise DataError(f"expected text, got {summary[key]!r}", path=str(path), key=key)
+    if summary.get("domain", "coldwell") not in domains.DOMAINS:
+        raise DataError(f"expected one of {', '.join(domains.DOMAINS)}, got "
+                        f"{summary['domain']!r}", path=str(path), key="domain")
+    pairs = summary.get("pairs", [])
+    if not isinstance(pairs, list) or any(not isinstance(p, dict) for p in pairs):
+        raise DataError("expected a list of pair objects", path=str(path), key="pairs")
+    for k, pair in enumerate(pairs):
+        if pair.get("collision") and pair.get("t_collision_s") is not None:
+            _number(pair["t_collision_s"], path, f"pairs[{k}].t_collision_s")
     return summary
 
 
@@ -139,7 +198,8 @@ def load_run(run_dir: str | Path) -> RunData:
         raise InputError("no trajectories.parquet here (the output folder of "
                          "'trafficsim run' or 'trafficsim replay' was expected)",
                          path=str(run_dir))
-    summary = _summary(run_dir)
+    summary = read_summary(run_dir)
+    summary_path = run_dir / "summary.json"
     info = summary["ships"]
     names = [str(s["name"]) for s in info]
     n = len(names)
@@ -160,12 +220,15 @@ def load_run(run_dir: str | Path) -> RunData:
     ships = Ships(names, np.array([float(s["length_m"]) for s in info]),
                   np.array([float(s["beam_m"]) for s in info]),
                   [str(s["behaviour"]) for s in info],
-                  [np.asarray(s["route_m"], dtype=float).reshape(-1, 2) for s in info])
+                  [_route(s["route_m"], summary_path, f"ships[{k}].route_m")
+                   for k, s in enumerate(info)])
     every = summary.get("record_every_s")
     if every is None:
         every = float(t_s[1] - t_s[0]) if t_s.shape[0] > 1 else 1.0
     pairs = summary.get("pairs", [])
     index = {name: k for k, name in enumerate(names)}
+    if len(index) < n:
+        raise DataError("two ships of the same name", path=str(summary_path), key="ships")
 
     def ship_of(pair: object, key: str) -> int:
         name = pair.get(key) if isinstance(pair, dict) else None
@@ -188,13 +251,19 @@ def load_run(run_dir: str | Path) -> RunData:
         gnss_east_m=grid("gnss_east_m"),
         gnss_valid=np.asarray(cols["gnss_valid"], dtype=bool).reshape(-1, n),
         has_estimate=np.any(np.hypot(est_n - north, est_e - east) > 1e-6, axis=0),
-        collisions=collisions, duration_s=float(summary.get("duration_s", t_s[-1])),
+        collisions=collisions,
+        duration_s=float(t_s[-1] if summary.get("duration_s") is None else summary["duration_s"]),
         count=t_s.shape[0])
     if (run_dir / "tracks.parquet").is_file():
         data.tracks = _tracks(run_dir / "tracks.parquet", index, t_s.shape[0])
     if (run_dir / "decisions.parquet").is_file():
-        data.decisions = DecisionTable(_table(run_dir / "decisions.parquet",
-                                              DECISION_COLUMNS))
+        try:
+            data.decisions = DecisionTable(_table(run_dir / "decisions.parquet",
+                                                  DECISION_COLUMNS))
+        except DataError:
+            raise
+        except ValueError as err:  # (rows out of time order)
+            raise DataError(str(err), path=str(run_dir / "decisions.parquet"), key="t_s") from None
     return data
 
 

@@ -33,14 +33,19 @@ class Export:
         return self.frames / self.seconds if self.seconds > 0 else float("inf")
 
 
-def frame_stride(every_s: float | None, record_every_s: float, key: str = "--every-s") -> int:
+def frame_stride(every_s: float | None, record_every_s: float, key: str = "--every-s",
+                 duration_s: float | None = None) -> int:
     """Records between frames for a frame every ``every_s`` (None: every record).
 
     Raises:
-        InputError: ``every_s`` is not a positive whole multiple of the record period.
+        InputError: ``every_s`` is not a positive whole multiple of the record period, or is
+            longer than the run (``duration_s``; a single frame would be drawn).
     """
     if every_s is None:
         return 1
+    if duration_s is not None and every_s > max(duration_s, record_every_s) * (1.0 + 1e-9):
+        raise InputError(f"expected at most the run's duration ({duration_s:g} s), got "
+                         f"{every_s:g} s", key=key)
     ratio = every_s / record_every_s
     if not math.isfinite(ratio) or ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
         raise InputError(f"expected a whole multiple of the run's record period "
@@ -85,7 +90,10 @@ def render_run(run_dir: str | Path, out_dir: str | Path, fmt: str = "png",
     check_options(fmt, options, fps)
     run_dir = Path(run_dir)
     data = load_run(run_dir)
-    stride = frame_stride(every_s, data.record_every_s)
+    stride = frame_stride(every_s, data.record_every_s, duration_s=data.duration_s)
+    if options.measurements and not np.isfinite(data.gnss_north_m).any():
+        raise InputError(f"applies only to a run with GNSS fixes; {run_dir} has none (no ship "
+                         "carries instruments)", key="--measurements")
     renderer = Renderer(data, options)
     t0 = time.perf_counter()
     writer = open_writer(fmt, Path(out_dir), name or run_dir.resolve().name, options.size_px,
@@ -154,7 +162,8 @@ class LiveFrames:
             raise InputError(f"no ship {options.follow!r} in {scenario_path}; ships: "
                              f"{', '.join(names)}", key="--follow")
         self.record_every_s = record_steps(scn) * scn.dt_s
-        self.stride = frame_stride(every_s, self.record_every_s, key="--frames-every-s")
+        self.stride = frame_stride(every_s, self.record_every_s, key="--frames-every-s",
+                                   duration_s=scn.duration_s)
         self.name, self.duration_s = scn.name, scn.duration_s
         self.out_dir, self.fmt, self.options, self.fps = Path(out_dir), fmt, options, fps
         self.renderer: Renderer | None = None
@@ -163,6 +172,9 @@ class LiveFrames:
 
     def __call__(self, rec: Any, sim: Any) -> None:
         if self.renderer is None:
+            if self.options.measurements and sim.nav is None:
+                raise InputError("applies only to a run with GNSS fixes; no ship of this "
+                                 "scenario carries instruments", key="--measurements")
             data = live_data(rec, sim, self.name, self.record_every_s, self.duration_s)
             self.renderer = Renderer(data, self.options, planned_points(sim, self.duration_s))
             self.writer = open_writer(self.fmt, self.out_dir, self.name, self.options.size_px,

@@ -25,6 +25,9 @@ from trafficsim.units import NM
 
 #: closest view of a followed ship, NM (closer, a hull is drawn millions of pixels long)
 MIN_RANGE_NM = 0.01
+#: farthest view, NM: the width of the scenario frame (2,000 km, ships within 1,000 km of the
+#: origin each way), beyond which a view shows nothing more
+MAX_RANGE_NM = 1080.0
 
 
 @dataclass(frozen=True)

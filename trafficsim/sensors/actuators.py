@@ -61,7 +61,7 @@ class ActuatorReading:
 
 def build(configs: Sequence[Mapping]) -> ActuatorSensorParams:
     """Parameters for ``n`` ships from per-ship config dicts (keys in the module docstring)."""
-    what = "actuator_sensors"
+    what = "actuators"
     check_keys(configs, KEYS, what)
     deg, rpm = math.radians(1.0), 1.0 / 60.0
     return ActuatorSensorParams(

@@ -149,7 +149,8 @@ def build(configs: Sequence[Mapping], dt: float) -> GnssParams:
     gm_tau = column(configs, "gm_tau_s", 300.0, what, minimum=0.0, strictly=True)
     gross_prob = column(configs, "gross_prob", 0.0, what, minimum=0.0)
     if np.any(gross_prob > 1.0):
-        raise InputError("gross_prob must be <= 1", key=what)
+        raise InputError(f"must be <= 1, got {gross_prob.max():g}",
+                         key=f"{what}[{int(np.argmax(gross_prob))}].gross_prob")
     dropout_rate = column(configs, "dropout_rate_per_h", 0.0, what, minimum=0.0) / 3600.0
     dropout_mean = column(configs, "dropout_mean_s", 30.0, what, minimum=0.0, strictly=True)
     gm_a, gm_q = gauss_markov(gm_sigma, gm_tau, dt)
