@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import SCENARIOS
+from tests.conftest import SCENARIOS, SHARED
 from trafficsim import cli
 from trafficsim.colregs.rulefile import parse_file
 from trafficsim.colregs.vocabulary import VOCABULARY
@@ -224,3 +224,14 @@ def test_a_file_without_its_deciding_key_is_told_by_its_other_keys(tmp_path, dro
     errors = validate_file(path)
     assert len(errors) == 1 and errors[0].key == key, [str(e) for e in errors]
     assert "missing" in errors[0].message
+
+
+def test_an_mmg_parameter_folder_is_checked_as_a_ship(tmp_path):
+    """Any ship path may be an MMG parameter folder: validate reads it as a ship; a folder
+    without the folder's files is no ship."""
+    folder = SHARED / "data" / "esso-osaka-mmg" / "python_module" / "input_csv"
+    if not folder.is_dir():
+        pytest.skip("the authors' MMG parameter folder is not beside the repository")
+    assert check_file(folder) == ([], "ok")
+    (error,) = check_file(tmp_path)[0]
+    assert error.path == str(tmp_path) and "MMG parameter folder" in error.message

@@ -105,6 +105,17 @@ def check_file(path: Path) -> tuple[list[InputError], str]:
     """
     from trafficsim.io.yamlio import load_yaml
 
+    if path.is_dir():  # a ship's MMG parameter folder
+        from trafficsim.diagnose.mmgfolder import FILES
+
+        if not any((path / name).exists() for name in FILES):
+            return [InputError("is a directory, expected a YAML file or an MMG parameter "
+                               f"folder (holding {', '.join(FILES)})", path=str(path))], ""
+        try:
+            _check_ship(path.resolve())
+        except InputError as err:
+            return _errors(err), ""
+        return [], "ok"
     try:
         doc = load_yaml(path)
     except InputError as err:
