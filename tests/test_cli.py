@@ -1052,6 +1052,16 @@ def test_an_empty_output_folder_is_refused(capsys, tmp_path, run_folder, command
     assert "--out: expected a folder name, got an empty one" in line
 
 
+@pytest.mark.parametrize("argv", [
+    ["campaign", "--out", " ", "c.yaml"], ["trial", "--out", "", "cargo"],
+    ["identify", "--out", "", "--model", "nomoto", "--base", "cargo", "--data", "d.csv"],
+    ["diagnose", "--out", "", "--self-test", "1"], ["report", "--out", "", "c"],
+    ["replay", "--out", "", "c", "--encounter", "0"]])
+def test_every_command_refuses_an_empty_output_folder(capsys, argv):
+    line = usage_error(capsys, argv)
+    assert "--out: expected a folder name, got an empty one" in line
+
+
 def test_a_scenario_too_big_for_memory_names_the_ships_key(capsys, tmp_path, monkeypatch):
     from tests.conftest import error_line
     from trafficsim import run

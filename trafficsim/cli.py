@@ -88,7 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     camp = sub.add_parser("campaign", help="Monte Carlo campaign of random encounters "
                           "(resumes an unfinished one in the same --out)")
     camp.add_argument("spec", type=Path, help="campaign spec YAML file")
-    camp.add_argument("--out", type=Path, required=True, help="output folder")
+    camp.add_argument("--out", type=_out_dir, required=True, help="output folder")
     camp.add_argument("--workers", type=_positive(int), default=None,
                       help="local worker processes (default: all cores)")
     camp.add_argument("--executor", choices=["local", "dask"], default="local",
@@ -129,7 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "1e-6 to 1e4 (default 0.01)")
     trial.add_argument("--seed", type=_non_negative_int, default=None,
                        help="with --sensors: seed of the instrument noise (default 0)")
-    trial.add_argument("--out", type=Path, required=True, help="output folder")
+    trial.add_argument("--out", type=_out_dir, required=True, help="output folder")
     trial.set_defaults(func=_cmd_trial)
 
     ident = sub.add_parser("identify", help="fit a ship model to trial runs; writes a ship "
@@ -143,7 +143,7 @@ def build_parser() -> argparse.ArgumentParser:
     ident.add_argument("--base", required=True,
                        help="ship type or ship file giving particulars, actuators and every "
                             "coefficient not fitted (an mmg ship for --model mmg)")
-    ident.add_argument("--out", type=Path, required=True, help="output folder")
+    ident.add_argument("--out", type=_out_dir, required=True, help="output folder")
     ident.add_argument("--method", choices=["oe", "ekf", "ekf+oe"], default=None,
                        help="output error, augmented EKF (response only) or EKF then output "
                             "error (default: ekf+oe for response, oe otherwise)")
@@ -184,7 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
                       help="training runs (trial-data CSV or FRT-DS-ESSO files, or folders)")
     diag.add_argument("--holdout", type=Path, nargs="+", default=[],
                       help="held-out runs (default: alternate windows of --data)")
-    diag.add_argument("--out", type=Path, default=None, help="output folder")
+    diag.add_argument("--out", type=_out_dir, default=None, help="output folder")
     diag.add_argument("--effects", nargs="+", default=None,
                       help="candidate effects, each once (default: every effect of the "
                            "library that acts on the ship's model)")
@@ -224,7 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("campaign_dir", type=Path, help="output folder of 'trafficsim campaign'")
     rep.add_argument("--worst", type=_non_negative_int, default=6,
                      help="how many of the worst encounters to replay and draw (default 6)")
-    rep.add_argument("--out", type=Path, default=None,
+    rep.add_argument("--out", type=_out_dir, default=None,
                      help="report folder (default: CAMPAIGN_DIR/report)")
     rep.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
     rep.set_defaults(func=_cmd_report)
@@ -234,7 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     rpl.add_argument("campaign_dir", type=Path, help="output folder of 'trafficsim campaign'")
     rpl.add_argument("--encounter", type=_non_negative_int, required=True,
                      help="encounter index (the 'encounter' column of encounters.parquet)")
-    rpl.add_argument("--out", type=Path, required=True, help="output folder (a run folder)")
+    rpl.add_argument("--out", type=_out_dir, required=True, help="output folder (a run folder)")
     rpl.add_argument("--record-every-s", type=_positive(float), default=None,
                      help="record period (a multiple of the campaign's step; default 5 s)")
     rpl.set_defaults(func=_cmd_replay)
