@@ -279,7 +279,15 @@ PAIR_BYTES, DECISION_BYTES = 2600, 900
 
 
 def available_memory_bytes() -> int | None:
-    """Memory the machine has free for a new process (None where it cannot tell)."""
+    """Memory the machine can give a new process without swapping: Linux's ``MemAvailable``
+    (free memory plus the caches it can drop), else the free pages (None where it cannot
+    tell)."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
     try:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES")
     except (AttributeError, ValueError, OSError):
