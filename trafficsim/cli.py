@@ -276,8 +276,6 @@ def _size(text: str) -> tuple[int, int]:
 #: without ``--frames`` they would do nothing
 _RUN_FRAME_FLAGS = {"--frames-every-s": None, "--size": None, "--dpi": None, "--follow": None,
                     "--range-nm": None, "--measurements": False, "--fps": None}
-#: frame size and dots per inch when ``--size`` and ``--dpi`` are not given
-DEFAULT_SIZE_PX, DEFAULT_DPI = (960, 720), 96.0
 
 
 def _frame_flags(group: argparse._ActionsContainer) -> None:
@@ -317,8 +315,8 @@ def _frame_options(args: argparse.Namespace) -> FrameOptions:
         raise InputError(f"expected a view range of {MIN_RANGE_NM:g} to {MAX_RANGE_NM:g} NM "
                          f"(the width of the scenario frame), got {args.range_nm:g}",
                          key="--range-nm")
-    return FrameOptions(size_px=DEFAULT_SIZE_PX if args.size is None else args.size,
-                        dpi=DEFAULT_DPI if args.dpi is None else args.dpi, follow=args.follow,
+    return FrameOptions(size_px=FrameOptions.size_px if args.size is None else args.size,
+                        dpi=FrameOptions.dpi if args.dpi is None else args.dpi, follow=args.follow,
                         range_nm=3.0 if args.range_nm is None else args.range_nm,
                         measurements=args.measurements)
 

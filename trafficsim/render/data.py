@@ -220,8 +220,7 @@ def load_run(run_dir: str | Path) -> RunData:
     ships = Ships(names, np.array([float(s["length_m"]) for s in info]),
                   np.array([float(s["beam_m"]) for s in info]),
                   [str(s["behaviour"]) for s in info],
-                  [_route(s["route_m"], summary_path, f"ships[{k}].route_m")
-                   for k, s in enumerate(info)])
+                  [np.asarray(s["route_m"], dtype=float).reshape(-1, 2) for s in info])
     every = summary.get("record_every_s")
     if every is None:
         every = float(t_s[1] - t_s[0]) if t_s.shape[0] > 1 else 1.0

@@ -30,6 +30,7 @@ batch in one fused loop.
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 from typing import Any, Protocol
@@ -88,6 +89,9 @@ def apparent_wind(x: np.ndarray, env: Env) -> tuple[np.ndarray, np.ndarray]:
     return np.hypot(ura, vra), np.arctan2(vra, ura)
 
 
+_COMPARE = {">": operator.gt, ">=": operator.ge, "<": operator.lt, "<=": operator.le}
+
+
 @dataclass(frozen=True)
 class Limit:
     """Valid range of one ship-file number (bounds given are enforced; None: unbounded).
@@ -115,8 +119,7 @@ class Limit:
         else:
             bounds = [(op, b) for op, b in ((">", self.gt), (">=", self.ge), ("<", self.lt),
                                             ("<=", self.le)) if b is not None]
-            ok = all({">": value > b, ">=": value >= b, "<": value < b, "<=": value <= b}[op]
-                     for op, b in bounds)
+            ok = all(_COMPARE[op](value, b) for op, b in bounds)
             ok = ok and (not self.whole or float(value).is_integer())
             want = " and ".join(f"{op} {b:g}" for op, b in bounds)
             if self.whole:
