@@ -627,48 +627,62 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
     :func:`_resume_margins`): rows (route speed, reduced speed) x (towards the line's course,
     towards the route course), steps :data:`_RESUME_STEPS_RAD`; out per ship whether a
     candidate was ``found``, whether it is the route itself (``home``), its row and course.
+    One ship at a time in scratch arrays of its candidates, which stay in the first-level
+    cache (arrays over all ships' candidates cost more to allocate and fill than the test).
     """
     s, k = ordered.shape[0], _RESUME_STEPS_RAD.size
-    c1, s1 = np.empty((s, 4, k)), np.empty((s, 4, k))
-    meet, speed = np.empty((s, 4, k)), np.empty((s, 4))
-    course, turned_home = np.empty((s, 4, k)), np.empty((s, 4, k), dtype=np.bool_)
-    across = np.empty((s, 4, k))
-    c2, s2 = np.empty(s), np.empty(s)
+    c1, s1, meet = np.empty((4, k)), np.empty((4, k)), np.empty((4, k))
+    course, across, speed = np.empty((4, k)), np.empty((4, k)), np.empty(4)
+    turned_home = np.empty((4, k), dtype=np.bool_)
+    keeps, clears = np.empty((4, k), dtype=np.bool_), np.empty((4, k), dtype=np.bool_)
+    alongside = np.empty((4, k), dtype=np.bool_)
+    present_short, present_close = np.empty((2, k), np.bool_), np.empty((2, k), np.bool_)
+    # the pairs of each ship, in their order (a counting sort by ship)
+    first = np.zeros(s + 1, dtype=np.int64)
+    for p in range(pair_ship.shape[0]):
+        first[pair_ship[p] + 1] += 1
     for i in range(s):
-        c2[i], s2[i] = math.cos(chi[i]), math.sin(chi[i])
+        first[i + 1] += first[i]
+    fill, by_ship = first[:-1].copy(), np.empty(pair_ship.shape[0], dtype=np.int64)
+    for p in range(pair_ship.shape[0]):
+        by_ship[fill[pair_ship[p]]] = p
+        fill[pair_ship[p]] += 1
+    deg = 180.0 / math.pi
+    for i in range(s):
+        c2, s2 = math.cos(chi[i]), math.sin(chi[i])
         for row in range(4):
-            speed[i, row] = route_speed[i] * (1.0 if row < 2 else slow[i])
+            speed[row] = route_speed[i] * (1.0 if row < 2 else slow[i])
             if row >= 2:  # the courses of rows 0 and 1 at the reduced speed
                 for step in range(k):
-                    turned_home[i, row, step] = turned_home[i, row - 2, step]
-                    course[i, row, step] = course[i, row - 2, step]
-                    c1[i, row, step], s1[i, row, step] = c1[i, row - 2, step], s1[i, row - 2, step]
-                    across[i, row, step] = across[i, row - 2, step]
-                    meet[i, row, step] = meet[i, row - 2, step]
+                    turned_home[row, step] = turned_home[row - 2, step]
+                    course[row, step] = course[row - 2, step]
+                    c1[row, step], s1[row, step] = c1[row - 2, step], s1[row - 2, step]
+                    across[row, step] = across[row - 2, step]
+                    meet[row, step] = meet[row - 2, step]
                 continue
             target = chi[i] if row % 2 == 0 else route[i]
             back = mod_2pi_scalar(target - ordered[i] + math.pi) - math.pi
             sign = 1.0 if back > 0.0 else (-1.0 if back < 0.0 else (0.0 if back == 0.0 else back))
             for step in range(k):
                 turn = sign * min(_RESUME_STEPS_RAD[step], abs(back))
-                turned_home[i, row, step] = abs(turn) >= abs(back) - 1e-9 and row % 2 == 1
+                turned_home[row, step] = abs(turn) >= abs(back) - 1e-9 and row % 2 == 1
                 cs = ordered[i] + turn
-                course[i, row, step] = cs
-                if step > 0 and cs == course[i, row, step - 1]:  # clipped at the target
-                    c1[i, row, step], s1[i, row, step] = c1[i, row, step - 1], s1[i, row, step - 1]
-                    across[i, row, step] = across[i, row, step - 1]
-                    meet[i, row, step] = meet[i, row, step - 1]
+                course[row, step] = cs
+                if step > 0 and cs == course[row, step - 1]:  # clipped at the target
+                    c1[row, step], s1[row, step] = c1[row, step - 1], s1[row, step - 1]
+                    across[row, step] = across[row, step - 1]
+                    meet[row, step] = meet[row, step - 1]
                     continue
-                c1[i, row, step], s1[i, row, step] = math.cos(cs), math.sin(cs)
+                c1[row, step], s1[row, step] = math.cos(cs), math.sin(cs)
                 a = math.sin(cs - chi[i])  # cross-track rate per unit speed
-                across[i, row, step] = a
-                meet[i, row, step] = -e[i] / a if e[i] * a < -1e-9 else math.inf
-    keeps, clears = np.ones((s, 4, k), dtype=np.bool_), np.ones((s, 4, k), dtype=np.bool_)
-    alongside = np.zeros((s, 4, k), dtype=np.bool_)
-    _resume_margins(c1, s1, c2, s2, meet, speed, present, pair_ship, pn, pe, wn, we, kept,
-                    horizon_s, keeps, clears, alongside)
-    deg = 180.0 / math.pi
-    for i in range(s):
+                across[row, step] = a
+                meet[row, step] = -e[i] / a if e[i] * a < -1e-9 else math.inf
+        keeps[:], clears[:], alongside[:] = True, True, False
+        for j in range(first[i], first[i + 1]):
+            p = by_ship[j]
+            _resume_margins(c1, s1, c2, s2, meet, speed, present[i], pn[p], pe[p], wn[p],
+                            we[p], kept[p], horizon_s, keeps, clears, alongside,
+                            present_short, present_close)
         # a course further off the line comes after a reduced speed; there, where a safe
         # course nearer the route lies beyond courses not to be turned through at route speed,
         # a reduced speed first (the ship in the way draws clear sooner)
@@ -676,99 +690,95 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
         for row in range(2):
             clear = True
             for step in range(k):
-                clear = clear and clears[i, row, step]
-                if keeps[i, row, step] and not clear:
+                clear = clear and clears[row, step]
+                if keeps[row, step] and not clear:
                     blocked = True
         best, best_row, best_step = math.inf, 0, 0
         for row in range(4):
             clear = True  # every course turned through on the way keeps the distance
             for step in range(k):
-                clear = clear and clears[i, row, step]
-                cs = course[i, row, step]
+                clear = clear and clears[row, step]
+                cs = course[row, step]
                 # (a candidate repeating the one before is no better and reached no sooner)
-                if not (clear and keeps[i, row, step]) or (
-                        step > 0 and cs == course[i, row, step - 1]):
+                if not (clear and keeps[row, step]) or (
+                        step > 0 and cs == course[row, step - 1]):
                     continue
                 off = abs(mod_2pi_scalar(cs - route[i] + math.pi) - math.pi)
-                away = e[i] * across[i, row, step] > _AWAY * abs(e[i])
-                cost = (off * deg - 1.0 * turned_home[i, row, step]
-                        + 5000.0 * alongside[i, row, step] + 2000.0 * away
+                away = e[i] * across[row, step] > _AWAY * abs(e[i])
+                cost = (off * deg - 1.0 * turned_home[row, step]
+                        + 5000.0 * alongside[row, step] + 2000.0 * away
                         + 1000.0 * ((row >= 2) != blocked))
                 if cost < best:
                     best, best_row, best_step = cost, row, step
         found[i] = math.isfinite(best)  # none: the ship keeps its order
-        home[i] = found[i] and turned_home[i, best_row, best_step]
+        home[i] = found[i] and turned_home[best_row, best_step]
         chosen_row[i] = best_row
-        chosen_course[i] = course[i, best_row, best_step]
+        chosen_course[i] = course[best_row, best_step]
 
 
 @kernel
-def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: np.ndarray, s2: np.ndarray,
-                    meet_m: np.ndarray, speed: np.ndarray, present: np.ndarray,
-                    pair_ship: np.ndarray, pn: np.ndarray, pe: np.ndarray, wn: np.ndarray,
-                    we: np.ndarray, kept: np.ndarray, horizon_s: float, keeps: np.ndarray,
-                    clears: np.ndarray, alongside: np.ndarray) -> None:
-    """The safety of :meth:`Decider._resume`'s candidates over the pairs, in place.
+def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m: np.ndarray,
+                    speed: np.ndarray, present: float, pn: float, pe: float, wn: float,
+                    we: float, kept: float, horizon_s: float, keeps: np.ndarray,
+                    clears: np.ndarray, alongside: np.ndarray, present_short: np.ndarray,
+                    present_close: np.ndarray) -> None:
+    """The safety of one ship's :meth:`Decider._resume` candidates against one pair, in place.
 
-    Per pair (own ship ``pair_ship``, other ship at ``pn, pe`` relative, velocity ``wn, we``)
-    and candidate ``(row, step)`` of course ``(c1, s1)`` (cos, sin) at ``speed[ship, row]``,
-    and at the ``present`` speed for the turns (step > 0): the closest approach as steered
-    (straight on) and along the path it leads to (straight on for ``meet_m`` until the route
-    line of direction ``(c2, s2)``, then along it). ``keeps`` is cleared where either comes
-    closer than the kept distance with :data:`RESUME_MARGIN`, ``clears`` where the steered one
-    comes closer than the kept distance; ``alongside`` marks a near ship passed at little
-    relative speed. Only the sides of the distances are needed, told by the squares
+    The other ship is at ``pn, pe`` relative, velocity ``wn, we``; candidate ``(row, step)``
+    of course ``(c1, s1)`` (cos, sin) at ``speed[row]``, and at the ``present`` speed for the
+    turns (step > 0): the closest approach as steered (straight on) and along the path it
+    leads to (straight on for ``meet_m`` until the route line of direction ``(c2, s2)``, then
+    along it). ``keeps`` is cleared where either comes closer than the kept distance with
+    :data:`RESUME_MARGIN`, ``clears`` where the steered one comes closer than the kept
+    distance; ``alongside`` marks a near ship passed at little relative speed. Only the sides
+    of the distances are needed, told by the squares
     (:func:`~trafficsim.geometry.hypot_below`); a closest approach that is not a number (a
     position that is not, at no relative speed) constrains nothing, and where the path's first
     leg gives one its second leg is not looked at. Rows 2 and 3 repeat the courses of rows 0
-    and 1 at the reduced speed, so at the present speed they take the verdicts of those rows.
+    and 1 at the reduced speed, so at the present speed they take the verdicts of those rows
+    (``present_short``, ``present_close``: scratch).
     """
-    n_rows, k = c1.shape[1], c1.shape[2]
-    # verdicts at the present speed of rows 0 and 1, whose courses rows 2 and 3 repeat
-    present_short, present_close = np.empty((2, k), np.bool_), np.empty((2, k), np.bool_)
-    for p in range(pair_ship.shape[0]):
-        i = pair_ship[p]
-        keep = kept[p] * (1.0 + RESUME_MARGIN)
-        near = (math.hypot(pn[p], pe[p])
-                < arbitration.ALONGSIDE_RANGE_FACTOR * kept[p] * (1.0 + RESUME_MARGIN))
-        alongside_prev = False
-        for row in range(n_rows):
-            short = close = False  # the previous candidate's verdicts
-            for step in range(k):
-                # turns clipped at the target course repeat the previous candidate
-                if (step >= 2 and c1[i, row, step] == c1[i, row, step - 1]
-                        and s1[i, row, step] == s1[i, row, step - 1]
-                        and meet_m[i, row, step] == meet_m[i, row, step - 1]):
-                    keeps[i, row, step] &= not short
-                    clears[i, row, step] &= not close
-                    alongside[i, row, step] |= alongside_prev
+    n_rows, k = c1.shape[0], c1.shape[1]
+    keep = kept * (1.0 + RESUME_MARGIN)
+    near = (math.hypot(pn, pe)
+            < arbitration.ALONGSIDE_RANGE_FACTOR * kept * (1.0 + RESUME_MARGIN))
+    alongside_prev = False
+    for row in range(n_rows):
+        short = close = False  # the previous candidate's verdicts
+        for step in range(k):
+            # turns clipped at the target course repeat the previous candidate
+            if (step >= 2 and c1[row, step] == c1[row, step - 1]
+                    and s1[row, step] == s1[row, step - 1]
+                    and meet_m[row, step] == meet_m[row, step - 1]):
+                keeps[row, step] &= not short
+                clears[row, step] &= not close
+                alongside[row, step] |= alongside_prev
+                continue
+            short = close = False
+            for variant in range(2):
+                if variant == 1 and step == 0:
                     continue
-                short = close = False
-                for variant in range(2):
-                    if variant == 1 and step == 0:
-                        continue
-                    if variant == 1 and row >= 2:  # rows 2, 3: the courses of rows 0, 1
-                        too_short, too_close = present_short[row - 2, step], present_close[
-                            row - 2, step]
-                    else:
-                        too_short, too_close = _too_close(
-                            pn[p], pe[p], wn[p], we[p],
-                            speed[i, row] if variant == 0 else present[i], c1[i, row, step],
-                            s1[i, row, step], meet_m[i, row, step], c2[i], s2[i], horizon_s,
-                            kept[p], keep)
-                        if variant == 1:
-                            present_short[row, step], present_close[row, step] = (too_short,
-                                                                                  too_close)
-                    short, close = short or too_short, close or too_close
-                keeps[i, row, step] &= not short
-                clears[i, row, step] &= not close
-                alongside_prev = False
-                if near:
-                    sp = speed[i, row]
-                    dvn = wn[p] - sp * c1[i, row, step]
-                    dve = we[p] - sp * s1[i, row, step]
-                    if dvn * dvn + dve * dve < arbitration.ALONGSIDE_SPEED_MPS**2:
-                        alongside[i, row, step] = alongside_prev = True
+                if variant == 1 and row >= 2:  # rows 2, 3: the courses of rows 0, 1
+                    too_short, too_close = present_short[row - 2, step], present_close[
+                        row - 2, step]
+                else:
+                    too_short, too_close = _too_close(
+                        pn, pe, wn, we, speed[row] if variant == 0 else present,
+                        c1[row, step], s1[row, step], meet_m[row, step], c2, s2, horizon_s,
+                        kept, keep)
+                    if variant == 1:
+                        present_short[row, step], present_close[row, step] = (too_short,
+                                                                              too_close)
+                short, close = short or too_short, close or too_close
+            keeps[row, step] &= not short
+            clears[row, step] &= not close
+            alongside_prev = False
+            if near:
+                sp = speed[row]
+                dvn = wn - sp * c1[row, step]
+                dve = we - sp * s1[row, step]
+                if dvn * dvn + dve * dve < arbitration.ALONGSIDE_SPEED_MPS**2:
+                    alongside[row, step] = alongside_prev = True
 
 
 @kernel
