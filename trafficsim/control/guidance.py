@@ -134,7 +134,8 @@ def _desired_course(leg_start: np.ndarray, wp_index: np.ndarray, hold: np.ndarra
                     n_waypoints: np.ndarray, north: np.ndarray, east: np.ndarray,
                     length: np.ndarray, out: np.ndarray) -> None:
     """The ships steering along a leg they are on, or holding a course after their route, in
-    a loop the compiler vectorises (:func:`trafficsim.geometry.atan`); then, one by one, those
+    a loop the compiler vectorises (:func:`trafficsim.geometry.atan`; no branch: every ship's
+    line-of-sight course is worked out and kept or not by a select); then, one by one, those
     that start a leg or wheel over onto the next (a step or two per leg)."""
     n = north.shape[0]
     turning = np.empty(n, dtype=np.bool_)
@@ -142,10 +143,9 @@ def _desired_course(leg_start: np.ndarray, wp_index: np.ndarray, hold: np.ndarra
         k = wp_index[i]
         on_route = k < n_waypoints[i]
         rn, re = north[i] - leg_start[0, i], east[i] - leg_start[1, i]
-        turning[i] = on_route and (leg_index[i] != k or _to_go(leg, i, rn, re) <= leg[4, i])
-        if not turning[i]:
-            out[i] = _line_of_sight(leg[0, i], leg[1, i], leg[2, i], leg[3, i], rn, re,
-                                    length[i]) if on_route else hold[i]
+        turning[i] = on_route & ((leg_index[i] != k) | (_to_go(leg, i, rn, re) <= leg[4, i]))
+        los = _line_of_sight(leg[0, i], leg[1, i], leg[2, i], leg[3, i], rn, re, length[i])
+        out[i] = los if on_route else hold[i]  # (a turning ship's is replaced below)
     for i in range(n):
         if turning[i]:
             _turning_ship(i, leg_start, wp_index, hold, leg, leg_index, waypoints, n_waypoints,
