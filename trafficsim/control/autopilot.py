@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
-from trafficsim.jit import kernel
-from trafficsim.sensors import mod_2pi_scalar
+from trafficsim.jit import inline_kernel, kernel
+from trafficsim.sensors import TWO_PI, mod_2pi_scalar
 
 INTEGRAL_BAND_RAD = math.radians(10.0)
 
@@ -49,9 +49,31 @@ def rudder_command(psi_d: np.ndarray, psi: np.ndarray, r: np.ndarray, integral: 
 def _rudder_command(psi_d: np.ndarray, psi: np.ndarray, r: np.ndarray, integral: np.ndarray,
                     kp: np.ndarray, kd_s: np.ndarray, ki_per_s: np.ndarray,
                     rudder_max: np.ndarray, dt: float, out: np.ndarray) -> None:
+    """PID on the heading error wrapped to [-pi, pi), in place. The ships whose
+    ``psi_d - psi + pi`` lies within (-2 pi, 2 pi) (all of them, as a rule) in a loop without
+    branches, which the compiler vectorises (the wrap as :func:`mod_2pi_scalar` gives it
+    there); the others after, one by one, with the division."""
+    wide = False
     for i in range(psi.shape[0]):
-        err = mod_2pi_scalar(psi_d[i] - psi[i] + math.pi) - math.pi
-        if abs(err) < INTEGRAL_BAND_RAD:
-            integral[i] += err * dt
-        cmd = kp[i] * err + ki_per_s[i] * integral[i] - kd_s[i] * r[i]
-        out[i] = min(max(cmd, -rudder_max[i]), rudder_max[i])
+        a = psi_d[i] - psi[i] + math.pi
+        inside = -TWO_PI < a < TWO_PI
+        wide |= not inside
+        err = (a + 0.0 if a >= 0.0 else a + TWO_PI) - math.pi
+        integrate = inside and abs(err) < INTEGRAL_BAND_RAD
+        integral[i] = integral[i] + err * dt if integrate else integral[i]
+        out[i] = _pid(err, integral[i], r[i], kp[i], kd_s[i], ki_per_s[i], rudder_max[i])
+    for i in range(psi.shape[0] if wide else 0):
+        a = psi_d[i] - psi[i] + math.pi
+        if not -TWO_PI < a < TWO_PI:
+            err = mod_2pi_scalar(a) - math.pi
+            if abs(err) < INTEGRAL_BAND_RAD:
+                integral[i] += err * dt
+            out[i] = _pid(err, integral[i], r[i], kp[i], kd_s[i], ki_per_s[i], rudder_max[i])
+
+
+@inline_kernel
+def _pid(err: float, integral: float, r: float, kp: float, kd_s: float, ki_per_s: float,
+         rudder_max: float) -> float:
+    """The rudder command of one ship, limited to +/- ``rudder_max``."""
+    cmd = kp * err + ki_per_s * integral - kd_s * r
+    return min(max(cmd, -rudder_max), rudder_max)
