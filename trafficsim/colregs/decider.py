@@ -637,6 +637,8 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
     keeps, clears = np.empty((4, k), dtype=np.bool_), np.empty((4, k), dtype=np.bool_)
     alongside = np.empty((4, k), dtype=np.bool_)
     present_short, present_close = np.empty((2, k), np.bool_), np.empty((2, k), np.bool_)
+    # per row, the steps before the turns clipped at the target course (which repeat the last)
+    end = np.empty(4, dtype=np.int64)
     # the pairs of each ship, in their order (a counting sort by ship)
     first = np.zeros(s + 1, dtype=np.int64)
     for p in range(pair_ship.shape[0]):
@@ -649,11 +651,12 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
         fill[pair_ship[p]] += 1
     deg = 180.0 / math.pi
     for i in range(s):
-        c2, s2 = math.cos(chi[i]), math.sin(chi[i])
+        c2, s2 = cos_sin(chi[i])
         for row in range(4):
             speed[row] = route_speed[i] * (1.0 if row < 2 else slow[i])
             if row >= 2:  # the courses of rows 0 and 1 at the reduced speed
-                for step in range(k):
+                end[row] = end[row - 2]
+                for step in range(end[row]):
                     turned_home[row, step] = turned_home[row - 2, step]
                     course[row, step] = course[row - 2, step]
                     c1[row, step], s1[row, step] = c1[row - 2, step], s1[row - 2, step]
@@ -663,25 +666,29 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
             target = chi[i] if row % 2 == 0 else route[i]
             back = mod_2pi_scalar(target - ordered[i] + math.pi) - math.pi
             sign = 1.0 if back > 0.0 else (-1.0 if back < 0.0 else (0.0 if back == 0.0 else back))
+            end[row] = k
             for step in range(k):
                 turn = sign * min(_RESUME_STEPS_RAD[step], abs(back))
-                turned_home[row, step] = abs(turn) >= abs(back) - 1e-9 and row % 2 == 1
                 cs = ordered[i] + turn
+                if step >= 2 and cs == course[row, step - 1]:  # clipped: so are those after
+                    end[row] = step
+                    break
+                turned_home[row, step] = abs(turn) >= abs(back) - 1e-9 and row % 2 == 1
                 course[row, step] = cs
                 if step > 0 and cs == course[row, step - 1]:  # clipped at the target
                     c1[row, step], s1[row, step] = c1[row, step - 1], s1[row, step - 1]
                     across[row, step] = across[row, step - 1]
                     meet[row, step] = meet[row, step - 1]
                     continue
-                c1[row, step], s1[row, step] = math.cos(cs), math.sin(cs)
-                a = math.sin(cs - chi[i])  # cross-track rate per unit speed
+                c1[row, step], s1[row, step] = cos_sin(cs)
+                a = cos_sin(cs - chi[i])[1]  # cross-track rate per unit speed
                 across[row, step] = a
                 meet[row, step] = -e[i] / a if e[i] * a < -1e-9 else math.inf
         keeps[:], clears[:], alongside[:] = True, True, False
         for j in range(first[i], first[i + 1]):
             p = by_ship[j]
-            _resume_margins(c1, s1, c2, s2, meet, speed, present[i], pn[p], pe[p], wn[p],
-                            we[p], kept[p], horizon_s, keeps, clears, alongside,
+            _resume_margins(c1, s1, c2, s2, meet, speed, end, present[i], pn[p], pe[p],
+                            wn[p], we[p], kept[p], horizon_s, keeps, clears, alongside,
                             present_short, present_close)
         # a course further off the line comes after a reduced speed; there, where a safe
         # course nearer the route lies beyond courses not to be turned through at route speed,
@@ -689,14 +696,14 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
         blocked = False
         for row in range(2):
             clear = True
-            for step in range(k):
+            for step in range(end[row]):
                 clear = clear and clears[row, step]
                 if keeps[row, step] and not clear:
                     blocked = True
         best, best_row, best_step = math.inf, 0, 0
         for row in range(4):
             clear = True  # every course turned through on the way keeps the distance
-            for step in range(k):
+            for step in range(end[row]):
                 clear = clear and clears[row, step]
                 cs = course[row, step]
                 # (a candidate repeating the one before is no better and reached no sooner)
@@ -718,8 +725,8 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
 
 @kernel
 def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m: np.ndarray,
-                    speed: np.ndarray, present: float, pn: float, pe: float, wn: float,
-                    we: float, kept: float, horizon_s: float, keeps: np.ndarray,
+                    speed: np.ndarray, end: np.ndarray, present: float, pn: float, pe: float,
+                    wn: float, we: float, kept: float, horizon_s: float, keeps: np.ndarray,
                     clears: np.ndarray, alongside: np.ndarray, present_short: np.ndarray,
                     present_close: np.ndarray) -> None:
     """The safety of one ship's :meth:`Decider._resume` candidates against one pair, in place.
@@ -736,16 +743,17 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
     position that is not, at no relative speed) constrains nothing, and where the path's first
     leg gives one its second leg is not looked at. Rows 2 and 3 repeat the courses of rows 0
     and 1 at the reduced speed, so at the present speed they take the verdicts of those rows
-    (``present_short``, ``present_close``: scratch).
+    (``present_short``, ``present_close``: scratch). Row ``row`` is looked at up to step
+    ``end[row]``: the turns beyond are clipped at the target course and repeat the last.
     """
-    n_rows, k = c1.shape[0], c1.shape[1]
+    n_rows = c1.shape[0]
     keep = kept * (1.0 + RESUME_MARGIN)
     near = (math.hypot(pn, pe)
             < arbitration.ALONGSIDE_RANGE_FACTOR * kept * (1.0 + RESUME_MARGIN))
     alongside_prev = False
     for row in range(n_rows):
         short = close = False  # the previous candidate's verdicts
-        for step in range(k):
+        for step in range(end[row]):
             # turns clipped at the target course repeat the previous candidate
             if (step >= 2 and c1[row, step] == c1[row, step - 1]
                     and s1[row, step] == s1[row, step - 1]
