@@ -7,6 +7,7 @@ step: guidance and autopilot are vectorised numpy over ships, the dynamics one c
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -16,6 +17,7 @@ from trafficsim.batch import Batch
 from trafficsim.colregs.decider import Decider
 from trafficsim.control import autopilot, guidance
 from trafficsim.errors import SimulationError
+from trafficsim.jit import kernel
 from trafficsim.metrics import PairMetrics
 from trafficsim.navigation import Navigation
 from trafficsim.observation import Observation, observes
@@ -63,7 +65,7 @@ class Simulation:
     #: (NaN: it has not); only with ``isolate_divergence``, else the first such step raises
     diverged_at_s: np.ndarray | None = None
     diverged_ships: np.ndarray | None = None  # (n,) bool: the ships whose state did
-    _x_good: np.ndarray | None = None  # the state before the step, kept to freeze from
+    _x_good: np.ndarray | None = None  # the last all-finite state, kept to freeze from
 
     @classmethod
     def start(cls, batch: Batch, dt: float, seed: int = 0, decider: Decider | None = None,
@@ -109,7 +111,7 @@ class Simulation:
         if isolate_divergence:
             sim.diverged_at_s = np.full(batch.n_encounters, np.nan)
             sim.diverged_ships = np.zeros(n, dtype=bool)
-            sim._x_good = np.empty_like(x)
+            sim._x_good = x.copy()
         sim._navigate_and_control()
         return sim
 
@@ -162,13 +164,14 @@ class Simulation:
     def step(self) -> None:
         """Advance all ships by one time step with the current orders, then navigate."""
         b, x, dt = self.batch, self.batch.x, self.dt
-        if self._x_good is not None:
-            np.copyto(self._x_good, x)
         kernels.step_ships(b.family_code, b.params, b.actuators, x, self.rudder_cmd_rad,
                            self.rps_cmd, b.env_rows, dt, self.substeps, self.vector_tables)
         self.step_index += 1
-        if not np.isfinite(x).all():
+        good = self._x_good
+        if not _finite_kept(x, x if good is None else good, good is not None):
             self._diverged(np.flatnonzero(~np.isfinite(x).all(axis=0)))
+            if good is not None:
+                np.copyto(good, x)
         self.metrics.accumulate(x, b.length_m, b.beam_m, b.pair_i, b.pair_j, self.t_s)
         self._navigate_and_control()
 
@@ -206,3 +209,19 @@ class Simulation:
             self.step()
             if callback is not None and every and k % every == 0:
                 callback(self)
+
+
+@kernel
+def _finite_kept(x: np.ndarray, kept: np.ndarray, keep: bool) -> bool:
+    """Whether every number of ``x`` is finite; if so and ``keep``, ``x`` is copied into
+    ``kept`` (the state to freeze a diverging encounter at: the one before its step). One
+    pass to test and one to copy while ``x`` is in the cache the step just wrote it to."""
+    finite = True
+    for r in range(x.shape[0]):
+        for i in range(x.shape[1]):
+            finite &= abs(x[r, i]) < math.inf
+    if finite and keep:
+        for r in range(x.shape[0]):
+            for i in range(x.shape[1]):
+                kept[r, i] = x[r, i]
+    return finite
