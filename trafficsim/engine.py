@@ -1,8 +1,8 @@
 """The step loop: guidance and autopilot on the estimate, dynamics per model family, metrics.
 
 One :class:`Simulation` advances every ship of every encounter of a batch together with a fixed
-step: guidance and autopilot are vectorised numpy over ships, the dynamics one compiled loop
-(:mod:`trafficsim.ships.kernels`); nothing loops over ships in Python.
+step: guidance, the autopilot and the dynamics (:mod:`trafficsim.ships.kernels`) are compiled
+loops over ships; nothing loops over ships in Python.
 """
 
 from __future__ import annotations

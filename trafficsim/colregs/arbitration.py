@@ -219,7 +219,7 @@ def _verdict(cb: float, sb: float, speed: float, factor: float, reduced: bool, c
         if hypot_below(a, b, req):  # closest_m - req < 0
             keeps = False
         if (req > 0.0 and dvn * dvn + dve * dve < ALONGSIDE_SPEED_MPS * ALONGSIDE_SPEED_MPS
-                and math.hypot(pn[p], pe[p]) < ALONGSIDE_RANGE_FACTOR * max(req, 1.0)):
+                and hypot_below(pn[p], pe[p], ALONGSIDE_RANGE_FACTOR * max(req, 1.0))):
             beside = True
     return keeps, beside
 

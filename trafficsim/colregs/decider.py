@@ -748,8 +748,8 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
     """
     n_rows = c1.shape[0]
     keep = kept * (1.0 + RESUME_MARGIN)
-    near = (math.hypot(pn, pe)
-            < arbitration.ALONGSIDE_RANGE_FACTOR * kept * (1.0 + RESUME_MARGIN))
+    near = hypot_below(pn, pe,
+                       arbitration.ALONGSIDE_RANGE_FACTOR * kept * (1.0 + RESUME_MARGIN))
     alongside_prev = False
     for row in range(n_rows):
         short = close = False  # the previous candidate's verdicts
