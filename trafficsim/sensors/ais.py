@@ -409,9 +409,8 @@ def _surely_keeps(u: float, v: float, cn: float, ce: float, gap: float) -> bool:
     at most the speed through the water plus the current's. A cheap test ahead of
     :func:`_interval_in_current`; False leaves the answer to it."""
     limit = (SLOW_KN if gap > INTERVAL_MEDIUM_S else MEDIUM_KN) * KNOT_MPS * (1.0 - _KEEP_MARGIN)
-    if cn != 0.0 or ce != 0.0:
-        limit -= math.sqrt(cn * cn + ce * ce)
-    return limit > 0.0 and u * u + v * v < limit * limit
+    limit -= math.sqrt(cn * cn + ce * ce)  # (still water: less zero, the limit itself)
+    return (limit > 0.0) & (u * u + v * v < limit * limit)
 
 
 @kernel
@@ -433,20 +432,28 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
     """
     enabled, sp, sv, sh, turn_rate, east_step = params
     next_tx, last_tx, head, buf_t, buf = state
-    for i in range(x_true.shape[1]):
-        # no interval can pull the pending report before next_tx, and it is not due: nothing
-        # changes (most steps of fast ships; always without a transponder)
-        settled = not math.isfinite(last_tx[i]) or last_tx[i] + _MIN_INTERVAL_S >= next_tx[i]
-        if settled and not (enabled[i] and t_s >= next_tx[i] - 1e-9):
+    n = x_true.shape[1]
+    # the ships whose schedule surely stays as it is, in a loop without branches that the
+    # compiler vectorises (most ships at most steps)
+    quiet = np.empty(n, dtype=np.bool_)
+    for i in range(n):
+        # no interval can pull the pending report before next_tx, and it is not due (most
+        # steps of fast ships; always without a transponder)
+        settled = (not math.isfinite(last_tx[i])) | (last_tx[i] + _MIN_INTERVAL_S >= next_tx[i])
+        due = enabled[i] & (t_s >= next_tx[i] - 1e-9)
+        # or not due and not pulled forward by a shorter interval
+        keeps = ((t_s < next_tx[i] - 1e-9) & (not anchored[i])
+                 & (next_tx[i] - last_tx[i] <= INTERVAL_SLOW_S)
+                 & (abs(x_true[R, i]) <= turn_rate[i])
+                 & _surely_keeps(x_true[U, i], x_true[V, i], current[0, i], current[1, i],
+                                 next_tx[i] - last_tx[i]))
+        quiet[i] = (settled & (not due)) | keeps
+    for i in range(n):
+        if quiet[i]:
             sent[i] = False
             continue
         u, v, psi = x_true[U, i], x_true[V, i], x_true[PSI, i]
         cn, ce = current[0, i], current[1, i]
-        gap = next_tx[i] - last_tx[i]
-        if (t_s < next_tx[i] - 1e-9 and not anchored[i] and gap <= INTERVAL_SLOW_S
-                and abs(x_true[R, i]) <= turn_rate[i] and _surely_keeps(u, v, cn, ce, gap)):
-            sent[i] = False  # not due and not pulled forward: nothing changes
-            continue
         still = cn == 0.0 and ce == 0.0  # speed over ground = speed through the water
         turning, anchor = abs(x_true[R, i]) > turn_rate[i], anchored[i]
         vn = ve = 0.0
