@@ -1,5 +1,8 @@
+import platform
+import re
 from pathlib import Path
 
+import llvmlite.binding
 import pytest
 
 from trafficsim import cli
@@ -7,6 +10,17 @@ from trafficsim import cli
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
 SHARED = ROOT.parent / "shared"
+
+#: skip a test that reads x86 AVX instructions off compiled code on a machine without them
+requires_avx = pytest.mark.skipif(
+    platform.machine() not in ("x86_64", "AMD64")
+    or not llvmlite.binding.get_host_cpu_features().get("avx"), reason="x86 AVX instructions")
+
+
+def packed_divisions(asm: str) -> bool:
+    """Whether assembly holds divisions of four or eight doubles at once (ymm or zmm
+    registers; two-wide ones can be scalar code paired, not a vectorised loop)."""
+    return re.search(r"divpd\s[^\n]*%[yz]mm", asm) is not None
 
 
 @pytest.fixture

@@ -1,12 +1,10 @@
 import math
-import platform
-import re
 
-import llvmlite.binding
 import numba
 import numpy as np
 import pytest
 
+from tests.conftest import packed_divisions, requires_avx
 from trafficsim.control import guidance
 from trafficsim.control.guidance import LOOKAHEAD_L, TURN_RADIUS_L, RouteState, desired_course
 
@@ -270,9 +268,7 @@ def test_a_route_of_only_the_start_point_holds_the_start_heading():
     assert c[0] == 2.0 and r.wp_index[0] == 2
 
 
-@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64")
-                    or not llvmlite.binding.get_host_cpu_features().get("avx"),
-                    reason="x86 AVX instructions")
+@requires_avx
 def test_the_loop_over_ships_on_a_leg_is_vectorised() -> None:
     """The steering of ships on a leg compiles to packed divisions of four or eight ships per
     instruction (ymm or zmm registers: a branch in the loop leaves at most the two-wide
@@ -285,4 +281,4 @@ def test_the_loop_over_ships_on_a_leg_is_vectorised() -> None:
     fresh(route.leg_start, route.wp_index, route.hold_course_rad, route.leg, route.leg_index,
           rng.uniform(-3e4, 3e4, (n, 2, 2)), np.full(n, 2), north, east, np.full(n, 100.0),
           np.empty(n))
-    assert re.search(r"divpd\s[^\n]*%[yz]mm", fresh.inspect_asm(fresh.signatures[0]))
+    assert packed_divisions(fresh.inspect_asm(fresh.signatures[0]))

@@ -4,15 +4,12 @@ and engine lags [seed 002, eqs 4.7-4.8]."""
 from __future__ import annotations
 
 import math
-import platform
-import re
 
-import llvmlite.binding
 import numba
 import numpy as np
 import pytest
 
-from tests.conftest import SHARED
+from tests.conftest import SHARED, packed_divisions, requires_avx
 from trafficsim.ships import base, kernels
 from trafficsim.ships.base import PSI, RPS, RUDDER, Actuators, Env, R, U, V
 from trafficsim.ships.library import load_ship
@@ -414,9 +411,7 @@ def test_the_vectorised_loops_leave_the_exceptions_to_the_scalar_one() -> None:
     np.testing.assert_array_equal(scalar, expected)
 
 
-@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64")
-                    or not llvmlite.binding.get_host_cpu_features().get("avx"),
-                    reason="x86 AVX instructions")
+@requires_avx
 def test_the_nomoto_loop_is_vectorised() -> None:
     """The compiler turns the Nomoto loop into packed divisions of four or eight ships per
     instruction (ymm or zmm registers; two-wide could be scalar code paired): the run-time
@@ -429,4 +424,4 @@ def test_the_nomoto_loop_is_vectorised() -> None:
     fn = numba.njit(error_model="numpy")(kernels._vectorised_nomoto.py_func)
     fn(codes, tables[1], tables[0], x, x[RUDDER], x[RPS], base.env_table(Env(), codes.size), 1.0,
        np.ones(codes.size, dtype=np.int64), np.ones(codes.size, dtype=bool))
-    assert re.search(r"divpd\s[^\n]*%[yz]mm", fn.inspect_asm(fn.signatures[0]))
+    assert packed_divisions(fn.inspect_asm(fn.signatures[0]))

@@ -675,10 +675,9 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
                     break
                 turned_home[row, step] = abs(turn) >= abs(back) - 1e-9 and row % 2 == 1
                 course[row, step] = cs
-                if step > 0 and cs == course[row, step - 1]:  # clipped at the target
-                    c1[row, step], s1[row, step] = c1[row, step - 1], s1[row, step - 1]
-                    across[row, step] = across[row, step - 1]
-                    meet[row, step] = meet[row, step - 1]
+                if step == 1 and cs == course[row, 0]:  # no turn: step 0's course again
+                    c1[row, 1], s1[row, 1] = c1[row, 0], s1[row, 0]
+                    across[row, 1], meet[row, 1] = across[row, 0], meet[row, 0]
                     continue
                 c1[row, step], s1[row, step] = cos_sin(cs)
                 a = cos_sin(cs - chi[i])[1]  # cross-track rate per unit speed

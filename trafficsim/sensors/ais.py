@@ -442,11 +442,10 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
         settled = (not math.isfinite(last_tx[i])) | (last_tx[i] + _MIN_INTERVAL_S >= next_tx[i])
         due = enabled[i] & (t_s >= next_tx[i] - 1e-9)
         # or not due and not pulled forward by a shorter interval
-        keeps = ((t_s < next_tx[i] - 1e-9) & (not anchored[i])
-                 & (next_tx[i] - last_tx[i] <= INTERVAL_SLOW_S)
+        gap = next_tx[i] - last_tx[i]
+        keeps = ((t_s < next_tx[i] - 1e-9) & (not anchored[i]) & (gap <= INTERVAL_SLOW_S)
                  & (abs(x_true[R, i]) <= turn_rate[i])
-                 & _surely_keeps(x_true[U, i], x_true[V, i], current[0, i], current[1, i],
-                                 next_tx[i] - last_tx[i]))
+                 & _surely_keeps(x_true[U, i], x_true[V, i], current[0, i], current[1, i], gap))
         quiet[i] = (settled & (not due)) | keeps
     for i in range(n):
         if quiet[i]:
