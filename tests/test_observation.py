@@ -5,6 +5,7 @@ import pytest
 
 from trafficsim.batch import EncounterEnv, ShipSetup, build_batch
 from trafficsim.engine import Simulation
+from trafficsim.estimation import tracker
 from trafficsim.noise import generator
 from trafficsim.observation import Observation, observes
 from trafficsim.ships.base import EAST, NORTH, PSI, U
@@ -194,8 +195,9 @@ def test_build_pairs_flags_and_per_ship_instruments():
     np.testing.assert_array_equal(obs.radar_p.enabled, [True, False, False])
     np.testing.assert_array_equal(obs.ais_p.enabled, [False, True, False])
     assert obs.has_radar and obs.has_ais
-    coast = obs.settings[:, 1]
-    np.testing.assert_array_equal(coast == 12.0, obs.obs == 1)
+    table, row = obs.settings
+    assert table.shape == (2, tracker.N_SETTINGS)  # two distinct settings
+    np.testing.assert_array_equal(table[row, tracker.S_COAST] == 12.0, obs.obs == 1)
     assert obs.tracks.x.shape == (6, 4) and not obs.tracks.active.any()
 
 
@@ -280,3 +282,47 @@ def test_streams_are_keyed_by_encounter_observer_purpose_and_target():
         np.testing.assert_array_equal(obs.banks["ais"].state[i],
                                       g.bit_generator.state["state"]["state"])
     assert not np.array_equal(obs.banks["radar"].state[0], obs.banks["radar"].state[1])
+
+
+
+def test_keeping_the_history_only_while_a_report_is_in_flight_changes_no_track(monkeypatch):
+    """The tracker keeps the measurements it may have to use again (for a late AIS report)
+    only while a report is on its way; its tracks are those of a tracker told nothing, which
+    keeps them all, to the bit: with reports late by a plot or two (reprocessed) and by more
+    than the history holds (propagated forward), lost reports and missed plots, and tracks
+    that coast out or fail the gate and restart."""
+    track = {"coast_s": 6.0, "gate_probability": 0.9, "max_gate_failures": 1}
+    configs = [{"radar": {"sigma_range_m": 40.0, "p_detect": 0.7},
+                "ais": {"p_receive": 0.6, "latency_s": latency}, "tracker": track}
+               for latency in (13.0, 5.0, 3.0)]
+    n = len(configs)
+    pi, pj = np.array([0, 0, 1]), np.array([1, 2, 2])
+    told, untold = (Observation.build(configs, pi, pj, 5, np.zeros(n, int), np.arange(n))
+                    for _ in range(2))
+    tracker_step, late, restarts = tracker.step, [], 0
+
+    def step(params, state, obs, t_s, radar=None, ais=None, **kwargs):
+        if state is untold.tracks:
+            kwargs["in_flight_s"] = None
+        else:
+            late.extend((t_s - ais.stamp_s)[ais.valid & (ais.stamp_s < state.t_s)])
+        return tracker_step(params, state, obs, t_s, radar, ais, **kwargs)
+    monkeypatch.setattr(tracker, "step", step)
+    x = np.zeros((8, n))
+    # 24 kn (2 s reports), 16 kn (6 s) and 10 kn (10 s), two of them turning slowly
+    x[NORTH], x[EAST], x[U] = [0.0, 4000.0, -2500.0], [0.0, 2000.0, 3500.0], [12.5, 8.2, 5.1]
+    x[PSI] = np.radians([10.0, 200.0, 300.0])
+    for t in range(400):
+        active = told.tracks.active.copy()
+        for o in (told, untold):
+            o.update(x, x[:6].copy(), np.zeros((2, n)), float(t))
+        restarts += np.sum(active & (told.tracks.n_updates == 1))
+        for f in ("x", "P", "t_s", "heard_s", "active", "n_updates", "gate_failures"):
+            np.testing.assert_array_equal(getattr(told.tracks, f), getattr(untold.tracks, f),
+                                          err_msg=f"{f} at {t} s")
+        x[NORTH] += x[U] * np.cos(x[PSI])
+        x[EAST] += x[U] * np.sin(x[PSI])
+        x[PSI] += np.radians([0.4, -0.3, 0.0])
+    late = np.array(late)
+    assert np.sum(late <= 6.0) > 50 and np.sum(late > 12.0) > 50 and restarts > 5
+    assert told.tracks.hist_n.sum() < untold.tracks.hist_n.sum()  # fewer records kept

@@ -47,7 +47,8 @@ class Observation:
     banks: dict[str, NoiseBank]
     has_radar: bool
     has_ais: bool
-    settings: np.ndarray  # (m, tracker.N_SETTINGS) observers' tracker settings per pair
+    settings: tuple[np.ndarray, np.ndarray]  # observers' tracker settings, per pair
+    nothing_in_flight: np.ndarray  # (m,) +inf: no AIS report on its way (a batch without AIS)
 
     @classmethod
     def build(cls, configs: Sequence[Mapping[str, Any]], pair_i: np.ndarray,
@@ -79,7 +80,8 @@ class Observation:
                    tracker_p=tracker_p, tracks=tracker.init(obs.shape[0]), banks=banks,
                    has_radar=any(c.get("radar") is not None for c in configs),
                    has_ais=any(c.get("ais") is not None for c in configs),
-                   settings=tracker.pair_settings(tracker_p, obs))
+                   settings=tracker.pair_settings(tracker_p, obs),
+                   nothing_in_flight=np.full(obs.shape[0], np.inf))
 
     def update(self, x: np.ndarray, est: np.ndarray, current_ne: np.ndarray, t_s: float
                ) -> None:
@@ -97,8 +99,10 @@ class Observation:
             self.ais_s, reports = ais.step(
                 self.ais_p, self.ais_s, t_s, self.obs, self.tgt, x, current_ne,
                 self.banks["ais"].state, self.banks["ais_rx"].state, inplace=True)
-        self.tracks = tracker.step(self.tracker_p, self.tracks, self.obs, t_s, plots, reports,
-                                   inplace=True, settings=self.settings)
+        self.tracks = tracker.step(
+            self.tracker_p, self.tracks, self.obs, t_s, plots, reports, inplace=True,
+            settings=self.settings,
+            in_flight_s=reports.in_flight_s if reports is not None else self.nothing_in_flight)
 
     def predicted_tracks(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Tracks predicted to ``t_s``: state ``(m, 4)`` north, east, v_north, v_east and

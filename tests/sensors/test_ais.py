@@ -270,7 +270,10 @@ def _reference_receive(params, state, t, obs, tgt, x, draws):
              & (draws[:, 0] < params.z_receive[obs]))
     nan = np.where(valid, 1.0, np.nan)
     fields = state.buf[tgt, slot] * nan[:, None]
-    return valid, newest * nan, fields, np.where(has, newest, state.last_rx_s)
+    last_rx = np.where(has, newest, state.last_rx_s)
+    on_way = (stamps > last_rx[:, None]) & ~arrived
+    in_flight = np.where(on_way, stamps, np.inf).min(axis=1)
+    return valid, newest * nan, fields, last_rx, in_flight
 
 
 def test_compiled_transmit_and_receive_match_array_formulas() -> None:
@@ -297,7 +300,7 @@ def test_compiled_transmit_and_receive_match_array_formulas() -> None:
     x[NORTH], x[EAST] = rng.uniform(-5000, 5000, (2, n))
     tx, rx = independent_streams(n, 17), independent_streams(obs.shape[0], 18)
     tx_live, rx_live = tx.copy(), rx.copy()
-    n_received = 0
+    n_received = n_on_way = 0
     for k in range(90):
         t = 0.7 * k
         x[R] = np.where(rng.random(n) < 0.3, TURN, 0.0)
@@ -313,7 +316,7 @@ def test_compiled_transmit_and_receive_match_array_formulas() -> None:
         for got, w in zip((pure.next_tx_s, pure.last_tx_s, pure.head, pure.buf_t_s, pure.buf),
                           want, strict=True):
             np.testing.assert_allclose(got, w, rtol=1e-14, atol=0.0)
-        valid, stamp, fields, last_rx = _reference_receive(
+        valid, stamp, fields, last_rx, in_flight = _reference_receive(
             params, pure, t, obs, tgt, x, peek_normals(rx, ais.AIS_RX_NORMAL_DIMS))
         pure, rep = ais.receive(params, pure, t, obs, tgt, x, rx)
         np.testing.assert_array_equal(rep.valid, valid)
@@ -321,12 +324,14 @@ def test_compiled_transmit_and_receive_match_array_formulas() -> None:
         got = np.stack([rep.north_m, rep.east_m, rep.sog_mps, rep.cog_rad, rep.heading_rad], 1)
         np.testing.assert_allclose(got, fields, rtol=1e-14, atol=0.0)
         np.testing.assert_array_equal(pure.last_rx_s, last_rx)
+        np.testing.assert_array_equal(rep.in_flight_s, in_flight)
+        n_on_way += int(np.isfinite(in_flight).sum())
         live, rep_live = ais.step(params, live, t, obs, tgt, x, current, tx_live, rx_live,
                                   anchored, inplace=True)
         np.testing.assert_array_equal(rep_live.north_m, rep.north_m)
         np.testing.assert_array_equal(live.buf, pure.buf)
         n_received += int(valid.sum())
-    assert 0 < n_received < 90 * obs.shape[0]
+    assert 0 < n_received < 90 * obs.shape[0] and 0 < n_on_way < 90 * obs.shape[0]
 
 
 @pytest.mark.parametrize("current_mps", [(0.0, 0.0), (0.4, -0.3)])
@@ -507,8 +512,9 @@ def test_every_receiver_hears_the_same_report() -> None:
 def test_latency_delivers_like_an_unbounded_history(latency: float, dt: float) -> None:
     """A 30 kn target reports every 2 s. At every step the receiver must get the newest report
     stamped after the last one it got, among those with ``stamp + latency <= t`` (module
-    docstring), as an unbounded list of sent reports says; ``build`` accepts latencies up to
-    ``MAX_LATENCY_S`` (14 s) and the docstring calls them exact at the highest rate."""
+    docstring), as an unbounded list of sent reports says, and be told the stamp of the
+    oldest still on its way; ``build`` accepts latencies up to ``MAX_LATENCY_S`` (14 s) and
+    the docstring calls them exact at the highest rate."""
     params = ais.build([{"latency_s": latency}] * 2)
     x, current, _ = _ships([0.0, 30.0])
     x[NORTH, 1] = 200.0
@@ -529,7 +535,8 @@ def test_latency_delivers_like_an_unbounded_history(latency: float, dt: float) -
         if want is not None:
             last = want
         got = float(rep.stamp_s[0]) if rep.valid[0] else None
-        if got != want:
+        on_way = [s for s in stamps if s > last and s + latency > t + 1e-9]
+        if got != want or rep.in_flight_s[0] != min(on_way, default=math.inf):
             lost.append((t, want, got))
     assert len(stamps) >= min(39, round(80.0 / dt) - 1)  # every 2 s, or every step if longer
     assert lost == []

@@ -88,16 +88,21 @@ Config keys (per observer ship; defaults in brackets): ``accel_psd_m2ps3`` [0.00
 ``max_gate_failures`` [3], ``latency_compensation`` [true], ``ais_sigma_position_m`` [5.0],
 ``ais_sigma_velocity_mps`` [0.1], ``use_radar`` [true], ``use_ais`` [true].
 
-All pairs run in one compiled loop (``@kernel``) with closed-form predictions; ``S^-1`` comes
-in closed form for a radar plot (2x2) and by 2x2 blocks for an AIS report (4x4, a Schur
-complement solve: no explicit 4x4 inverse, which loses accuracy when position and velocity are
-strongly correlated); covariances are kept exactly symmetric. There is no per-pair Python loop.
-The loop reads the radar plots and AIS reports as they come (the AIS measurement is formed
-inside it) and the observers' settings from a per-pair table gathered once
-(:func:`pair_settings`); a pair without a measurement costs a few tests. The history is a ring
-buffer of fixed-size records, so accepting a measurement writes one record instead of moving
-the whole history, and the loop prefetches the track and the records a pair will touch a few
-pairs ahead (the history does not fit in cache).
+All pairs run in one compiled loop (``@kernel``) with closed-form predictions; ``S^-1`` comes in
+closed form for a radar plot (2x2) and by 2x2 blocks for an AIS report (4x4, a Schur complement
+solve: no explicit 4x4 inverse, which loses accuracy when position and velocity are strongly
+correlated); covariances are kept exactly symmetric. There is no per-pair Python loop. The loop
+reads the radar plots and AIS reports as they come (the AIS measurement is formed inside it) and the
+observers' settings from a table of the distinct settings and a row number per pair, gathered once
+(:func:`pair_settings`; a campaign's ships share a few rows, which stay in cache); a pair without a
+measurement costs a few tests. The history is a ring buffer of fixed-size records, so accepting a
+measurement writes one record instead of moving the whole history, and the loop prefetches the track
+and the records a pair will touch a few pairs ahead (the history does not fit in cache). A
+measurement goes into the history only while a report stamped before it is on its way to the
+observer (:attr:`AisReports.in_flight_s`, passed to :func:`step`), the one case in which it can be
+used again; otherwise the history is emptied, since no later measurement can be stamped before it.
+With 2 s latency and reports every 2-10 s that leaves most plots unrecorded, and the tracks are the
+same to the bit as with every measurement recorded (tested).
 """
 
 from __future__ import annotations
@@ -266,17 +271,19 @@ def init(n_pairs: int) -> TrackState:
 N_SETTINGS = 11
 
 
-def pair_settings(params: TrackerParams, obs: np.ndarray) -> np.ndarray:
-    """The observers' settings gathered per directed pair, ``(m, N_SETTINGS)`` float (columns
-    ``S_*``; switches as 0/1, ``max_gate_failures`` as a whole number; one row per pair, so that
-    the loop over pairs reads one record per pair with a measurement). Build it once for a fixed
-    set of pairs and pass it to :func:`step`."""
+def pair_settings(params: TrackerParams, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The observers' settings per directed pair: the distinct settings ``(u, N_SETTINGS)``
+    float (columns ``S_*``; switches as 0/1, ``max_gate_failures`` as a whole number) and the
+    row of each pair ``(m,)`` int32. Build it once for a fixed set of pairs and pass it to
+    :func:`step`."""
     p = params
     cols = (p.q_m2ps3, p.coast_s, p.init_speed_sigma_mps, p.gate2, p.gate4, p.max_gate_failures,
             p.latency_compensation, p.use_radar, p.use_ais, p.ais_sigma_position_m,
             p.ais_sigma_velocity_mps)
-    return np.ascontiguousarray(np.stack([np.asarray(c, dtype=float) for c in cols], axis=1)[
-        np.asarray(obs, dtype=np.int64)])
+    per_observer = np.stack([np.asarray(c, dtype=float) for c in cols], axis=1)
+    table, row = np.unique(per_observer, axis=0, return_inverse=True)
+    return (np.ascontiguousarray(table),
+            np.ascontiguousarray(row.reshape(-1)[np.asarray(obs, dtype=np.int64)], np.int32))
 
 
 #: variance of the rounding error of the AIS position (uniform over one step: step^2 / 12)
@@ -317,7 +324,8 @@ _NONE_B, _NONE_F, _NONE_F3 = np.zeros(0, dtype=bool), np.zeros(0), np.zeros((0, 
 
 def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
          radar: RadarPlots | None = None, ais: AisReports | None = None,
-         inplace: bool = False, settings: np.ndarray | None = None) -> TrackState:
+         inplace: bool = False, settings: tuple[np.ndarray, np.ndarray] | None = None,
+         in_flight_s: np.ndarray | None = None) -> TrackState:
     """Use this step's radar plots and AIS reports, start and delete tracks.
 
     Args:
@@ -329,6 +337,10 @@ def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
         ais: this step's received reports, or None.
         inplace: update ``state`` itself instead of a copy (the engine's step path).
         settings: ``pair_settings(params, obs)``, if already gathered (the engine's step path).
+        in_flight_s: ``(m,)`` stamp of the oldest AIS report on its way to each observer
+            (:attr:`AisReports.in_flight_s`; +inf for none): no measurement of a later step is
+            stamped earlier, so the history is kept only where one can come late. None: not
+            known, every accepted measurement is kept.
 
     Returns: the new tracks (each held at the time of its newest measurement; use
     :func:`predict` for the state at another time).
@@ -346,8 +358,9 @@ def step(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: float,
              _c(ais.sog_mps), _c(ais.cog_rad))
     else:
         a = (False, _NONE_B, _NONE_F, _NONE_F, _NONE_F, _NONE_F, _NONE_F)
+    fl = _NONE_F if in_flight_s is None else _c(in_flight_s)
     _step_kernel(new.x, new.P, new.t_s, new.heard_s, new.active, new.gate_failures, new.n_updates,
-                 new.hist_n, new.hist_start, new.hist, settings, float(t_s), *r, *a)
+                 new.hist_n, new.hist_start, new.hist, *settings, float(t_s), *r, *a, fl)
     return new
 
 
@@ -776,13 +789,14 @@ def _make_room(hist: np.ndarray, k: int, j: int, n: int, start: int) -> tuple[in
 @kernel
 def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.ndarray,
                  active: np.ndarray, fails: np.ndarray, n_upd: np.ndarray, hist_n: np.ndarray,
-                 hist_start: np.ndarray, hist: np.ndarray, settings: np.ndarray, t_now: float,
+                 hist_start: np.ndarray, hist: np.ndarray, settings: np.ndarray,
+                 setting_row: np.ndarray, t_now: float,
                  has_radar: bool, r_valid: np.ndarray, r_t: float, r_north: np.ndarray,
                  r_east: np.ndarray, r_cov: np.ndarray, has_ais: bool, a_valid: np.ndarray,
                  a_stamp: np.ndarray, a_north: np.ndarray, a_east: np.ndarray,
-                 a_sog: np.ndarray, a_cog: np.ndarray) -> None:
+                 a_sog: np.ndarray, a_cog: np.ndarray, in_flight: np.ndarray) -> None:
     """Use each pair's radar plot and AIS report (the older stamp first), then delete tracks
-    that coasted too long. ``settings``: :func:`pair_settings`.
+    that coasted too long. ``settings``, ``setting_row``: :func:`pair_settings`.
 
     Using one measurement (``dim`` 2: position, 4: full state) stamped ``tm`` on pair ``k``
     has four cases: in sequence (predict, update); late, with the estimate before the newer
@@ -799,6 +813,7 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
     w = np.zeros(W_SIZE)
     m = x.shape[0]
     hist_flat, P_flat = hist.reshape(hist.size), P.reshape(P.size)
+    known = in_flight.shape[0] > 0
     for k in range(m):
         f = k + PREFETCH_AHEAD
         if f < m and ((has_radar and r_valid[f]) or (has_ais and a_valid[f])):
@@ -807,7 +822,7 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
                 for i in range(0, HISTORY * H_SIZE, 8):
                     _prefetch(hist_flat, o + i)
                 _prefetch(hist_flat, o + HISTORY * H_SIZE - 1)
-            else:
+            elif not known or in_flight[f] <= t_now:
                 for s in range(int(has_radar and r_valid[f]) + int(has_ais and a_valid[f])):
                     row = o + (hist_start[f] + hist_n[f] + s) % HISTORY * H_SIZE
                     for i in range(0, H_SIZE, 8):
@@ -816,29 +831,30 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
             for i in range(0, 16, 8):
                 _prefetch(P_flat, 16 * f + i)
             _prefetch(P_flat, 16 * f + 15)
+        sk = setting_row[k]
         # (a measurement with a NaN field is none: a run of them must not restart the track
         # from NaN, as the gate's rejections would)
-        use_r = (has_radar and r_valid[k] and settings[k, S_USE_RADAR] != 0.0
+        use_r = (has_radar and r_valid[k] and settings[sk, S_USE_RADAR] != 0.0
                  and not (math.isnan(r_north[k]) or math.isnan(r_east[k])))
-        use_a = (has_ais and a_valid[k] and settings[k, S_USE_AIS] != 0.0
+        use_a = (has_ais and a_valid[k] and settings[sk, S_USE_AIS] != 0.0
                  and not (math.isnan(a_north[k]) or math.isnan(a_east[k])
                           or math.isnan(a_sog[k]) or math.isnan(a_cog[k])))
         if use_r or use_a:
-            a_t = (a_stamp[k] if settings[k, S_LATENCY] != 0.0 else t_now) if use_a else t_now
+            a_t = (a_stamp[k] if settings[sk, S_LATENCY] != 0.0 else t_now) if use_a else t_now
             # older stamp first, so that in-sequence use is the rule
             ais_first = use_a and (not use_r or a_t <= r_t)
             for which in range(2):
                 if use_a and ((which == 0) == ais_first):
-                    dim, tm, gate = 4, a_t, settings[k, S_GATE4]
-                    _ais_zr(a_north[k], a_east[k], a_sog[k], a_cog[k], settings[k, S_AIS_SP],
-                            settings[k, S_AIS_SV], w, W_Z)
+                    dim, tm, gate = 4, a_t, settings[sk, S_GATE4]
+                    _ais_zr(a_north[k], a_east[k], a_sog[k], a_cog[k], settings[sk, S_AIS_SP],
+                            settings[sk, S_AIS_SV], w, W_Z)
                 elif use_r and ((which == 1) == ais_first):
-                    dim, tm, gate = 2, r_t, settings[k, S_GATE2]
+                    dim, tm, gate = 2, r_t, settings[sk, S_GATE2]
                     w[W_Z], w[W_Z + 1] = r_north[k], r_east[k]
                     w[W_R], w[W_R + 1], w[W_R + 2] = r_cov[k, 0, 0], r_cov[k, 1, 0], r_cov[k, 1, 1]
                 else:
                     continue
-                q, sv0 = settings[k, S_Q], settings[k, S_SV0]
+                q, sv0 = settings[sk, S_Q], settings[sk, S_SV0]
                 n, start = hist_n[k], hist_start[k]
                 lag = 0.0
                 j = n
@@ -871,7 +887,7 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
                     accepted = _update4(w, lag, q, gate) if dim == 4 else _update2(w, lag, q, gate)
                 if not accepted:
                     fails[k] += 1
-                    if fails[k] < settings[k, S_MAX_FAIL]:
+                    if fails[k] < settings[sk, S_MAX_FAIL]:
                         continue
                     active[k] = False  # restart the track from the measurement [seed 002, sec 6.6]
                     _start(w, dim, sv0)
@@ -883,6 +899,11 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
                     active[k], n_upd[k] = True, 0
                 if case == FORWARD:
                     hist_n[k] = 0  # the stored estimates lack this measurement: start anew
+                elif j == hist_n[k] and known and not in_flight[k] < tm:
+                    # nothing on its way is stamped before this measurement, so no later one
+                    # will be: no history can be needed again
+                    hist_n[k] = 0
+                    t_state[k] = tm
                 else:
                     slot, hist_n[k], start = _make_room(hist, k, j, hist_n[k], hist_start[k])
                     hist_start[k] = start
@@ -909,7 +930,7 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
                 fails[k] = 0
                 n_upd[k] += 1
                 heard[k] = t_now
-        if active[k] and t_now - heard[k] > settings[k, S_COAST]:
+        if active[k] and t_now - heard[k] > settings[sk, S_COAST]:
             active[k] = False
             fails[k] = 0
             n_upd[k] = 0

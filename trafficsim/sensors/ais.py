@@ -164,6 +164,9 @@ class AisReports:
         stamp_s: the report's time stamp (the time its position refers to), s.
         north_m, east_m: reported (quantised) position, m.
         sog_mps, cog_rad, heading_rad: reported SOG (m/s), COG and heading (rad, [0, 2 pi)).
+        in_flight_s: the stamp of the oldest report of the target still on its way to the
+            observer (sent, neither received nor lost yet), s; +inf when there is none, None
+            when not known. A report received in a later step is stamped no earlier.
     """
 
     valid: np.ndarray
@@ -173,6 +176,7 @@ class AisReports:
     sog_mps: np.ndarray
     cog_rad: np.ndarray
     heading_rad: np.ndarray
+    in_flight_s: np.ndarray | None = None
 
 
 def build(configs: Sequence[Mapping]) -> AisParams:
@@ -319,13 +323,14 @@ def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt
     last_rx = state.last_rx_s if inplace else state.last_rx_s.copy()
     reports = AisReports(valid=np.empty(m, dtype=bool), stamp_s=np.empty(m),
                          north_m=np.empty(m), east_m=np.empty(m), sog_mps=np.empty(m),
-                         cog_rad=np.empty(m), heading_rad=np.empty(m))
+                         cog_rad=np.empty(m), heading_rad=np.empty(m),
+                         in_flight_s=np.empty(m))
     p = params
     _receive((_c(p.enabled, bool), _c(p.latency_s), _c(p.max_range_m), _c(p.z_receive)),
              _c(state.buf_t_s), _c(state.buf), _c(state.head, np.int64), last_rx, float(t_s),
              _c(obs, np.int64), _c(tgt, np.int64), _c(x_true), streams,
              (reports.valid, reports.stamp_s, reports.north_m, reports.east_m, reports.sog_mps,
-              reports.cog_rad, reports.heading_rad))
+              reports.cog_rad, reports.heading_rad, reports.in_flight_s))
     new = state if inplace else AisState(
         next_tx_s=state.next_tx_s, last_tx_s=state.last_tx_s, head=state.head,
         buf_t_s=state.buf_t_s, buf=state.buf, last_rx_s=last_rx)
@@ -507,17 +512,25 @@ def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, head: np.ndarray
     ``last_rx`` advances in place. ``params``: ``(enabled, latency_s, max_range_m,
     z_receive)``; ``out``: the arrays of :class:`AisReports`, NaN where nothing is received."""
     enabled, latency, max_range, z_receive = params
-    valid, stamp, north, east, sog, cog, heading = out
+    valid, stamp, north, east, sog, cog, heading, in_flight = out
     for k in range(obs.shape[0]):
         i, j = obs[k], tgt[k]
-        # newest report stamped after the last one consumed that has arrived by now (the
-        # first of equal stamps, as argmax); none when the target's newest is consumed already
-        slot, newest = 0, -math.inf
-        if buf_t[j, head[j]] > last_rx[k]:
-            for s in range(AIS_BUFFER):
-                st = buf_t[j, s]
-                if st > last_rx[k] and st + latency[j] <= t_s + 1e-9 and st > newest:
-                    slot, newest = s, st
+        # newest report stamped after the last one consumed that has arrived by now; none
+        # when the target's newest is consumed already. The ring holds the reports newest
+        # first from ``head`` back, so those on their way (one latency per sender) come
+        # first and the first arrived one is the newest: the walk stops there.
+        slot, newest, oldest_out = 0, -math.inf, math.inf
+        s = head[j]
+        for _ in range(AIS_BUFFER):
+            st = buf_t[j, s]
+            if not st > last_rx[k]:
+                break
+            if st + latency[j] <= t_s + 1e-9:
+                slot, newest = s, st
+                break
+            oldest_out = st
+            s = s - 1 if s > 0 else AIS_BUFFER - 1
+        in_flight[k] = oldest_out
         ok = False
         if math.isfinite(newest):
             last_rx[k] = newest  # consumed whether heard or not
