@@ -49,6 +49,7 @@ class Observation:
     has_ais: bool
     settings: tuple[np.ndarray, np.ndarray]  # observers' tracker settings, per pair
     nothing_in_flight: np.ndarray  # (m,) +inf: no AIS report on its way (a batch without AIS)
+    ais_reports: ais.AisReports | None = None  # this step's, overwritten at the next
 
     @classmethod
     def build(cls, configs: Sequence[Mapping[str, Any]], pair_i: np.ndarray,
@@ -98,7 +99,9 @@ class Observation:
         if self.has_ais:
             self.ais_s, reports = ais.step(
                 self.ais_p, self.ais_s, t_s, self.obs, self.tgt, x, current_ne,
-                self.banks["ais"].state, self.banks["ais_rx"].state, inplace=True)
+                self.banks["ais"].state, self.banks["ais_rx"].state, inplace=True,
+                out=self.ais_reports)
+            self.ais_reports = reports
         self.tracks = tracker.step(
             self.tracker_p, self.tracks, self.obs, t_s, plots, reports, inplace=True,
             settings=self.settings,

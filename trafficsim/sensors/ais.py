@@ -306,8 +306,8 @@ def transmit(params: AisParams, state: AisState, t_s: float, x_true: np.ndarray,
 
 
 def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
-            x_true: np.ndarray, streams: np.ndarray,
-            inplace: bool = False) -> tuple[AisState, AisReports]:
+            x_true: np.ndarray, streams: np.ndarray, inplace: bool = False,
+            out: AisReports | None = None) -> tuple[AisState, AisReports]:
     """Reports of each target that reach each observer at ``t_s`` (one compiled loop over
     pairs).
 
@@ -317,14 +317,17 @@ def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt
         streams: ``(m, 4)`` uint64 random-stream states, one per pair, advanced in place by
             ``AIS_RX_NORMAL_DIMS`` numbers per report that arrives.
         inplace: update ``state.last_rx_s`` itself instead of a copy (the engine's step path).
+        out: the reports this function returned at the last step, to be overwritten and
+            returned (the engine's step path): only the pairs that receive a report now or
+            received one then are written.
     """
     m = obs.shape[0]
     check_streams(streams, m)
     last_rx = state.last_rx_s if inplace else state.last_rx_s.copy()
-    reports = AisReports(valid=np.empty(m, dtype=bool), stamp_s=np.empty(m),
-                         north_m=np.empty(m), east_m=np.empty(m), sog_mps=np.empty(m),
-                         cog_rad=np.empty(m), heading_rad=np.empty(m),
-                         in_flight_s=np.empty(m))
+    reports = out if out is not None else AisReports(
+        valid=np.zeros(m, dtype=bool), stamp_s=np.full(m, np.nan), north_m=np.full(m, np.nan),
+        east_m=np.full(m, np.nan), sog_mps=np.full(m, np.nan), cog_rad=np.full(m, np.nan),
+        heading_rad=np.full(m, np.nan), in_flight_s=np.empty(m))
     p = params
     _receive((_c(p.enabled, bool), _c(p.latency_s), _c(p.max_range_m), _c(p.z_receive)),
              _c(state.buf_t_s), _c(state.buf), _c(state.head, np.int64), last_rx, float(t_s),
@@ -340,8 +343,8 @@ def receive(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt
 def step(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: np.ndarray,
          x_true: np.ndarray, current_ne_mps: np.ndarray, tx_streams: np.ndarray,
          rx_streams: np.ndarray,
-         anchored: np.ndarray | None = None,
-         inplace: bool = False) -> tuple[AisState, AisReports]:
+         anchored: np.ndarray | None = None, inplace: bool = False,
+         out: AisReports | None = None) -> tuple[AisState, AisReports]:
     """One step: broadcast the reports that are due, then deliver those that have arrived.
 
     Arguments as in :func:`transmit` (``tx_streams``) and :func:`receive` (``rx_streams``). A
@@ -349,7 +352,7 @@ def step(params: AisParams, state: AisState, t_s: float, obs: np.ndarray, tgt: n
     """
     state, _ = transmit(params, state, t_s, x_true, current_ne_mps, tx_streams, anchored,
                         inplace)
-    return receive(params, state, t_s, obs, tgt, x_true, rx_streams, inplace)
+    return receive(params, state, t_s, obs, tgt, x_true, rx_streams, inplace, out)
 
 
 def _c(a: np.ndarray, dtype: type = float) -> np.ndarray:
@@ -510,7 +513,8 @@ def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, head: np.ndarray
              x_true: np.ndarray, streams: np.ndarray, out: tuple) -> None:
     """Newest arrived report per pair, reception range and probability (module docstring);
     ``last_rx`` advances in place. ``params``: ``(enabled, latency_s, max_range_m,
-    z_receive)``; ``out``: the arrays of :class:`AisReports`, NaN where nothing is received."""
+    z_receive)``; ``out``: the arrays of :class:`AisReports`, NaN where ``valid`` is false
+    (kept so: a pair that received nothing now is written only if it did before)."""
     enabled, latency, max_range, z_receive = params
     valid, stamp, north, east, sog, cog, heading, in_flight = out
     for k in range(obs.shape[0]):
@@ -538,10 +542,11 @@ def _receive(params: tuple, buf_t: np.ndarray, buf: np.ndarray, head: np.ndarray
                 dn, de = x_true[NORTH, j] - x_true[NORTH, i], x_true[EAST, j] - x_true[EAST, i]
                 side = norm_side(dn, de, max_range[i], 1.0)
                 ok = side < 0 if side != 0 else math.hypot(dn, de) <= max_range[i]
+        was = valid[k]
         valid[k] = ok
         if ok:
             stamp[k] = newest
             north[k], east[k], sog[k] = buf[j, slot, 0], buf[j, slot, 1], buf[j, slot, 2]
             cog[k], heading[k] = buf[j, slot, 3], buf[j, slot, 4]
-        else:
+        elif was:
             stamp[k] = north[k] = east[k] = sog[k] = cog[k] = heading[k] = math.nan
