@@ -807,8 +807,8 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
     more than the update).
 
     Ahead of pair ``k`` it prefetches, for pair ``k + PREFETCH_AHEAD`` if it has a
-    measurement, the covariance and the history records to be written (the whole history for
-    a late AIS report): they are scattered over more memory than the caches hold.
+    measurement, the covariance and the history records to be written (those it holds and
+    the next for a late AIS report): they are scattered over more memory than the caches hold.
     """
     w = np.zeros(W_SIZE)
     m = x.shape[0]
@@ -818,16 +818,16 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
         f = k + PREFETCH_AHEAD
         if f < m and ((has_radar and r_valid[f]) or (has_ais and a_valid[f])):
             o = f * HISTORY * H_SIZE
-            if has_ais and a_valid[f] and a_stamp[f] < t_state[f]:
-                for i in range(0, HISTORY * H_SIZE, 8):
-                    _prefetch(hist_flat, o + i)
-                _prefetch(hist_flat, o + HISTORY * H_SIZE - 1)
-            elif not known or in_flight[f] <= t_now:
-                for s in range(int(has_radar and r_valid[f]) + int(has_ais and a_valid[f])):
-                    row = o + (hist_start[f] + hist_n[f] + s) % HISTORY * H_SIZE
-                    for i in range(0, H_SIZE, 8):
-                        _prefetch(hist_flat, row + i)
-                    _prefetch(hist_flat, row + H_SIZE - 1)
+            first, rows = hist_n[f], int(has_radar and r_valid[f]) + int(has_ais and a_valid[f])
+            if has_ais and a_valid[f] and a_stamp[f] < t_state[f]:  # the records it holds
+                first, rows = 0, min(hist_n[f] + 1, HISTORY)
+            elif known and in_flight[f] > t_now:  # nothing will be recorded
+                rows = 0
+            for s in range(rows):
+                row = o + (hist_start[f] + first + s) % HISTORY * H_SIZE
+                for i in range(0, H_SIZE, 8):
+                    _prefetch(hist_flat, row + i)
+                _prefetch(hist_flat, row + H_SIZE - 1)
             for i in range(0, 16, 8):
                 _prefetch(P_flat, 16 * f + i)
             _prefetch(P_flat, 16 * f + 15)
