@@ -18,6 +18,10 @@ compiler vectorises such a loop only after testing at run time that the arrays i
 overlap those it reads, and by default gives up beyond 128 such tests; the limit is raised to
 :data:`MEMORY_CHECKS` (the tests cost a few hundred nanoseconds per call, the vectorised loop
 saves microseconds per hundred ships). The results are the same to the bit either way.
+
+:func:`prefetch` asks the cache for an element a loop will use a few iterations later: for
+loops that touch scattered records (a tracker's history, the buffer slot of a ship that may
+send an AIS report), which the hardware's own prefetching does not foresee.
 """
 
 from __future__ import annotations
@@ -31,6 +35,10 @@ from pathlib import Path
 
 import llvmlite.binding
 import numba
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 _PACKAGE = Path(__file__).parent
 
@@ -80,3 +88,22 @@ kernel = numba.njit(cache=True, error_model="numpy")
 #: decorator for small compiled helpers that their calling kernels must inline (a branch to an
 #: out-of-line helper can keep the compiler from optimising the caller's common path)
 inline_kernel = numba.njit(cache=True, inline="always", error_model="numpy")
+
+
+@intrinsic
+def prefetch(typingctx: object, a: types.Array, i: types.Integer) -> tuple:
+    """Ask the cache for element ``i`` of the 1-d array ``a``, to be written soon
+    (``llvm.prefetch``: a hint, it changes no result)."""
+    def codegen(context: object, builder: ir.IRBuilder, sig: object, args: list) -> object:
+        ary = context.make_array(sig.args[0])(context, builder, args[0])
+        ptr = builder.bitcast(
+            cgutils.get_item_pointer(context, builder, sig.args[0], ary, [args[1]]),
+            ir.IntType(8).as_pointer())
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32]),
+            "llvm.prefetch.p0")
+        # write, keep in all cache levels, data cache
+        builder.call(fn, [ptr, ir.Constant(i32, 1), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+    return types.void(a, types.intp), codegen

@@ -113,14 +113,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
 
 import numpy as np
-from llvmlite import ir
-from numba import types
-from numba.core import cgutils
-from numba.extending import intrinsic
 
 from trafficsim.errors import InputError
 from trafficsim.geometry import cos_sin, cpa
-from trafficsim.jit import kernel
+from trafficsim.jit import kernel, prefetch
 from trafficsim.sensors import check_keys, column, flags
 from trafficsim.sensors.ais import COG_STEP_RAD, POSITION_STEP_M, SOG_STEP_MPS, AisReports
 from trafficsim.sensors.radar import RadarPlots
@@ -437,25 +433,6 @@ W_SIZE = 28
 
 #: the loop prefetches the track and history records of the pair this many pairs ahead
 PREFETCH_AHEAD = 8
-
-
-@intrinsic
-def _prefetch(typingctx: object, a: types.Array, i: types.Integer) -> tuple:
-    """Ask the cache for element ``i`` of the 1-d array ``a``, to be written soon
-    (``llvm.prefetch``: a hint, it changes no result)."""
-    def codegen(context: object, builder: ir.IRBuilder, sig: object, args: list) -> object:
-        ary = context.make_array(sig.args[0])(context, builder, args[0])
-        ptr = builder.bitcast(
-            cgutils.get_item_pointer(context, builder, sig.args[0], ary, [args[1]]),
-            ir.IntType(8).as_pointer())
-        i32 = ir.IntType(32)
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32]),
-            "llvm.prefetch.p0")
-        # write, keep in all cache levels, data cache
-        builder.call(fn, [ptr, ir.Constant(i32, 1), ir.Constant(i32, 3), ir.Constant(i32, 1)])
-        return context.get_dummy_value()
-    return types.void(a, types.intp), codegen
 
 
 @kernel
@@ -826,11 +803,11 @@ def _step_kernel(x: np.ndarray, P: np.ndarray, t_state: np.ndarray, heard: np.nd
             for s in range(rows):
                 row = o + (hist_start[f] + first + s) % HISTORY * H_SIZE
                 for i in range(0, H_SIZE, 8):
-                    _prefetch(hist_flat, row + i)
-                _prefetch(hist_flat, row + H_SIZE - 1)
+                    prefetch(hist_flat, row + i)
+                prefetch(hist_flat, row + H_SIZE - 1)
             for i in range(0, 16, 8):
-                _prefetch(P_flat, 16 * f + i)
-            _prefetch(P_flat, 16 * f + 15)
+                prefetch(P_flat, 16 * f + i)
+            prefetch(P_flat, 16 * f + 15)
         sk = setting_row[k]
         # (a measurement with a NaN field is none: a run of them must not restart the track
         # from NaN, as the gate's rejections would)

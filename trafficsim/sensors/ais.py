@@ -68,7 +68,7 @@ import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.geometry import atan2, cos_sin, norm_side
-from trafficsim.jit import kernel
+from trafficsim.jit import kernel, prefetch
 from trafficsim.noise import check_streams, normal_from
 from trafficsim.sensors import KNOT_MPS, check_keys, column, flags, wrap_2pi, wrap_2pi_scalar
 from trafficsim.sensors.radar import probit
@@ -81,6 +81,8 @@ AIS_RX_NORMAL_DIMS = 1
 AIS_PURPOSE = "ais"
 #: reports kept in flight per ship
 AIS_BUFFER = 9
+#: the transmission loop prefetches the stream and buffer slot of the ship this far ahead
+PREFETCH_AHEAD = 8
 
 #: message 1-3 field resolutions (ITU-R M.1371-5 annex 2)
 POSITION_STEP_M = 1852.0 / 10000.0  # 1/10000 min of latitude
@@ -455,7 +457,16 @@ def _transmit(params: tuple, state: tuple, t_s: float, x_true: np.ndarray, curre
                  & (abs(x_true[R, i]) <= turn_rate[i])
                  & _surely_keeps(x_true[U, i], x_true[V, i], current[0, i], current[1, i], gap))
         quiet[i] = (settled & (not due)) | keeps
+    # the few ships that may send are scattered: ask for their stream and buffer slot early
+    streams_flat, buf_t_flat, buf_flat = streams.reshape(-1), buf_t.reshape(-1), buf.reshape(-1)
     for i in range(n):
+        f = i + PREFETCH_AHEAD
+        if f < n and not quiet[f]:
+            slot = f * AIS_BUFFER + (head[f] + 1) % AIS_BUFFER
+            prefetch(streams_flat, 4 * f)
+            prefetch(buf_t_flat, slot)
+            prefetch(buf_flat, 5 * slot)
+            prefetch(buf_flat, 5 * slot + 4)
         if quiet[i]:
             sent[i] = False
             continue
