@@ -285,16 +285,32 @@ def test_streams_are_keyed_by_encounter_observer_purpose_and_target():
 
 
 
-def test_keeping_the_history_only_while_a_report_is_in_flight_changes_no_track(monkeypatch):
+TRACK = {"coast_s": 6.0, "gate_probability": 0.9, "max_gate_failures": 1}
+
+
+def _in_flight_configs(mixed):
+    """Three ships with AIS latencies 13, 5 and 3 s; ``mixed``: the first ignores the stamps
+    of the reports it receives and the third has no transponder."""
+    configs = [{"radar": {"sigma_range_m": 40.0, "p_detect": 0.7},
+                "ais": {"p_receive": 0.6, "latency_s": latency}, "tracker": dict(TRACK)}
+               for latency in (13.0, 5.0, 3.0)]
+    if mixed:
+        configs[0]["tracker"]["latency_compensation"] = False
+        configs[2]["ais"]["enabled"] = False
+    return configs
+
+
+@pytest.mark.parametrize(("dt", "mixed"), [(1.0, False), (0.7, False), (2.3, False),
+                                           (1.0, True)])
+def test_keeping_the_history_only_while_a_report_is_in_flight_changes_no_track(
+        monkeypatch, dt, mixed):
     """The tracker keeps the measurements it may have to use again (for a late AIS report)
     only while a report is on its way; its tracks are those of a tracker told nothing, which
     keeps them all, to the bit: with reports late by a plot or two (reprocessed) and by more
-    than the history holds (propagated forward), lost reports and missed plots, and tracks
-    that coast out or fail the gate and restart."""
-    track = {"coast_s": 6.0, "gate_probability": 0.9, "max_gate_failures": 1}
-    configs = [{"radar": {"sigma_range_m": 40.0, "p_detect": 0.7},
-                "ais": {"p_receive": 0.6, "latency_s": latency}, "tracker": track}
-               for latency in (13.0, 5.0, 3.0)]
+    than the history holds (propagated forward), lost reports and missed plots, tracks that
+    coast out or fail the gate and restart, steps shorter and longer than 1 s, an observer
+    that ignores the stamps and a ship without AIS."""
+    configs = _in_flight_configs(mixed)
     n = len(configs)
     pi, pj = np.array([0, 0, 1]), np.array([1, 2, 2])
     told, untold = (Observation.build(configs, pi, pj, 5, np.zeros(n, int), np.arange(n))
@@ -312,17 +328,17 @@ def test_keeping_the_history_only_while_a_report_is_in_flight_changes_no_track(m
     # 24 kn (2 s reports), 16 kn (6 s) and 10 kn (10 s), two of them turning slowly
     x[NORTH], x[EAST], x[U] = [0.0, 4000.0, -2500.0], [0.0, 2000.0, 3500.0], [12.5, 8.2, 5.1]
     x[PSI] = np.radians([10.0, 200.0, 300.0])
-    for t in range(400):
+    for k in range(round(400.0 / dt)):
         active = told.tracks.active.copy()
         for o in (told, untold):
-            o.update(x, x[:6].copy(), np.zeros((2, n)), float(t))
+            o.update(x, x[:6].copy(), np.zeros((2, n)), k * dt)
         restarts += np.sum(active & (told.tracks.n_updates == 1))
         for f in ("x", "P", "t_s", "heard_s", "active", "n_updates", "gate_failures"):
             np.testing.assert_array_equal(getattr(told.tracks, f), getattr(untold.tracks, f),
-                                          err_msg=f"{f} at {t} s")
-        x[NORTH] += x[U] * np.cos(x[PSI])
-        x[EAST] += x[U] * np.sin(x[PSI])
-        x[PSI] += np.radians([0.4, -0.3, 0.0])
+                                          err_msg=f"{f} at {k * dt} s")
+        x[NORTH] += dt * x[U] * np.cos(x[PSI])
+        x[EAST] += dt * x[U] * np.sin(x[PSI])
+        x[PSI] += dt * np.radians([0.4, -0.3, 0.0])
     late = np.array(late)
-    assert np.sum(late <= 6.0) > 50 and np.sum(late > 12.0) > 50 and restarts > 5
+    assert np.sum(late <= 6.0) > 20 and np.sum(late > 12.0) > 20 and restarts > 5
     assert told.tracks.hist_n.sum() < untold.tracks.hist_n.sum()  # fewer records kept
