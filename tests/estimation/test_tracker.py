@@ -910,6 +910,10 @@ def test_predict_is_f_p_ft_plus_q_and_nan_when_untracked() -> None:
         np.testing.assert_allclose(P[k], F @ state.P[k] @ F.T + Q, rtol=1e-12)
     assert np.isnan(x[2]).all() and np.isnan(P[2]).all()
     np.testing.assert_array_equal(tracker.predict_state(state, 10.0), x)
+    formula = state.x.copy()  # (the compiled loop, to the bit)
+    formula[:, :2] += (10.0 - state.t_s)[:, None] * state.x[:, 2:]
+    formula[~state.active] = np.nan
+    np.testing.assert_array_equal(x, formula)
     x0, P0 = tracker.predict(t_par, state, obs, 3.5)  # zero interval: unchanged
     np.testing.assert_array_equal(x0[:2], state.x[:2])
     np.testing.assert_allclose(P0[:2], state.P[:2], rtol=1e-15)

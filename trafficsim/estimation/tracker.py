@@ -387,12 +387,25 @@ def predict(params: TrackerParams, state: TrackState, obs: np.ndarray, t_s: floa
 
 def predict_state(state: TrackState, t_s: float) -> np.ndarray:
     """The states of :func:`predict` alone (no covariance): ``(m, 4)``, NaN for untracked
-    pairs."""
-    d = float(t_s) - state.t_s
-    x = state.x.copy()
-    x[:, :2] += d[:, None] * state.x[:, 2:]
-    x[~state.active] = np.nan
-    return x
+    pairs; the transpose of a C-contiguous ``(4, m)`` array (one row per state component, as
+    the decision features read them)."""
+    rows = np.empty((N_STATE, state.x.shape[0]))
+    _predicted_rows(state.x, state.t_s, state.active, float(t_s), rows)
+    return rows.T
+
+
+@kernel
+def _predicted_rows(x: np.ndarray, t_state: np.ndarray, active: np.ndarray, t_s: float,
+                    rows: np.ndarray) -> None:
+    """:func:`predict_state` into ``rows (4, m)``."""
+    for k in range(x.shape[0]):
+        if active[k]:
+            d = t_s - t_state[k]
+            rows[POS_N, k] = x[k, POS_N] + d * x[k, VEL_N]
+            rows[POS_E, k] = x[k, POS_E] + d * x[k, VEL_E]
+            rows[VEL_N, k], rows[VEL_E, k] = x[k, VEL_N], x[k, VEL_E]
+        else:
+            rows[POS_N, k] = rows[POS_E, k] = rows[VEL_N, k] = rows[VEL_E, k] = math.nan
 
 
 def cpa_from_tracks(x_track: np.ndarray, own_north_m: np.ndarray, own_east_m: np.ndarray,
