@@ -749,18 +749,8 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
     keep = kept * (1.0 + RESUME_MARGIN)
     near = hypot_below(pn, pe,
                        arbitration.ALONGSIDE_RANGE_FACTOR * kept * (1.0 + RESUME_MARGIN))
-    alongside_prev = False
     for row in range(n_rows):
-        short = close = False  # the previous candidate's verdicts
         for step in range(end[row]):
-            # turns clipped at the target course repeat the previous candidate
-            if (step >= 2 and c1[row, step] == c1[row, step - 1]
-                    and s1[row, step] == s1[row, step - 1]
-                    and meet_m[row, step] == meet_m[row, step - 1]):
-                keeps[row, step] &= not short
-                clears[row, step] &= not close
-                alongside[row, step] |= alongside_prev
-                continue
             short = close = False
             for variant in range(2):
                 if variant == 1 and step == 0:
@@ -779,13 +769,12 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
                 short, close = short or too_short, close or too_close
             keeps[row, step] &= not short
             clears[row, step] &= not close
-            alongside_prev = False
             if near:
                 sp = speed[row]
                 dvn = wn - sp * c1[row, step]
                 dve = we - sp * s1[row, step]
                 if dvn * dvn + dve * dve < arbitration.ALONGSIDE_SPEED_MPS**2:
-                    alongside[row, step] = alongside_prev = True
+                    alongside[row, step] = True
 
 
 @kernel
