@@ -220,6 +220,19 @@ def test_damaged_tracks_file_is_named(synthetic_run):
     assert err.value.path == str(run / "tracks.parquet")
 
 
+def test_a_radar_with_no_other_ship_gives_an_empty_tracks_table_that_loads(tmp_path):
+    """A lone ship with radar writes a tracks file without rows: it loads as no pairs."""
+    scenario = tmp_path / "lone.yaml"
+    scenario.write_text("schema_version: 1\nname: lone\nduration_s: 20\nrecord_every_s: 5\n"
+                        "ships:\n  - {name: own, type: cargo, north_m: 0, east_m: 0, "
+                        "heading_deg: 0, filter: pv, sensors: {radar: {}}}\n")
+    run_scenario(scenario, tmp_path / "out")
+    assert pq.read_table(tmp_path / "out" / "tracks.parquet").num_rows == 0
+    tracks = load_run(tmp_path / "out").tracks
+    assert tracks.observer.shape == (0,) and tracks.north_m.shape == (5, 0)
+    assert tracks.tracked.shape == (5, 0)
+
+
 def test_has_estimate_is_a_difference_beyond_a_micrometre(synthetic_run):
     """A ship's estimate counts as a filter's only if it leaves the truth by more than 1e-6 m
     somewhere: rounding noise of 1e-9 m is still 'the truth'."""

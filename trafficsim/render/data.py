@@ -284,7 +284,7 @@ def _tracks(path: Path, index: dict[str, int], n_records: int) -> Tracks:
 
     sog, cog = grid("track_sog_kn") * KN, np.radians(grid("track_cog_deg"))
     return Tracks(obs, tgt, grid("track_north_m"), grid("track_east_m"), sog * np.cos(cog),
-                  sog * np.sin(cog), np.asarray(cols["tracked"], dtype=bool).reshape(-1, m))
+                  sog * np.sin(cog), np.asarray(cols["tracked"], dtype=bool).reshape(n_records, m))
 
 
 def live_data(rec: Any, sim: Any, name: str, record_every_s: float, duration_s: float
