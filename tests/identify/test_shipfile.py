@@ -149,7 +149,7 @@ def test_written_file_layout_and_no_leftover_temporary_files(tmp_path: Path) -> 
     """Extra particulars follow length, beam, draught in alphabetical order; empty autopilot or
     sensors are not written; the folder holds only the ship file after the atomic write."""
     spec = load_ship("cargo")
-    parts = {**spec["particulars"], "zeta_m": 1.0, "alpha_m": 2.0}
+    parts = {**spec["particulars"], "yaw_inertia_kgm2": 1.0, "block_coefficient": 0.7}
     spec = {**spec, "particulars": parts, "autopilot": {}, "sensors": None}
     loaded = write_ship_file(tmp_path / "c.yaml", spec, "c", "d", "s", {})
     body = (tmp_path / "c.yaml").read_text()
@@ -159,5 +159,5 @@ def test_written_file_layout_and_no_leftover_temporary_files(tmp_path: Path) -> 
     assert keys == ["length_m", "beam_m", "draught_m", *rest]
     assert "autopilot:" not in body and "sensors:" not in body
     assert [p.name for p in tmp_path.iterdir()] == ["c.yaml"]
-    assert parse_yaml(body).data["particulars"]["alpha_m"] == 2.0
+    assert parse_yaml(body).data["particulars"]["block_coefficient"] == 0.7
     assert loaded["coefficients"] == pytest.approx(spec["coefficients"], rel=1e-10)

@@ -56,6 +56,9 @@ def test_unknown_model_family_suggests_the_right_one(tmp_path):
     ("  length_m: 320.0", "  length_m: long", "expected a number"),
     ("  rudder_max_deg: 35.0", "  rudder_max_deg: -35.0", "rudder_max_deg"),
     ("service_speed_kn: 15.5", "service_speed_kn: 15.5\nspeed: 3", "unknown key 'speed'"),
+    ("  length_m: 320.0", "  length_m: 320.0\n  lenght_m: 3",
+     "particulars.lenght_m: unknown key 'lenght_m' (did you mean 'length_m'?)"),
+    ("  length_m: 320.0", "  length_m: 320.0\n  keel_depth: 3", "known particulars: length_m"),
     # values that set time steps: a tiny ship or sub-step never finished (or overflowed)
     ("  length_m: 320.0", "  length_m: 1.0e-300", "length_m: must be >= 0.5"),
     ("integration: {max_dt_s: 1.0}", "integration: {max_dt_s: 1.0e-9}",
@@ -301,7 +304,11 @@ _G = "(volume of displacement)"
      "must be > 0 (propeller thrust coefficient), got -0.2772"),
     ("catfish", "  N_rdot: -0.001464", "  N_rdot: 0.001464", "coefficients.N_rdot",
      "must be <= 0 (yaw added inertia derivative, -J_z), got 0.001464"),
+    ("kvlcc2", "  lcg_m: 11.2", "  lcg_m: -1000", "particulars.lcg_m",
+     "must lie within half the length of midship (|lcg_m| <= 160 m), got -1000"),
     # response (bulk_carrier)
+    ("bulk_carrier", "  block_coefficient: 0.85", "  block_coefficient: 1.5",
+     "particulars.block_coefficient", "must be > 0 and <= 1 (block coefficient), got 1.5"),
     ("bulk_carrier", "  c3: 1.9627e-4", "  c3: 1.9627e-4\n  rudder_fade_speed_mps: 0",
      "coefficients.rudder_fade_speed_mps",
      "must be > 0 (speed below which the rudder fades; 0 would turn a ship at rest), got 0"),

@@ -149,7 +149,11 @@ PARTICULAR_LIMITS: Mapping[str, Limit] = {
     "mass_kg": Limit(gt=0, what="mass"),
     "yaw_inertia_kgm2": Limit(gt=0, what="yaw moment of inertia"),
     "gear_ratio": Limit(gt=0, what="engine / propeller speed ratio"),
+    "block_coefficient": Limit(gt=0, le=1, what="block coefficient"),
+    "hull_separation_m": Limit(gt=0, what="distance between the hulls of a catamaran"),
 }
+#: every key a ship file's particulars may hold (``lcg_m`` within half the length of midship)
+KNOWN_PARTICULARS = ("length_m", "beam_m", "draught_m", "lcg_m", *PARTICULAR_LIMITS)
 #: limits shared by the families' coefficients of the same meaning
 ADDED_MASS = Limit(ge=0, what="added mass, non-dimensional")
 GYRADIUS = Limit(gt=0, lt=1, what="yaw radius of gyration / length")
@@ -175,6 +179,10 @@ def limit_problems(family: ModelFamily, ship: Mapping[str, Any]) -> list[tuple[s
             if problem:
                 out.append((f"{section}.{key}", problem))
     parts = ship.get("particulars", {})
+    if "lcg_m" in parts and abs(float(parts["lcg_m"])) > 0.5 * float(parts["length_m"]):
+        out.append(("particulars.lcg_m", f"must lie within half the length of midship "
+                    f"(|lcg_m| <= {0.5 * float(parts['length_m']):g} m), got "
+                    f"{float(parts['lcg_m']):g}"))
     if "windage_centroid_from_bow_m" in parts:
         loa = float(parts.get("length_overall_m", parts["length_m"]))
         if float(parts["windage_centroid_from_bow_m"]) > loa:

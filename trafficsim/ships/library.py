@@ -51,6 +51,14 @@ class Particulars(Strict):
     @classmethod
     def _numbers(cls, data: Any) -> Any:
         if isinstance(data, dict):
+            from trafficsim.ships.base import KNOWN_PARTICULARS
+
+            for key in data:
+                if key not in KNOWN_PARTICULARS:
+                    close = difflib.get_close_matches(str(key), KNOWN_PARTICULARS, n=1)
+                    hint = (f" (did you mean '{close[0]}'?)" if close else
+                            f"; known particulars: {', '.join(KNOWN_PARTICULARS)}")
+                    raise FieldError(f"unknown key '{key}'{hint}", loc=(key,))
             for key, value in data.items():
                 if isinstance(value, bool) or not isinstance(value, (int, float)):
                     raise FieldError(f"expected a number, got {value!r}", loc=(key,))
