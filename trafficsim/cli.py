@@ -164,7 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="known ship to compare the standard manoeuvres with "
                             "(simulated trials)")
     ident.add_argument("--name", default=None, help="name of the identified ship")
-    ident.add_argument("--max-nfev", type=_positive(int), default=60,
+    ident.add_argument("--max-nfev", type=_positive(int), default=None,
                        help="most model evaluations of the output-error fit (default 60)")
     ident.add_argument("--columns", type=_mapping, default=None, metavar="NAME=COLUMN,...",
                        help="read trial-data columns from other columns of the CSV files, "
@@ -364,6 +364,8 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
 
     _only_with("--address", args.address is not None, args.executor == "dask",
                "with --executor dask")
+    _only_with("--workers", args.workers is not None, args.executor == "local",
+               "to local processes (a Dask cluster has its own workers)")
     s = run_campaign(args.spec, args.out, args.workers, args.executor, args.address,
                      progress=not args.no_progress)
     rate = s["ship_steps_per_s"]
@@ -461,10 +463,16 @@ def _cmd_identify(args: argparse.Namespace) -> int:
         sigma_pos_m=args.sigma_pos_m,
         sigma_heading_rad=None if args.sigma_heading_deg is None
         else float(np.radians(args.sigma_heading_deg)))
+    output_error = args.method != "ekf"
+    _only_with("--max-nfev", args.max_nfev is not None, output_error,
+               "to the output-error fit (--method oe or ekf+oe)")
+    _only_with("--bounds", bool(args.bounds), output_error,
+               "to the output-error fit (--method oe or ekf+oe)")
     bounds = {name: (lo, hi) for name, lo, hi in args.bounds}
     rep = identify(args.model, args.data, args.out, args.base, args.holdout, args.method,
                    args.fit, bounds, args.horizon_s, args.dt_s, args.wind, args.reference,
-                   args.name, args.max_nfev, smoother=smoother, columns=args.columns)
+                   args.name, 60 if args.max_nfev is None else args.max_nfev,
+                   smoother=smoother, columns=args.columns)
     fit = rep["fit"]
     if fit is not None:
         print(f"{rep['model']} model: output-error cost {fit['cost_initial']:.4g} -> "

@@ -22,6 +22,9 @@ _STATE = ("decided_own_role", "decided_encounter", "decided_other_role", "decide
 
 def _read(run_dir: Path) -> dict[str, np.ndarray]:
     path = run_dir / "decisions.parquet"
+    if not run_dir.is_dir():
+        raise InputError("no such folder (the output folder of 'trafficsim run' or "
+                         "'trafficsim replay' was expected)", path=str(run_dir))
     if not path.is_file():
         raise InputError("no decisions recorded here (a run folder of a scenario in which some "
                          "ship takes collision-avoidance decisions was expected)",
