@@ -148,6 +148,9 @@ def test_port_zigzag_trial_puts_the_first_rudder_to_port(tmp_path):
     ("crash-stop", {"dt": 0.0005}, "--dt-s", "expected a time step from 0.001 to 60 s, got 0.0005"),
     ("zigzag", {"dt": 61.0}, "--dt-s", "expected a time step from 0.001 to 60 s, got 61"),
     ("turning", {"dt": 0.0}, "--dt-s", "expected a time step from 0.001 to 60 s, got 0"),
+    ("zigzag", {"dt": 20.0}, "--dt-s",
+     "expected at most L/U = 15.5 s for this ship (a longer step skips its manoeuvring motion), "
+     "got 20"),
 ])
 def test_values_a_manoeuvre_rejects_are_reported_under_their_flag(tmp_path, manoeuvre, kw, flag,
                                                                   message):
@@ -157,6 +160,23 @@ def test_values_a_manoeuvre_rejects_are_reported_under_their_flag(tmp_path, mano
     assert err.value.key == flag and err.value.message == message
     assert str(err.value) == f"{flag}: {message}"
     assert not out.exists()  # nothing written
+
+
+def test_a_ship_model_that_runs_away_is_one_line_naming_the_file_and_time(tmp_path):
+    """A sign error in a ship file (a destabilising sway derivative) makes the state NaN
+    within seconds: one SimulationError naming the file and the time, nothing written."""
+    from trafficsim.errors import SimulationError
+    from trafficsim.ships.library import LIBRARY_DIR
+
+    text = (LIBRARY_DIR / "kvlcc2.yaml").read_text()
+    assert "  Y_v: -0.315\n" in text
+    ship = tmp_path / "runaway.yaml"
+    ship.write_text(text.replace("  Y_v: -0.315\n", "  Y_v: 31.5\n"))
+    for manoeuvre in ("turning", "zigzag"):
+        with pytest.raises(SimulationError) as err:
+            _trial(tmp_path / "out", str(ship), manoeuvre)
+        assert str(err.value).startswith(f"{ship}: the ship's state became non-finite at t = ")
+        assert not (tmp_path / "out").exists()
 
 
 def test_an_error_without_a_flag_keeps_its_message(tmp_path):

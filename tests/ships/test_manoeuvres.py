@@ -258,12 +258,17 @@ def test_bad_manoeuvre_arguments_are_input_errors_naming_the_argument(kwargs, ke
 
 
 def test_limits_of_the_time_step_and_speed_are_accepted():
-    """dt exactly 60 s is accepted; so is an approach at twice the service speed, which this
+    """A turn's dt up to L/U is accepted (beyond it refused; a crash stop takes up to 60 s);
+    so is an approach at twice the service speed, which this
     engine cannot hold: the ship approaches at full power and slows for the 60 s settling
     run as the quadratic surge says, ``u(t) = a coth(a t / c + arcoth(u0 / a))`` with ``a`` the
     full-power speed (rps_max / rps_service x 10 kn = 13.33 kn) and ``c = 2 U_s T_u``."""
-    _, ind = manoeuvres.turning_circle(load_ship("cargo"), dt=60.0, turns_deg=90.0)
+    cargo = load_ship("cargo")
+    most = cargo["particulars"]["length_m"] / from_kn(cargo["service_speed_kn"])
+    _, ind = manoeuvres.turning_circle(cargo, dt=most, turns_deg=90.0)
     assert ind["time_to_90_s"] > 0
+    with pytest.raises(InputError, match="expected at most L/U"):
+        manoeuvres.turning_circle(cargo, dt=1.01 * most, turns_deg=90.0)
     spec = _nomoto()
     track, ind = manoeuvres.turning_circle(spec, speed_kn=20.0, dt=0.5, turns_deg=90.0)
     c = spec["coefficients"]

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from trafficsim.errors import InputError
+from trafficsim.errors import InputError, SimulationError
 from trafficsim.ships import base
 from trafficsim.ships.base import PSI, RPS, Actuators, Env, U
 from trafficsim.units import from_kn, to_kn
@@ -47,6 +47,7 @@ class _Ship:
         self.act = Actuators.from_specs([spec])
         self.env = env
         self.length = float(spec["particulars"]["length_m"])
+        self.name = str(spec.get("path") or spec["name"])
         speed = from_kn(speed_kn if speed_kn is not None else spec["service_speed_kn"])
         service = from_kn(spec["service_speed_kn"])
         if not speed >= MIN_SPEED_FACTOR * service:
@@ -76,6 +77,14 @@ class _Ship:
         """Run straight with the approach rps until speed is steady."""
         for _ in range(int(seconds / dt)):
             self.advance(0.0, self.rps0, dt)
+        self.check_finite("in the straight approach run")
+
+    def check_finite(self, when: str) -> None:
+        """Raise :class:`SimulationError` if the state is no longer finite (a ship model that
+        runs away)."""
+        if not np.isfinite(self.x).all():
+            raise SimulationError(f"{self.name}: the ship's state became non-finite {when}; "
+                                  "its model runs away (check the ship file's coefficients)")
 
     def advance(self, rudder_cmd_rad: float, rps_cmd: float, dt: float) -> None:
         sub = max(1, int(np.ceil(dt / self.max_dt - 1e-9)))
@@ -101,13 +110,17 @@ def _track(rows: list[np.ndarray], env: Env) -> Track:
     }
 
 
-def _auto_dt(ship: _Ship, dt: float | None) -> float:
-    """Time step: given (within :data:`DT_RANGE_S`), else 1 s capped at L/(20 U) so small
-    models turn smoothly."""
+def _auto_dt(ship: _Ship, dt: float | None, turns: bool = True) -> float:
+    """Time step: given (within :data:`DT_RANGE_S`, and at most L/U for a manoeuvre that
+    ``turns``), else 1 s capped at L/(20 U) so small models turn smoothly."""
     if dt is not None:
         if not DT_RANGE_S[0] <= dt <= DT_RANGE_S[1]:
             raise InputError(f"expected a time step from {DT_RANGE_S[0]:g} to "
                              f"{DT_RANGE_S[1]:g} s, got {dt:g}", key="dt_s")
+        most = ship.length / max(ship.speed0, 0.1)
+        if turns and dt > most:
+            raise InputError(f"expected at most L/U = {most:.3g} s for this ship (a longer step "
+                             f"skips its manoeuvring motion), got {dt:g}", key="dt_s")
         return dt
     return float(min(1.0, 0.05 * ship.length / max(ship.speed0, 0.1)))
 
@@ -133,6 +146,7 @@ def _run(ship: _Ship, dt: float, t_max: float,
             break
         ship.advance(cmd[0], cmd[1], dt)
         t += dt
+        ship.check_finite(f"at t = {t:g} s")
         psi = float(ship.x[PSI, 0])
         unwrapped += (psi - last + np.pi) % (2 * np.pi) - np.pi
         last = psi
@@ -282,7 +296,7 @@ def crash_stop(spec: Mapping[str, Any], speed_kn: float | None = None, dt: float
     if not ship.family.supports_astern or ship.act.rps_min[0] >= 0.0:
         raise InputError(f"ship '{spec['name']}' ({spec['model']} model) cannot go astern: "
                          "a crash stop needs a model that supports astern thrust")
-    step = _auto_dt(ship, dt)
+    step = _auto_dt(ship, dt, turns=False)
     ship.settle(60.0, step)
     astern = float(ship.act.rps_min[0])
 
