@@ -225,6 +225,25 @@ def test_cli_missing_data_file(tmp_path, capsys) -> None:
     assert not (tmp_path / "o").exists()
 
 
+def test_cli_blank_or_coarse_data_names_the_file(tmp_path, capsys) -> None:
+    """A file of blank lines is an empty file; a run sampled every 50 s is coarser than the
+    KVLCC2's L/U (40.13 s) and cannot be replayed: both one line naming the file, exit 2."""
+    blank = tmp_path / "blank.csv"
+    blank.write_text("\n")
+    line = error_line(capsys, ["diagnose", "--ship", "kvlcc2", "--data", blank, "--out",
+                                tmp_path / "o"])
+    assert line.endswith(f"{blank}:1: empty file (blank lines only); expected a header row")
+    t = np.arange(40.0) * 50.0
+    coarse = _write_csv(tmp_path / "coarse.csv", {
+        "t_s": t, "north_m": 7 * t, "east_m": 0.01 * t * t, "heading_deg": 0.1 * t,
+        "rudder_deg": 10.0 * (t > 100), "rpm": t * 0 + 60})
+    line = error_line(capsys, ["diagnose", "--ship", "kvlcc2", "--data", coarse, "--out",
+                                tmp_path / "o", "--effects", "current"])
+    assert (f"{coarse}: t_s: sampling interval 50 s (median time step) exceeds L/U = 40.13 s "
+            "of the ship (320 m at 15.5 kn)") in line
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("value", ["0", "-1", "two"])
 def test_cli_bad_self_test_count(capsys, value) -> None:
     with pytest.raises(SystemExit) as exc:

@@ -16,7 +16,7 @@ from trafficsim.errors import DataError, InputError
 from trafficsim.identify import command
 from trafficsim.identify.preprocess import Kinematics
 from trafficsim.io.results import write_csv
-from trafficsim.io.trialdata import from_arrays
+from trafficsim.io.trialdata import TrialData, from_arrays
 from trafficsim.ships import manoeuvres
 from trafficsim.ships.library import LIBRARY_DIR, load_ship
 
@@ -89,6 +89,22 @@ def test_working_interval(native, given, expect) -> None:
                              "rudder_deg": t, "rpm": t})
     got = command.working_interval_s([slow, trial], 225.0, 13 * KNOT, given)
     assert got == pytest.approx(expect)
+
+
+def test_runs_sampled_more_coarsely_than_l_over_u_are_refused() -> None:
+    """L/U = 225 m / 13 kn = 33.6 s: a run sampled every 40 s is named (whether --dt-s is
+    given or not), one sampled every 30 s passes."""
+    def run(name: str, dt: float) -> TrialData:
+        t = np.arange(0.0, 40.0 * dt, dt)
+        return from_arrays(name, {"t_s": t, "north_m": t, "east_m": t, "heading_deg": t,
+                                  "rudder_deg": t, "rpm": t})
+
+    assert command.working_interval_s([run("a", 30.0)], 225.0, 13 * KNOT, None) == 30.0
+    for given in (None, 35.0):
+        with pytest.raises(DataError, match=r"^t_s: sampling interval 40 s \(median time "
+                                            r"step\) exceeds L/U = 33.64 s of the ship"):
+            command.working_interval_s([run("a", 1.0), run("b", 40.0)], 225.0, 13 * KNOT,
+                                       given)
 
 
 def _kin(u: list[float], rps: list[float]) -> Kinematics:
@@ -263,6 +279,26 @@ def _csv_text(tmp_path: Path, name: str, text: str) -> Path:
                                           "kvlcc2"],
      "--wind: applies only when the model has wind loads and the runs carry wind; the runs "
      "carry no wind"),
+    (lambda p: _csv_text(p, "blank.csv", "\n\n"), [],
+     "blank.csv:1: empty file (blank lines only); expected a header row"),
+    # cargo: L/U = 160.93 m / 15 kn = 20.85 s; one sample every 25 s is coarser
+    (lambda p: _csv_text(p, "y.csv", "t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n"
+                         + "".join(f"{25 * i},{175 * i},0,{i},{5 * (i > 3)},80\n"
+                                   for i in range(30))), [],
+     "y.csv: t_s: sampling interval 25 s (median time step) exceeds L/U = 20.85 s of the ship "
+     "(160.93 m at 15 kn): more than a ship length per sample, so it cannot identify or "
+     "replay the ship's motion"),
+    (lambda p: _simple_run(p / "z.csv"), ["--bounds", "K_prime=-5:-1"],
+     "--bounds: K_prime=-5:-1 reaches outside the physical range of K_prime, which must be "
+     "> 0 (rudder gain; positive rudder turns to starboard), got -5"),
+    (lambda p: _simple_run(p / "z2.csv"), ["--bounds", "K_prime=0:5"],
+     "--bounds: K_prime=0:5 reaches outside the physical range of K_prime, which must be > 0"),
+    # rpm negated: the ship makes 7 m/s ahead on an astern propeller throughout
+    (lambda p: _csv_text(p, "neg.csv", "t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n"
+                         + "".join(f"{i},{7 * i},0,{0.5 * i},{10 * (i > 3)},-80\n"
+                                   for i in range(60))), [],
+     ": rpm: rps_service cannot be identified from this data: the ship makes way ahead above "
+     "30 % of its service speed (2.31 m/s) only with the propeller stopped or astern"),
 ])
 def test_bad_input_is_one_located_line(tmp_path, capsys, make, extra, expect) -> None:
     path = make(tmp_path)
@@ -348,6 +384,47 @@ def test_end_to_end_recovers_the_changed_coefficients(cargo_zigzag, tmp_path, ca
     pred = report["validation"]["prediction"]["training"]
     assert pred["identified"]["all"]["end_position_rms_m"] < pred["start"]["all"][
         "end_position_rms_m"]
+
+
+def test_a_fit_no_ship_file_holds_names_the_data_and_writes_nothing(cargo_zigzag, tmp_path,
+                                                                    capsys) -> None:
+    """The cargo ship's zig-zag logged with 1.5 times its propeller speed: the fitted
+    propeller speed at the service speed (2 rev/s) is beyond the base ship's engine (rps_max
+    1.78): the error names the data file and its rpm column, not the ship file, which is not
+    written."""
+    data, _ = cargo_zigzag
+    text = data.read_text().splitlines()
+    rpm = text[0].split(",").index("rpm")
+    rows = [row.split(",") for row in text[1:]]
+    for row in rows:
+        row[rpm] = repr(1.5 * float(row[rpm]))
+    fast = tmp_path / "fast.csv"
+    fast.write_text("\n".join([text[0], *(",".join(r) for r in rows)]) + "\n")
+    out = tmp_path / "o"
+    line = error_line(capsys, ["identify", "--model", "nomoto", "--base", "cargo", "--data",
+                                fast, "--out", out, "--fit", "rps_service", "--max-nfev", "10"])
+    assert f"error: {fast}: rpm: the propeller speed at the service speed fitted from this " \
+           "data (rps_service 2" in line
+    assert "beyond the engine of the base ship 'cargo' (--base; rps_max 1.7778 rev/s)" in line
+    assert "ship.yaml" not in line and not out.exists()
+
+
+def test_check_fitted_names_the_data_not_the_ship_file(tmp_path) -> None:
+    """A fitted coefficient outside the range a ship file takes: one run is named by its file,
+    several by --data; a valid ship passes."""
+    run = command.read_runs([_simple_run(tmp_path / "r.csv")], [])[2]
+    spec = load_ship("cargo")
+    command.check_fitted(spec, spec, run)
+    bad = {**spec, "coefficients": {**spec["coefficients"], "T_prime": -2.0}}
+    with pytest.raises(InputError) as err:
+        command.check_fitted(bad, spec, run)
+    assert str(err.value).startswith(
+        f"{tmp_path / 'r.csv'}: the coefficients fitted from this data make no valid ship "
+        "(coefficients.T_prime: must be > 0")
+    with pytest.raises(InputError) as err:
+        command.check_fitted(bad, spec, run * 2)
+    assert err.value.key == "--data" and err.value.path is None
+    assert "fitted from the 2 training runs" in str(err.value)
 
 
 def test_an_output_path_that_is_a_file(cargo_zigzag, tmp_path, capsys) -> None:

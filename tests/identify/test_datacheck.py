@@ -14,6 +14,7 @@ from trafficsim.io.trialdata import from_arrays, read_trial
 from trafficsim.ships.library import load_ship
 
 HEADER = "t_s,north_m,east_m,heading_deg,rudder_deg,rpm"
+KNOT = 1852.0 / 3600.0
 
 
 def _rows(n: int = 30) -> list[list[float]]:
@@ -97,9 +98,9 @@ def test_empty_cells_and_nan_stay_missing_values(tmp_path: Path) -> None:
 def test_negative_speeds_and_optional_columns(tmp_path: Path) -> None:
     """A negative speed over ground or wind speed is no reading; an infinite extra column is
     refused under its own name."""
-    rows = [[*r, 13.0, 5.0] for r in _rows()]
+    rows = [[*r, 13.0, 5.0, 90.0] for r in _rows()]
     rows[5][7] = -2.0
-    path = _csv(tmp_path / "w.csv", rows, HEADER + ",sog_kn,wind_speed_mps")
+    path = _csv(tmp_path / "w.csv", rows, HEADER + ",sog_kn,wind_speed_mps,wind_from_deg")
     with pytest.raises(DataError, match=r":7: wind_speed_mps: expected a speed of at least 0, "
                                         r"got -2$"):
         datacheck.check_run(read_trial(path))
@@ -107,6 +108,28 @@ def test_negative_speeds_and_optional_columns(tmp_path: Path) -> None:
     rows[8][6] = "inf"
     path = _csv(tmp_path / "x.csv", rows, HEADER + ",gnss_fix_north_m")
     with pytest.raises(DataError, match=r":10: gnss_fix_north_m: expected a finite number"):
+        datacheck.check_run(read_trial(path))
+
+
+def test_a_true_wind_above_100_mps_is_located(tmp_path: Path) -> None:
+    """A true wind speed above 100 m/s (no wind on record is that strong) is refused at its
+    line and column, in either file format; 100 m/s itself is a reading."""
+    rows = [[*r, 100.0, 90.0] for r in _rows()]
+    path = _csv(tmp_path / "w.csv", rows, HEADER + ",wind_speed_mps,wind_from_deg")
+    datacheck.check_run(read_trial(path))
+    rows[6][6] = 150.0
+    path = _csv(tmp_path / "w.csv", rows, HEADER + ",wind_speed_mps,wind_from_deg")
+    with pytest.raises(DataError) as err:
+        datacheck.check_run(read_trial(path))
+    assert str(err.value) == (f"{path}:8: wind_speed_mps: expected a true wind speed of at most "
+                              "100 m/s (above the strongest sustained winds on record), got 150")
+    header = ("t [s],x_position_mid [m],y_position_mid [m],psi_hat [rad],n_prop [rps],"
+              "delta_rudder [rad],wind_velo_true [m/s],wind_dir_true [rad]")
+    rows = [[0.1 * i, 0.04 * i, 0.0, 0.01 * i, 10.0, 0.2, 3.0, 1.0] for i in range(30)]
+    rows[3][6] = 1e4
+    path = _csv(tmp_path / "frt.csv", rows, header)
+    with pytest.raises(DataError, match=r"frt.csv:5: wind_velo_true \[m/s\]: expected a true "
+                                        r"wind speed of at most 100 m/s"):
         datacheck.check_run(read_trial(path))
 
 
@@ -191,3 +214,36 @@ def test_turning_coefficients_need_rudder_and_heading_to_move(tmp_path: Path) ->
         datacheck.check_excitation([run, run2], ("a1", "b1", "c1"))
     turning = read_trial(_csv(tmp_path / "turn.csv", _rows()))
     datacheck.check_excitation([run, run2, turning], names)
+
+
+def _turning(path: Path, rpm: float, n: int = 60) -> tuple[list, list]:
+    """A cargo-ship turn at 7 m/s with the given rpm, read and smoothed."""
+    rows = [[float(i), 7.0 * i, 0.01 * i * i, 0.5 * i, 0.0 if i < 5 else 10.0, rpm]
+            for i in range(n)]
+    trial = read_trial(_csv(path, rows))
+    return [trial], preprocess.smooth_runs([trial], 160.93, 15 * KNOT)
+
+
+def test_service_propeller_speed_needs_the_propeller_ahead(tmp_path: Path) -> None:
+    """rps_service from a ship that makes 7 m/s ahead on -80 rpm (a column whose sign is
+    reversed): refused at the file's rpm column (one run) or naming --data (several); the
+    same ahead (or a run that never goes faster than 30 % of the service speed) passes."""
+    u = 15 * KNOT
+    trials, runs = _turning(tmp_path / "ok.csv", 80.0)
+    datacheck.check_propulsion(trials, runs, u)
+    neg_trials, neg_runs = _turning(tmp_path / "neg.csv", -80.0)
+    with pytest.raises(DataError) as err:
+        datacheck.check_propulsion(neg_trials, neg_runs, u)
+    text = str(err.value)
+    assert text.startswith(f"{tmp_path / 'neg.csv'}:") and err.value.key == "rpm"
+    assert ("rps_service cannot be identified from this data: the ship makes way ahead above "
+            "30 % of its service speed (2.31 m/s) only with the propeller stopped or astern "
+            "(here 7") in text
+    assert text.endswith("the column reading -80); the rpm is signed (negative astern): check "
+                         "the sign of the column, or fit without rps_service (--fit)")
+    with pytest.raises(InputError) as err:
+        datacheck.check_propulsion(neg_trials * 2, neg_runs * 2, u, optional=False)
+    assert err.value.key == "--data" and err.value.path is None
+    assert str(err.value).endswith("check the sign of the column")
+    datacheck.check_propulsion(neg_trials, neg_runs, 100.0)  # never faster than 30 m/s
+    datacheck.check_propulsion([*neg_trials, *trials], [*neg_runs, *runs], u)

@@ -9,7 +9,13 @@ import numpy as np
 import pytest
 
 from trafficsim.errors import InputError
-from trafficsim.identify.parameters import BOUNDS, DEFAULT_FIT, Parametrisation, default_bounds
+from trafficsim.identify.parameters import (
+    BOUNDS,
+    DEFAULT_FIT,
+    Parametrisation,
+    check_physical,
+    default_bounds,
+)
 from trafficsim.identify.replay import model_rows
 from trafficsim.ships.base import families
 from trafficsim.ships.library import load_ship
@@ -103,6 +109,26 @@ def test_bounds_must_leave_room(bounds: tuple[float, float]) -> None:
     with pytest.raises(InputError, match="empty bounds for K_prime") as err:
         Parametrisation.of(load_ship("cargo"), ["K_prime"], {"K_prime": bounds})
     assert err.value.key == "--bounds"
+
+
+@pytest.mark.parametrize("name, bounds, expect", [
+    ("K_prime", (-5.0, -1.0), "K_prime=-5:-1 reaches outside the physical range of K_prime, "
+                              "which must be > 0 (rudder gain; positive rudder turns to "
+                              "starboard), got -5; give bounds inside it"),
+    ("T_prime", (1.0, float("inf")), None),
+    ("n3_prime", (-1.0, 10.0), "n3_prime=-1:10 reaches outside the physical range of n3_prime, "
+                               "which must be >= 0"),
+    ("surge_tau_s", (0.0, 10.0), "surge_tau_s=0:10 reaches outside"),
+])
+def test_user_bounds_stay_inside_the_physical_range(name, bounds, expect) -> None:
+    """User bounds reaching where no ship file can hold the coefficient are refused before any
+    fit (else the fit could end there and the ship file would be invalid)."""
+    if expect is None:
+        check_physical("nomoto", {name: bounds})
+        return
+    with pytest.raises(InputError) as err:
+        check_physical("nomoto", {name: bounds})
+    assert err.value.key == "--bounds" and str(err.value).startswith(f"--bounds: {expect}")
 
 
 def test_base_spec_is_copied_not_referenced() -> None:

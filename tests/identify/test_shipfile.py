@@ -102,12 +102,16 @@ def test_fitted_coefficients_are_marked_with_their_interval(tmp_path: Path) -> N
     assert render(spec, "c", "d", "s", {}).count("identified") == 0
 
 
-def test_an_invalid_ship_is_not_returned(tmp_path: Path) -> None:
-    """A spec the loader rejects (negative beam) raises the loader's error naming the file."""
+def test_an_invalid_ship_is_neither_returned_nor_written(tmp_path: Path) -> None:
+    """A spec the loader rejects (negative beam) raises the loader's error naming the key and
+    says the file was not written; nothing is left in the folder."""
     spec = load_ship("cargo")
     bad = {**spec, "particulars": {**spec["particulars"], "beam_m": -3.0}}
-    with pytest.raises(ShipLibraryError, match=r"bad\.yaml"):
+    with pytest.raises(ShipLibraryError) as err:
         write_ship_file(tmp_path / "bad.yaml", bad, "bad", "d", "s", {})
+    assert err.value.key == "particulars.beam_m" and err.value.path is None
+    assert f"so {tmp_path / 'bad.yaml'} was not written" in str(err.value)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_rewriting_the_same_path_returns_the_new_ship(tmp_path: Path) -> None:

@@ -82,6 +82,10 @@ def test_missing_cells_are_counted_not_fatal(tmp_path: Path) -> None:
     ("t_s,north_m,east_m,heading_deg,rudder_deg,rpm\n0,0,0,0,0,60\n,1,1,0,0,60\n", 3,
      "expected a finite time in every row, got an empty cell or nan"),
     ("", 1, "empty file"),
+    ("\n", 1, "empty file (blank lines only); expected a header row"),
+    ("\n\n,,\n \n", 1, "empty file (blank lines only); expected a header row"),
+    ("\nt_s,north_m,east_m,heading_deg,rudder_deg,rpm\n0,0,0,0,0,60\n", 1,
+     "expected a header row of column names, got a blank line"),
     ("t_s,t_s,north_m\n", 1, "duplicate column"),
 ])
 def test_bad_files_give_located_errors(tmp_path: Path, body: str, line: int, expect: str
@@ -434,3 +438,35 @@ def test_frt_errors_name_the_columns_with_units(tmp_path: Path) -> None:
     # the trial-data reader does not take an FRT file for one
     with pytest.raises(DataError, match="missing column"):
         read_trial_csv(fine)
+
+
+@pytest.mark.parametrize("header, lacking", [
+    (",wind_speed_mps", "wind_from_deg"),
+    (",wind_from_deg", "wind_speed_mps"),
+])
+def test_wind_speed_and_direction_come_together(tmp_path: Path, header: str, lacking: str
+                                                ) -> None:
+    """A true wind speed without the direction it blows from (or the reverse) would be read as
+    no wind at all: refused at the header, naming the missing column."""
+    path = _write(tmp_path, HEADER + header + "\n0,0,0,0,0,60,5\n1,1,1,0,0,60,5\n")
+    err = _located(path)
+    assert (err.line, err.key) == (1, lacking)
+    assert str(err).startswith(f"{path}:1: {lacking}: missing column, needed with ")
+    mapped = _write(tmp_path, HEADER + ",anemometer_mps\n0,0,0,0,0,60,5\n1,1,1,0,0,60,5\n",
+                    "m.csv")
+    with pytest.raises(DataError) as raised:
+        read_trial(mapped, columns={"wind_speed_mps": "anemometer_mps"})
+    assert (raised.value.path, raised.value.key) == (str(mapped), "wind_from_deg")
+
+
+@pytest.mark.parametrize("drop, lacking", [
+    ("wind_dir_true [rad],", "wind_dir_true [rad]"),
+    ("wind_velo_true [m/s],", "wind_velo_true [m/s]"),
+])
+def test_frt_wind_speed_and_direction_come_together(tmp_path: Path, drop: str, lacking: str
+                                                    ) -> None:
+    header = FRT_HEADER.replace(drop, "")
+    path = _write(tmp_path, header + "\n" + ",".join(["0"] * 13) + "\n"
+                  + "0.1," + ",".join(["0"] * 12) + "\n")
+    err = _located(path)
+    assert (err.path, err.line, err.key) == (str(path), 1, lacking)

@@ -53,11 +53,11 @@ from trafficsim.identify import (
     replay,
     validation,
 )
-from trafficsim.identify.parameters import DEFAULT_FIT, Parametrisation
+from trafficsim.identify.parameters import DEFAULT_FIT, Parametrisation, check_physical
 from trafficsim.identify.report import convergence_plot, write_reports
 from trafficsim.identify.shipfile import write_ship_file
 from trafficsim.io.trialdata import TrialData, read_trial
-from trafficsim.ships.base import families
+from trafficsim.ships.base import families, limit_problems
 from trafficsim.ships.library import load_ship
 
 MODELS = ("response", "nomoto", "mmg", "mmg_berthing")
@@ -104,17 +104,26 @@ def read_runs(data: Sequence[Path], holdout: Sequence[Path],
 
 
 def working_interval_s(trials: Sequence[TrialData], length_m: float, u_service_mps: float,
-                       dt_s: float | None) -> float:
+                       dt_s: float | None, columns: Mapping[str, str] | None = None) -> float:
     """``dt_s`` if given, else the data's sampling thinned to at most ``L / (20 U)``.
 
-    A given ``dt_s`` must lie between the finest sampling interval of the runs (runs are
-    thinned, never interpolated onto a finer grid) and ``L / U`` (a ship length per sample),
-    and leave every run at least 4 samples (the smoother's minimum); else an InputError
-    names ``--dt-s``."""
+    A run sampled more coarsely than ``L / U`` (a ship length per sample) is a DataError
+    naming its file and time column (``columns`` as in :func:`read_runs`). A given ``dt_s``
+    must lie between the finest sampling interval of the runs (runs are thinned, never
+    interpolated onto a finer grid) and ``L / U``, and leave every run at least 4 samples (the
+    smoother's minimum); else an InputError names ``--dt-s``."""
+    most = length_m / u_service_mps
+    for t in trials:
+        if t.dt_s > most:
+            raise DataError(f"sampling interval {t.dt_s:.4g} s (median time step) exceeds L/U "
+                            f"= {most:.4g} s of the ship ({length_m:g} m at "
+                            f"{u_service_mps / KNOT:.4g} kn): more than a ship length per "
+                            "sample, so it cannot identify or replay the ship's motion; give "
+                            f"data sampled every {most / 20.0:.4g} s (L/(20 U)) or more often",
+                            path=t.path or None, key=datacheck.column_of(t, "t_s", columns))
     native = min(t.dt_s for t in trials)
     if dt_s is None:
         return native * max(1, int(np.floor(length_m / (20.0 * u_service_mps) / native + 1e-9)))
-    most = length_m / u_service_mps
     if dt_s < native * (1.0 - 1e-6):
         raise InputError(f"expected at least the data's sampling interval ({native:.6g} s): "
                          f"runs are thinned to the working interval, not interpolated; got "
@@ -184,6 +193,35 @@ def starting_spec(model: str, base: Mapping[str, Any], runs: Sequence[preprocess
     return spec
 
 
+def check_fitted(spec: Mapping[str, Any], base: Mapping[str, Any],
+                 trials: Sequence[TrialData], columns: Mapping[str, str] | None = None) -> None:
+    """Refuse a fitted ship that no ship file can hold (a coefficient outside its physical
+    range, or the nomoto service propeller speed beyond the base ship's engine), before
+    anything is written: an InputError naming the training data (its file, or ``--data``) and
+    what to change, not the output file."""
+    problems = limit_problems(families()[spec["model"]], spec)
+    if not problems:
+        return
+    key, problem = problems[0]
+    single = len(trials) == 1
+    path = (trials[0].path or None) if single else None
+    where = "this data" if single else f"the {len(trials)} training runs"
+    if key == "actuators.rps_max":  # (nomoto: rps_service beyond the engine's reach)
+        rps = float(spec["coefficients"]["rps_service"])
+        column = datacheck.column_of(trials[0], "rps", columns)
+        raise InputError(
+            f"the propeller speed at the service speed fitted from {where} (rps_service "
+            f"{rps:.6g} rev/s = {60.0 * rps:.6g} rpm) is beyond the engine of the base ship "
+            f"'{base['name']}' (--base; rps_max {float(base['actuators']['rps_max']):g} rev/s): "
+            f"check the {column} column (signed, negative astern) or give a base ship whose "
+            "engine reaches it; no ship file was written",
+            path=path, key=column if path else "--data")
+    raise InputError(
+        f"the coefficients fitted from {where} make no valid ship ({key}: {problem}): bound "
+        f"the coefficient inside that range (--bounds) or fit fewer (--fit); no ship file was "
+        "written", path=path, key=None if path else "--data")
+
+
 def _has_wind_loads(spec: Mapping[str, Any]) -> bool:
     parts = spec["particulars"]
     return (spec["model"] in WIND_FAMILIES
@@ -231,12 +269,16 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     train_files, hold_files, trials = read_runs(data, holdout, columns)
     datacheck.check_propeller(trials, base_spec, columns)
     datacheck.check_motion(trials[: len(train_files)], length)
-    work_dt = working_interval_s(trials, length, u_service, dt_s)
+    work_dt = working_interval_s(trials, length, u_service, dt_s, columns)
     horizon = horizon_of(trials, length, u_service, horizon_s, work_dt)
     kin = preprocess.smooth_runs(trials, length, u_service,
                                  smoother or preprocess.SmootherSettings(), dt_s=work_dt)
     train, hold = kin[: len(train_files)], kin[len(train_files):]
 
+    names = tuple(fit_names) if fit_names else DEFAULT_FIT[model]
+    if model == "nomoto" and ("rps_service" in names or base_spec["model"] != "nomoto"):
+        datacheck.check_propulsion(trials[: len(train_files)], train, u_service, columns,
+                                   optional=base_spec["model"] == "nomoto")
     spec0 = starting_spec(model, base_spec, train)
     if model == "response" and base_spec["model"] != "response" and "ekf" not in method:
         raise InputError("the response model from a base ship of another family needs the "
@@ -252,8 +294,8 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
                  "ignored (the model has no wind loads)" if not _has_wind_loads(spec0) else
                  "none in the data")
 
-    names = tuple(fit_names) if fit_names else DEFAULT_FIT[model]
     param = Parametrisation.of(spec0, names, bounds)
+    check_physical(param.model, bounds)
     if "ekf" in method and param.names != augmented_ekf.NAMES:
         raise InputError("the augmented EKF estimates all 16 response coefficients; "
                          "--fit applies to the output-error fit only (--method oe)", key="--fit")
@@ -275,9 +317,10 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     else:  # EKF only: its own covariance
         ci = output_error.Z95 * ekf_result.std if ekf_result is not None else np.zeros(param.p)
 
+    fitted_spec = param.specs(x_final[None, :])[0]
+    check_fitted(fitted_spec, base_spec, trials[: len(train_files)], columns)
     out.mkdir(parents=True, exist_ok=True)
     ship_name = name or f"{base_spec['name']}_identified"
-    fitted_spec = param.specs(x_final[None, :])[0]
     source = (f"trafficsim identify --model {model} --method {method}; training runs: "
               f"{', '.join(str(p) for p in train_files)}"
               + (f"; held-out runs: {', '.join(str(p) for p in hold_files)}" if hold_files

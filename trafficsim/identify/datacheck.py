@@ -11,18 +11,22 @@ column as the file names it, the value as the file holds it), or an
 * a value that is not finite (``inf``; an empty cell or ``nan`` is a missing value and allowed);
 * a value no instrument can read: a rudder angle beyond 90 deg either way, a position farther
   than half the Earth's circumference from the origin, a negative speed over ground or wind
-  speed, a propeller speed beyond twice the base ship's engine range (``rps_min .. rps_max``,
-  whichever is larger in size; an rpm column holding rev/s reads 60 times too fast);
+  speed, a true wind speed above :data:`MAX_WIND_MPS`, a propeller speed beyond twice the base
+  ship's engine range (``rps_min .. rps_max``, whichever is larger in size; an rpm column
+  holding rev/s reads 60 times too fast);
 * runs that do not excite what is fitted: a ship that does not move (its track spans less than
   its length in every training run), and coefficients of the sway and yaw motion from runs in
-  none of which both the rudder and the heading move by :data:`MIN_EXCURSION_DEG` or more.
+  none of which both the rudder and the heading move by :data:`MIN_EXCURSION_DEG` or more;
+  and the propeller speed at the service speed (``rps_service`` of ``nomoto``) from runs in
+  which the ship makes way ahead above :data:`AHEAD_FRACTION` of its service speed only with
+  the propeller stopped or astern (an rpm column whose sign is reversed reads so).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,12 +35,20 @@ from trafficsim.estimation.smoother import unwrap_finite
 from trafficsim.io import trialdata
 from trafficsim.io.trialdata import TrialData
 
+if TYPE_CHECKING:  # (preprocess imports this module)
+    from trafficsim.identify.preprocess import Kinematics
+
 #: longest time step bridged, in median sampling intervals
 MAX_GAP_INTERVALS = 20
 #: largest rudder angle either way, deg
 MAX_RUDDER_DEG = 90.0
 #: largest distance of a position from the origin of its local frame, m
 MAX_POSITION_M = 2.0e7
+#: largest true wind speed, m/s (the strongest sustained winds on record, in tropical
+#: cyclones, stay below it: Hurricane Patricia 2015, about 96 m/s)
+MAX_WIND_MPS = 100.0
+#: speeds ahead above this fraction of the service speed tell the propeller speed giving it
+AHEAD_FRACTION = 0.3
 #: propeller speeds up to this multiple of the base ship's engine range
 RPS_FACTOR = 2.0
 #: smallest rudder and heading excursion (largest minus smallest) that excites the yaw, deg
@@ -82,6 +94,11 @@ def _located(trial: TrialData, field: str, index: int,
             line = int(lines[rows[index]])
             value = float(table[rows[index], header.index(column)])
     return line, column, value
+
+
+def column_of(trial: TrialData, field: str, columns: Mapping[str, str] | None = None) -> str:
+    """The column of ``field`` as the run's file names it (``rpm``, ``n_prop [rps]``, ...)."""
+    return _located(trial, field, 0, columns)[1]
 
 
 def _error(trial: TrialData, field: str, index: int, columns: Mapping[str, str] | None,
@@ -142,6 +159,10 @@ def check_values(trial: TrialData, columns: Mapping[str, str] | None = None) -> 
         ({k: getattr(trial, k) < 0.0 for k in ("sog_mps", "wind_speed_mps")
           if getattr(trial, k) is not None},
          "expected a speed of at least 0, got {value}"),
+        ({"wind_speed_mps": trial.wind_speed_mps > MAX_WIND_MPS}
+         if trial.wind_speed_mps is not None else {},
+         f"expected a true wind speed of at most {MAX_WIND_MPS:g} m/s (above the strongest "
+         "sustained winds on record), got {value}"),
     ]
     for bad, message in limits:
         first = _first(trial, bad)
@@ -229,3 +250,37 @@ def check_excitation(trials: Sequence[TrialData], names: Sequence[str]) -> None:
                      f"{max(rudder):.3g} deg, heading {max(heading):.3g} deg), so nothing "
                      f"excites the turning motion; give runs with rudder manoeuvres (turns, "
                      f"zig-zags){instead}", path=path, key=key or None)
+
+
+def check_propulsion(trials: Sequence[TrialData], runs: Sequence[Kinematics],
+                     u_service_mps: float, columns: Mapping[str, str] | None = None,
+                     optional: bool = True) -> None:
+    """Refuse training runs (``trials``, smoothed as ``runs``) in which the ship makes way ahead
+    above :data:`AHEAD_FRACTION` of the service speed only with the propeller stopped or
+    astern: the propeller speed giving the service speed (``rps_service``) is then not
+    determined, and a fit drives it to its bound (``optional``: the base ship could give it
+    instead, which the message suggests). Runs that never go that fast (with an rpm reading)
+    are left alone."""
+    fast = [np.isfinite(r.smooth["u_mps"]) & np.isfinite(r.trial.rps)
+            & (r.smooth["u_mps"] > AHEAD_FRACTION * u_service_mps) for r in runs]
+    if not any(f.any() for f in fast) or any(
+            (f & (r.trial.rps > 0.0)).any() for f, r in zip(fast, runs, strict=True)):
+        return
+    i = next(k for k, f in enumerate(fast) if f.any())
+    j = int(np.argmax(fast[i]))
+    u, t = float(runs[i].smooth["u_mps"][j]), float(runs[i].t_s[j])
+    why = (f"the ship makes way ahead above {100 * AHEAD_FRACTION:g} % of its service speed "
+           f"({AHEAD_FRACTION * u_service_mps:.3g} m/s) only with the propeller stopped or "
+           "astern")
+    hint = ("the rpm is signed (negative astern): check the sign of the column"
+            + (", or fit without rps_service (--fit)" if optional else ""))
+    if len(trials) == 1:
+        index = int(np.argmin(np.abs(trials[0].t_s - t)))
+        raise _error(trials[0], "rps", index, columns,
+                     f"rps_service cannot be identified from this data: {why} (here "
+                     f"{u:.3g} m/s ahead, the column reading {{value}}); {hint}")
+    path, key, where = _where(trials)
+    raise InputError(f"rps_service cannot be identified from {where}: {why} (run "
+                     f"'{runs[i].name}' at t = {t:.6g} s: {u:.3g} m/s ahead at "
+                     f"{60.0 * float(runs[i].trial.rps[j]):.4g} rpm); {hint}",
+                     path=path, key=key or None)

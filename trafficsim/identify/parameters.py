@@ -18,7 +18,8 @@ Default subsets (documented choices):
   manoeuvres determine, and the report's correlation matrix shows how well.
 
 Bounds keep candidates physical (damping negative, areas and fractions in range); they are
-the ones below unless the user gives others.
+the ones below unless the user gives others (``trafficsim identify`` checks those against the
+range the ship file takes for the coefficient, :func:`check_physical`).
 """
 
 from __future__ import annotations
@@ -82,6 +83,19 @@ BOUNDS: dict[str, dict[str, tuple[float, float]]] = {
 
 def default_bounds(model: str, name: str) -> tuple[float, float]:
     return BOUNDS.get(model, {}).get(name, (-INF, INF))
+
+
+def check_physical(model: str, bounds: Mapping[str, tuple[float, float]] | None) -> None:
+    """Refuse user bounds reaching outside the range a ship file of family ``model`` takes for
+    the coefficient (its ``limits``): a fit inside them could end where no ship file holds it.
+    An InputError names ``--bounds``, the coefficient and what is allowed."""
+    limits = families()[model].limits
+    for name, (low, high) in (bounds or {}).items():
+        limit = limits.get(name)
+        problem = (limit.problem(low) or limit.problem(high)) if limit else None
+        if problem:
+            raise InputError(f"{name}={low:g}:{high:g} reaches outside the physical range of "
+                             f"{name}, which {problem}; give bounds inside it", key="--bounds")
 
 
 @dataclass

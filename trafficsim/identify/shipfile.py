@@ -1,8 +1,9 @@
 """Writing an identified ship as a ship file (the schema of ``trafficsim/ships/library/*.yaml``).
 
 The file is written as plain YAML text (atomically), with the fitted coefficients marked and
-their nominal 95 % intervals as comments, and then read back through the ship-library loader,
-so a file that the loader would reject is never reported as a result.
+their nominal 95 % intervals as comments, once the ship-library loader has accepted the text
+(checked on a scratch copy), so a file that the loader would reject is never written nor
+reported as a result.
 """
 
 from __future__ import annotations
@@ -10,10 +11,12 @@ from __future__ import annotations
 import json
 import math
 import re
+import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from trafficsim.errors import ShipLibraryError
 from trafficsim.io.results import atomic_write
 
 _PARTS_ORDER = ("length_m", "beam_m", "draught_m")
@@ -94,9 +97,19 @@ def render(spec: Mapping[str, Any], name: str, description: str, source: str,
 
 def write_ship_file(path: Path, spec: Mapping[str, Any], name: str, description: str,
                     source: str, fitted: Mapping[str, tuple[float, float]]) -> dict[str, Any]:
-    """Write the ship file atomically and return it as loaded (validated) by the library."""
+    """Validate the ship file by the library's loader, write it atomically and return it as
+    loaded. A spec the loader rejects is a ShipLibraryError naming the key, and nothing is
+    written to ``path``."""
     from trafficsim.ships.library import load_ship
 
     body = render(spec, name, description, source, fitted)
+    with tempfile.TemporaryDirectory() as scratch:
+        probe = Path(scratch) / "ship.yaml"
+        probe.write_text(body, encoding="utf-8")
+        try:
+            load_ship(str(probe))
+        except ShipLibraryError as err:
+            raise ShipLibraryError(f"{err.message} (the identified ship is not a valid ship "
+                                   f"file, so {path} was not written)", key=err.key) from None
     atomic_write(path, lambda fh: fh.write(body.encode()))
     return load_ship(str(Path(path).resolve()))

@@ -43,7 +43,8 @@ Two file formats are read into the same :class:`TrialData`:
 Missing values (empty cells, ``nan``) are kept as NaN and counted per column in
 :attr:`TrialData.missing`; nothing is interpolated here (pre-processing treats NaN as a missing
 measurement). Malformed files raise :class:`~trafficsim.errors.DataError` naming the file, the
-line and the column.
+line and the column; so do a file without a header row (empty, or blank lines only) and a true
+wind speed column without its direction column or the other way round.
 """
 
 from __future__ import annotations
@@ -289,6 +290,12 @@ def _read_table(path: Path) -> tuple[list[str], np.ndarray, np.ndarray]:
         raise DataError("empty file; expected a header row", path=str(path), line=1) from None
     except csv.Error as err:
         raise DataError(f"not a CSV table ({err})", path=str(path), line=1) from None
+    if not any(header):  # a blank first line (or only commas): no column names
+        if all(not any(cell.strip() for cell in row) for row in _rows(reader, path)):
+            raise DataError("empty file (blank lines only); expected a header row",
+                            path=str(path), line=1)
+        raise DataError("expected a header row of column names, got a blank line",
+                        path=str(path), line=1)
     if len(set(header)) != len(header):
         dup = sorted({h for h in header if header.count(h) > 1})
         raise DataError(f"duplicate column(s) {', '.join(dup)}", path=str(path), line=1)
@@ -342,6 +349,17 @@ def _clean_rows(path: str | None, table: np.ndarray, lines: np.ndarray, time_col
     return table, lines, int(empty.sum())
 
 
+def _check_paired(path: str | None, header: Sequence[str], speed: str, direction: str
+                  ) -> None:
+    """Refuse a true wind speed column without its direction column or the other way round
+    (alone, either would be read as no wind at all)."""
+    for have, lack in ((speed, direction), (direction, speed)):
+        if have in header and lack not in header:
+            raise DataError(f"missing column, needed with {have}: the true wind is its speed "
+                            "and the direction it blows from together (give both columns or "
+                            "neither)", path=path, line=1, key=lack)
+
+
 def _trial_csv(path: Path, header: Sequence[str], table: np.ndarray, lines: np.ndarray,
                name: str | None, path_text: str | None = None) -> TrialData:
     where = str(path) if path_text is None else path_text
@@ -350,6 +368,7 @@ def _trial_csv(path: Path, header: Sequence[str], table: np.ndarray, lines: np.n
         raise DataError(f"missing column(s) {', '.join(missing)}; a trial-data CSV needs "
                         f"{', '.join(REQUIRED_CSV)} (optional: {', '.join(OPTIONAL_CSV)}) or "
                         "the FRT-DS-ESSO columns", path=where or None, line=1)
+    _check_paired(where or None, header, "wind_speed_mps", "wind_from_deg")
     table, lines, dropped = _clean_rows(where or None, table, lines, header.index("t_s"))
     col = {h: table[:, i] for i, h in enumerate(header)}
 
@@ -376,6 +395,7 @@ def _frt(path: Path, header: Sequence[str], table: np.ndarray, lines: np.ndarray
     if missing:
         raise DataError(f"missing FRT-DS-ESSO column(s) {', '.join(repr(m) for m in missing)}",
                         path=str(path), line=1)
+    _check_paired(str(path), header, "wind_velo_true [m/s]", "wind_dir_true [rad]")
     table, lines, dropped = _clean_rows(str(path), table, lines, header.index("t [s]"))
     series: dict[str, np.ndarray] = {}
     extra: dict[str, np.ndarray] = {}
