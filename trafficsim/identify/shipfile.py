@@ -107,9 +107,10 @@ def write_ship_file(path: Path, spec: Mapping[str, Any], name: str, description:
         probe = Path(scratch) / "ship.yaml"
         probe.write_text(body, encoding="utf-8")
         try:
-            load_ship(str(probe))
+            loaded = load_ship(str(probe))
         except ShipLibraryError as err:
             raise ShipLibraryError(f"{err.message} (the identified ship is not a valid ship "
                                    f"file, so {path} was not written)", key=err.key) from None
     atomic_write(path, lambda fh: fh.write(body.encode()))
-    return load_ship(str(Path(path).resolve()))
+    loaded["path"] = str(Path(path).resolve())  # (the same text: no second load)
+    return loaded
