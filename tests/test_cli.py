@@ -539,7 +539,7 @@ def test_an_output_folder_below_a_file_is_one_line_naming_it(capsys, tmp_path, r
     blocker.write_text("")
     out = blocker / "out"
     spec = tmp_path / "spec.yaml"
-    spec.write_text("schema_version: 1\nname: c\nn_encounters: 1\nseed: 1\nduration_s: 60\n"
+    spec.write_text("schema_version: 1\nname: c\nn_encounters: 1\nseed: 1\nduration_s: 1800\n"
                     "ship_types: {cargo: 1}\n")
     argv = {"run": ["run", SCENARIOS / "head_on.yaml", "--out", out],
             "trial": ["trial", "cargo", "--manoeuvre", "turning", "--out", out],
@@ -643,7 +643,7 @@ def test_a_rules_file_with_several_problems_is_still_one_line(capsys, tmp_path, 
         (tmp_path / "rules.yaml").write_text("schema_version: 1\n")
         path = tmp_path / "spec.yaml"
         path.write_text("schema_version: 1\nname: c\nn_encounters: 1\nseed: 1\n"
-                        "duration_s: 60\nrules: rules.yaml\nship_types: {cargo: 1}\n")
+                        "duration_s: 1800\nrules: rules.yaml\nship_types: {cargo: 1}\n")
     argv = [command, path, "--out", tmp_path / "o"] + (
         ["--workers", "1", "--no-progress"] if command == "campaign" else [])
     line = error_line(capsys, argv)
@@ -933,7 +933,8 @@ def campaign_folder(tmp_path_factory):
     spec = folder / "spec.yaml"
     spec.write_text("schema_version: 1\nname: small\nn_encounters: 3\nseed: 11\n"
                     "duration_s: 120\nchunk_encounters: 2\nship_types: {cargo: 2, container: 1}\n"
-                    "encounter_types: {head_on: 1, multi: 1}\nmulti_ships: [3, 3]\n")
+                    "encounter_types: {head_on: 1, multi: 1}\nmulti_ships: [3, 3]\n"
+                    "tcpa_min: [1, 2]\ndcpa_nm: [0, 0.2]\n")
     assert cli_module.main(["campaign", str(spec), "--out", str(folder / "out"), "--workers",
                             "1", "--no-progress"]) == 0
     return folder / "out"

@@ -21,7 +21,7 @@ def folders(tmp_path_factory) -> tuple[Path, Path, Path]:
     root = tmp_path_factory.mktemp("folders")
     spec = root / "spec.yaml"
     spec.write_text("schema_version: 1\nname: small\nn_encounters: 2\nseed: 3\n"
-                    "duration_s: 60\nencounter_types: {head_on: 1}\n")
+                    "duration_s: 60\nencounter_types: {head_on: 1}\ntcpa_min: [1, 1]\n")
     assert cli.main(["campaign", str(spec), "--out", str(root / "campaign"), "--workers", "1",
                      "--no-progress"]) == 0
     assert cli.main(["run", str(SCENARIOS / "head_on.yaml"), "--out", str(root / "run")]) == 0

@@ -139,7 +139,7 @@ def test_a_bad_rules_file_a_scenario_or_campaign_names_is_reported(tmp_path, cap
                         "heading_deg: 0}\n")
     else:
         path.write_text("schema_version: 1\nname: c\nn_encounters: 1\nseed: 1\n"
-                        "duration_s: 60\nrules: rules.yaml\n")
+                        "duration_s: 1800\nrules: rules.yaml\n")
     assert validate_files([path]) == 2
     err = capsys.readouterr().err
     assert f"{tmp_path / 'rules.yaml'}:4: nodes.a.test" in err and "rnge_nm" in err
@@ -166,7 +166,7 @@ def test_a_ship_files_model_checks_run_and_are_located(tmp_path, capsys):
     assert len(err) == 2 and all(line.startswith(want) for line in err)
 
 
-CAMPAIGN = ("schema_version: 1\nname: c\nn_encounters: 4\nseed: 1\nduration_s: 60\n"
+CAMPAIGN = ("schema_version: 1\nname: c\nn_encounters: 4\nseed: 1\nduration_s: 1800\n"
             "ship_types: {ships}\nencounter_types: {types}\nspeed_fraction: [1.0, 1.0]\n")
 
 

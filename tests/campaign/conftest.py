@@ -16,10 +16,14 @@ rogue_fraction: {rogue}
 
 @pytest.fixture
 def write_spec(tmp_path: Path):
-    """Write a small campaign spec; returns its path."""
+    """Write a small campaign spec; returns its path. A ``duration`` shorter than the default
+    TCPA range's 30 min comes with ``tcpa_min`` from a third of it to all of it (at least
+    1 min) unless ``extra`` sets one, so that every encounter reaches its CPA, as a spec must."""
 
-    def write(n: int = 6, chunk: int = 2, duration: float = 900, extra: str = "",
+    def write(n: int = 6, chunk: int = 2, duration: float = 1800, extra: str = "",
               name: str = "spec.yaml", rogue: float = 0.2) -> Path:
+        if duration < 1800 and "tcpa_min" not in extra:
+            extra += f"\ntcpa_min: [{max(1.0, duration / 180):g}, {duration / 60:g}]"
         path = tmp_path / name
         path.write_text(SMALL.format(n=n, chunk=chunk, duration=duration, extra=extra,
                                      rogue=rogue))

@@ -238,7 +238,7 @@ def test_a_folder_or_file_where_the_campaign_expects_the_other_is_named(base, tm
 # resuming after an interruption at any point, and the chunking, workers and executors
 # --------------------------------------------------------------------------------------------
 
-WEATHER = (SENSORS + "\ncurrent_kn: [0, 1]\nwind_mps: [0, 10]")
+WEATHER = (SENSORS + "\ncurrent_kn: [0, 1]\nwind_mps: [0, 10]\ntcpa_min: [2, 5]")
 # encounters 0..4 in chunks of two: (0, 2), (2, 4) and the short last chunk (4, 5)
 N, CHUNK, DURATION = 5, 2, 300
 CHUNK_NAMES = ["00000000-00000002.parquet", "00000002-00000004.parquet",
@@ -416,6 +416,70 @@ def test_a_parquet_file_without_the_chunk_metadata_is_not_a_finished_chunk(base,
     assert jobs == [(4, 5)]
     assert b"ship_steps" in pq.read_schema(path).metadata
     _same(_table(base_out), _table(out))
+
+
+def test_every_chunk_has_the_schema_a_resume_expects(base):
+    """The schema a resumed campaign holds a chunk to (:data:`trafficsim.campaign.runner.
+    COLUMNS`) is the one the runner writes, column for column: otherwise every chunk would run
+    again."""
+    _, out, _ = base
+    for name in CHUNK_NAMES:
+        schema = pq.read_schema(out / "chunks" / name).remove_metadata()
+        assert schema.equals(execute._chunk_schema()), (name, schema)
+
+
+@pytest.mark.parametrize("damage", ["dropped", "strings", "renamed", "empty values"])
+def test_a_chunk_resaved_with_another_schema_is_run_again(base, tmp_path, jobs, damage):
+    """A chunk re-saved with its metadata but a column dropped, of another type, renamed or
+    with empty values reads, yet cannot be gathered with the others: it counts as damaged and
+    runs again (before, the resume ended in pyarrow's "Schema ... was different" dump)."""
+    import pyarrow as pa
+
+    spec, base_out, _ = base
+    out = _copy(base_out, tmp_path)
+    path = out / "chunks" / CHUNK_NAMES[1]
+    table = pq.read_table(path)
+    k = table.column_names.index("collision")
+    table = {"dropped": lambda t: t.remove_column(k),
+             "strings": lambda t: t.set_column(k, "collision", pa.array(
+                 [str(v) for v in t.column(k).to_pylist()])),
+             "renamed": lambda t: t.rename_columns(
+                 [c if c != "collision" else "collided" for c in t.column_names]),
+             "empty values": lambda t: t.set_column(k, "collision", pa.array(
+                 [None] * t.num_rows, pa.bool_())),
+             }[damage](table).replace_schema_metadata(table.schema.metadata)
+    pq.write_table(table, path)
+    assert b"ship_steps" in pq.read_schema(path).metadata
+    for name in ("encounters.parquet", "summary.json"):
+        (out / name).unlink()
+    run_campaign(spec, out, workers=1, progress=False)
+    assert jobs == [(2, 4)]
+    _same(_table(base_out), _table(out))
+
+
+def test_a_campaign_failing_before_its_first_chunk_leaves_no_manifest(write_spec, tmp_path):
+    """Two-minute encounters with TCPA 1-2 min pass ``validate`` (one encounter of each type
+    draws), but no multi-ship geometry is found for encounter 3. A campaign that fails so
+    before any chunk is written leaves no ``campaign.json``, so the corrected spec runs in the
+    same folder instead of being refused as "another campaign"; once a chunk is written the
+    manifest stays, to guard it."""
+    from trafficsim.campaign.generator import NoGeometryError, spec_errors
+
+    spec = write_spec(n=4, chunk=4, duration=120)
+    assert spec_errors(load_spec(spec)) == []
+    out = tmp_path / "o"
+    with pytest.raises(NoGeometryError, match="encounter 3: no geometry"):
+        run_campaign(spec, out, workers=1, progress=False)
+    assert not (out / "campaign.json").exists() and not list(out.rglob("*.parquet"))
+    spec.write_text(spec.read_text().replace("duration_s: 120", "duration_s: 600").replace(
+        "tcpa_min: [1, 2]", "tcpa_min: [3, 10]"))
+    assert run_campaign(spec, out, workers=1, progress=False)["n_encounters"] == 4
+    halves = write_spec(n=4, chunk=2, duration=120, name="halves.yaml")
+    with pytest.raises(NoGeometryError, match="encounter 3: no geometry"):
+        run_campaign(halves, tmp_path / "p", workers=1, progress=False)
+    assert (tmp_path / "p" / "campaign.json").is_file()  # beside chunk 0-2
+    assert [f.name for f in (tmp_path / "p" / "chunks").iterdir()] == [
+        "00000000-00000002.parquet"]
 
 
 def test_interrupted_between_chunks_resumes_with_the_rest(base, tmp_path, monkeypatch):
@@ -616,7 +680,8 @@ def _spec_with_files(folder: Path) -> Path:
     shutil.copy(RULES_DIR / "colregs.yaml", folder / "base.yaml")
     spec = folder / "spec.yaml"
     spec.write_text("schema_version: 1\nname: files\nn_encounters: 2\nseed: 3\n"
-                    "duration_s: 300\nchunk_encounters: 1\nship_types: {mine.yaml: 1}\n"
+                    "duration_s: 300\ntcpa_min: [2, 5]\nchunk_encounters: 1\n"
+                    "ship_types: {mine.yaml: 1}\n"
                     "rules: rules.yaml\n")
     return spec
 

@@ -106,7 +106,7 @@ SPEC = """schema_version: 1
 name: gen
 n_encounters: {n}
 seed: {seed}
-duration_s: 1200
+duration_s: 2400
 chunk_encounters: {chunk}
 ship_types: {{cargo: 1, container: 1, fishing: 1}}
 {extra}
@@ -698,8 +698,8 @@ def test_encounters_do_not_depend_on_the_spec_keys_that_are_not_draws(tmp_path):
     a = _spec(tmp_path, n=20, chunk=3, name="a.yaml")
     b_path = tmp_path / "b.yaml"
     b_path.write_text(SPEC.format(n=7000, seed=7, chunk=1000, extra="decision_period_s: 30")
-                      .replace("name: gen", "name: other").replace("duration_s: 1200",
-                                                                   "duration_s: 3600"))
+                      .replace("name: gen", "name: other").replace("duration_s: 2400",
+                                                                   "duration_s: 7200"))
     b = load_spec(b_path)
     for index in (0, 5, 19):
         x, y = draw(a, index), draw(b, index)
@@ -711,7 +711,7 @@ def test_encounters_do_not_depend_on_the_spec_keys_that_are_not_draws(tmp_path):
             # same direction, a route three times as long (1.5 x duration x speed + 1 NM)
             for u in (s, t):
                 leg = math.hypot(u.route_m[0, 0] - u.north_m, u.route_m[0, 1] - u.east_m)
-                duration = 1200.0 if u is s else 3600.0
+                duration = 2400.0 if u is s else 7200.0
                 assert leg == pytest.approx(1.5 * duration * u.speed_mps + NM)
 
 

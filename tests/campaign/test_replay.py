@@ -17,7 +17,8 @@ from trafficsim.errors import InputError
 from trafficsim.units import NM
 
 SENSORS = ("sensors: {gnss_sigma_m: [1, 5], compass_sigma_deg: [0.1, 0.5]}\n"
-           "encounter_types: {crossing_give_way: 1, head_on: 1, multi: 1}\nmulti_ships: [3, 3]")
+           "encounter_types: {crossing_give_way: 1, head_on: 1, multi: 1}\nmulti_ships: [3, 3]\n"
+           "tcpa_min: [5, 10]")
 
 
 @pytest.fixture(scope="module")
@@ -177,7 +178,7 @@ def _small_campaign(tmp_path, dt_s: float, name: str = "c"):
 
     spec = tmp_path / f"{name}.yaml"
     spec.write_text(SMALL.format(n=1, chunk=1, duration=240, rogue=0.0,
-                                 extra=f"dt_s: {dt_s}\npolicy: no_avoidance"))
+                                 extra=f"dt_s: {dt_s}\npolicy: no_avoidance\ntcpa_min: [2, 4]"))
     run_campaign(spec, tmp_path / name, workers=1, progress=False)
     return spec, tmp_path / name
 
@@ -221,18 +222,41 @@ def test_a_negative_encounter_index_is_refused(campaign, tmp_path):
     assert not (tmp_path / "x").exists()
 
 
-@pytest.mark.parametrize(("manifest", "message"), [
-    ("{broken", "unreadable"),
-    ("[]", "unreadable"),
-    ('{"spec": "x.yaml"}', "unreadable"),
+@pytest.mark.parametrize(("manifest", "message", "key"), [
+    ("{broken", "unreadable", None),
+    ("[]", "unreadable (expected a JSON object, got list)", None),
+    ('{"spec": "x.yaml"}', "missing key (expected the SHA-256 of the campaign's spec)",
+     "spec_sha256"),
+    ('{"spec_sha256": "ab"}', "missing key (expected the path of the campaign's spec)", "spec"),
+    ('{"spec": 3, "spec_sha256": "ab"}', "expected the path of the campaign's spec as text, "
+     "got 3", "spec"),
 ])
-def test_a_damaged_manifest_is_named(tmp_path, manifest, message):
-    """``campaign.json`` that is not JSON, not an object or lacks ``spec_sha256``: an
-    InputError naming the manifest."""
+def test_a_damaged_manifest_is_named(tmp_path, manifest, message, key):
+    """``campaign.json`` that is not JSON, not an object, or lacks a key it must hold or holds
+    it as no text: an InputError naming the manifest and the key (not "unreadable ('spec')")."""
     (tmp_path / "campaign.json").write_text(manifest)
-    with pytest.raises(InputError, match=message) as info:
+    with pytest.raises(InputError) as info:
         replay_encounter(tmp_path, 0, tmp_path / "x")
-    assert info.value.path == str(tmp_path / "campaign.json")
+    assert info.value.message.startswith(message), info.value.message
+    assert (info.value.path, info.value.key) == (str(tmp_path / "campaign.json"), key)
+
+
+def test_a_record_period_beyond_the_encounter_is_refused(campaign, tmp_path, capsys):
+    """A record period longer than the campaign's 600 s encounters would record t = 0 alone
+    (a scenario file refuses it as well): exit 2 naming the flag and the duration, no folder
+    made; the whole duration is accepted (t = 0 and 600 s)."""
+    from tests.conftest import error_line
+
+    spec, out = campaign
+    line = error_line(capsys, ["replay", out, "--encounter", "1", "--record-every-s", "100000",
+                               "--out", tmp_path / "rp"])
+    assert line == ("trafficsim: error: --record-every-s: must not exceed the encounter's "
+                    f"duration (600 s, duration_s of {spec}), got 100000 (only the start would "
+                    "be recorded)")
+    assert not (tmp_path / "rp").exists()
+    replay_encounter(out, 1, tmp_path / "whole", record_every_s=600.0)
+    times = pq.read_table(tmp_path / "whole" / "trajectories.parquet").column("t_s")
+    assert sorted(set(times.to_pylist())) == [0.0, 600.0]
 
 
 def test_a_spec_gone_or_a_file_given_is_refused(tmp_path):

@@ -21,6 +21,7 @@ name: runaway
 n_encounters: 8
 seed: 5
 duration_s: 300
+tcpa_min: [2, 5]
 chunk_encounters: 4
 encounter_types: {head_on: 1, crossing_give_way: 1}
 ship_types: {cargo: 1, runaway.yaml: 1}
@@ -99,8 +100,8 @@ dcpa_nm: [0.2, 0.6]
 
 
 def _rows_spec(tmp_path, extra="", duration=400, name="r.yaml"):
-    if "tcpa_min" not in extra:
-        extra += "\ntcpa_min: [2, 4]"
+    if "tcpa_min" not in extra:  # (a spec's TCPA must end within its duration)
+        extra += f"\ntcpa_min: [{min(2, duration / 60):g}, {min(4, duration / 60):g}]"
     path = tmp_path / name
     path.write_text(ROWS_SPEC.format(extra=extra, duration=duration))
     return load_spec(path)
@@ -185,9 +186,10 @@ def test_compliant_needs_both_ships_on_the_rules():
 def test_a_run_that_ends_between_decisions_is_observed_to_its_end(tmp_path):
     """95 s with 10 s decisions: the chunk runs 95 steps, not a whole number of decision
     periods (90 or 100): with a TCPA of 10 min the range still falls at the end, so the
-    closest point is the last step, 95 s; the ship-steps are 95 per ship."""
-    spec = _rows_spec(tmp_path, extra="policy: no_avoidance\ntcpa_min: [10, 10]", duration=95,
-                 name="short.yaml")
+    closest point is the last step, 95 s; the ship-steps are 95 per ship. (A spec refuses a
+    run that ends before its TCPA; the runner is given one here all the same.)"""
+    spec = _rows_spec(tmp_path, extra="policy: no_avoidance\ntcpa_min: [10, 10]", duration=600,
+                      name="short.yaml").model_copy(update={"duration_s": 95.0})
     rows = run_chunk(spec, 0, 2)
     own = [k for k, s in enumerate(rows["ship_i"]) if s == "own"]
     assert all(rows["t_cpa_s"][k] == pytest.approx(95.0) for k in own)

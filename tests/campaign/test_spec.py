@@ -45,7 +45,7 @@ def test_unknown_ship_type_is_located(tmp_path: Path, write_spec):
 MINIMAL = """schema_version: 1
 name: minimal
 n_encounters: 3
-duration_s: 600
+duration_s: 1800
 {extra}
 """
 
@@ -109,14 +109,14 @@ def test_a_missing_required_key_is_named(tmp_path, missing):
     "n_encounters: 1",
     "n_encounters: 10000000",
     "seed: 0",
-    "duration_s: 600\ndt_s: 60\ndecision_period_s: 60",
+    "duration_s: 1800\ndt_s: 60\ndecision_period_s: 60",
     "chunk_encounters: 1",
     "chunk_encounters: 1000000",
     "decision_period_s: 600",
     "multi_ships: [3, 3]",
     "multi_ships: [5, 5]",
     "dcpa_nm: [10, 10]",
-    "tcpa_min: [1, 120]",
+    "duration_s: 7200\ntcpa_min: [1, 120]",
     "speed_fraction: [0.2, 1.2]",
     "current_kn: [5, 5]",
     "wind_mps: [0, 40]",
@@ -254,7 +254,7 @@ def test_whole_multiples_in_floating_point_are_accepted(tmp_path, extra):
     steps: the tolerance must accept them."""
     text = MINIMAL.format(extra=extra)
     if extra.startswith("duration_s"):
-        text = text.replace("duration_s: 600\n", "", 1)
+        text = text.replace("duration_s: 1800\n", "", 1)
     path = tmp_path / "w.yaml"
     path.write_text(text)
     load_spec(path)
@@ -265,7 +265,7 @@ def test_duration_not_a_whole_number_of_default_steps_is_refused(tmp_path, durat
     """``dt_s: 1`` written out makes 900.5 s an error ("whole multiple"); leaving dt_s at its
     documented default of 1 s must not change that (the runner would run round(900.5) = 900
     steps, and round(0.5) = 0 steps for 0.5 s)."""
-    written = MINIMAL.replace("duration_s: 600", f"duration_s: {duration}")
+    written = MINIMAL.replace("duration_s: 1800", f"duration_s: {duration}")
     explicit = tmp_path / "explicit.yaml"
     explicit.write_text(written.format(extra="dt_s: 1"))
     assert "whole multiple" in str(_error(explicit))
@@ -377,3 +377,40 @@ def test_a_file_that_is_not_a_mapping_or_not_yaml_is_located(tmp_path):
     broken.write_text("schema_version: 1\nname: [x\n")
     err = _error(broken)
     assert str(broken) in str(err) and err.line is not None
+
+
+@pytest.mark.parametrize("extra, tcpa", [
+    ("", "30 min = 1800 s"),  # the default tcpa_min [10, 30]
+    ("tcpa_min: [1, 5.5]", "5.5 min = 330 s"),
+])
+def test_a_duration_shorter_than_the_largest_start_tcpa_is_refused_at_its_line(
+        tmp_path, capsys, extra, tcpa):
+    """An encounter drawn with a start TCPA beyond the run never reaches its CPA: its smallest
+    range would be the last step's. ``duration_s`` below ``60 * tcpa_min[1]`` is refused at
+    its line, by ``load_spec`` and by ``validate`` (exit 2, one line); equal is accepted."""
+    from tests.conftest import error_line
+
+    path = tmp_path / "short.yaml"
+    path.write_text(MINIMAL.replace("duration_s: 1800", "duration_s: 300").format(extra=extra))
+    err = _error(path)
+    assert (err.path, err.line, err.key) == (str(path), 4, "duration_s")
+    assert f"must be at least tcpa_min's upper end, {tcpa}, so that every encounter reaches " \
+           "its CPA" in err.message and err.message.endswith("got 300")
+    line = error_line(capsys, ["validate", path])
+    assert line.startswith(f"trafficsim: error: {path}:4: duration_s: must be at least")
+    path.write_text(MINIMAL.replace("duration_s: 1800", "duration_s: 330").format(
+        extra="tcpa_min: [1, 5.5]"))
+    assert load_spec(path).duration_s == 330.0
+
+
+def test_a_decision_period_longer_than_the_duration_is_refused(tmp_path):
+    """As in a scenario file: the ships would decide once, at the start."""
+    path = _minimal(tmp_path, extra="decision_period_s: 600")
+    path.write_text(path.read_text().replace("duration_s: 1800", "duration_s: 60\n"
+                                             "tcpa_min: [1, 1]"))
+    err = _error(path)
+    assert (err.path, err.line, err.key) == (str(path), 6, "decision_period_s")
+    assert err.message == ("must not exceed duration_s (60 s), got 600 (the ships would decide "
+                           "once, at the start)")
+    path.write_text(path.read_text().replace("decision_period_s: 600", "decision_period_s: 60"))
+    assert load_spec(path).decision_period_s == 60.0

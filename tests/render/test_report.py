@@ -8,6 +8,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from PIL import Image
@@ -109,6 +110,91 @@ def test_a_damaged_encounters_table_is_named_not_a_traceback(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith(f"trafficsim: error: {broken / 'encounters.parquet'}: unreadable "
                           "encounters table (") and "Traceback" not in err
+
+
+@pytest.mark.parametrize("column", ["collision", "min_range_m", "encounter", "encounter_type",
+                                    "compliance_i", "score_rule13"])
+def test_an_encounters_table_missing_a_column_is_named(tmp_path, capsys, column):
+    """A column the report reads dropped from ``encounters.parquet``: one line naming the file
+    and the column and what it holds, exit 2 (before, a KeyError traceback)."""
+    from tests.conftest import error_line
+
+    cols = _synthetic_columns()
+    del cols[column]
+    folder = tmp_path / "camp"
+    folder.mkdir()
+    write_parquet(folder / "encounters.parquet", cols)
+    line = error_line(capsys, ["report", folder, "--no-progress"])
+    assert line.startswith(f"trafficsim: error: {folder / 'encounters.parquet'}: {column}: "
+                           "missing column (expected "), line
+    assert not (folder / "report").exists()
+
+
+@pytest.mark.parametrize(("column", "value", "expected"), [
+    ("collision", lambda v: str(v), "expected true or false, got string values"),
+    ("collision", lambda v: int(v), "expected true or false, got int64 values"),
+    ("min_range_m", lambda v: f"{v} m", "expected numbers, got string values"),
+    ("encounter", lambda v: float(v), "expected whole numbers, got double values"),
+    ("encounter_type", lambda v: 1, "expected text, got int64 values"),
+    ("blind_spot", lambda v: None, "expected true or false in every row, got 10 empty values"),
+    ("encounter", lambda v: -v - 1, "expected encounter indices >= 0, got -7"),
+])
+def test_an_encounters_table_column_of_another_type_is_named(tmp_path, capsys, column, value,
+                                                            expected):
+    """``collision`` stored as text (``"False"`` is truthy: every pair a collision), numbers as
+    text, a fractional encounter index, empty values, a negative index: one line naming the
+    file, the column and what was expected, exit 2, instead of a page of nonsense."""
+    from tests.conftest import error_line
+
+    cols = _synthetic_columns()
+    folder = tmp_path / "camp"
+    folder.mkdir()
+    table = pa.table({k: v.tolist() if isinstance(v, np.ndarray) else v for k, v in cols.items()})
+    changed = [value(v) for v in table.column(column).to_pylist()]
+    k = table.column_names.index(column)
+    table = table.set_column(k, column, pa.array(changed, type=pa.bool_() if column ==
+                                                 "blind_spot" else None))
+    pq.write_table(table, folder / "encounters.parquet")
+    line = error_line(capsys, ["report", folder, "--no-progress"])
+    assert line.startswith(f"trafficsim: error: {folder / 'encounters.parquet'}: {column}: "
+                           f"{expected}"), line
+
+
+def test_report_on_a_run_folder_says_it_needs_a_campaign(synthetic_run, capsys):
+    """A run's folder (``trafficsim run`` or ``replay``) is no unfinished campaign: the message
+    says what the folder holds and what ``report`` needs, not "run the campaign again"."""
+    from tests.conftest import error_line
+    from tests.render.conftest import Ship
+
+    run = synthetic_run([Ship("a", 0.0, 0.0, 0.0, 5.0), Ship("b", 900.0, 0.0, 180.0, 5.0)])
+    line = error_line(capsys, ["report", run, "--no-progress"])
+    assert line == (f"trafficsim: error: {run}: holds a run's results (of 'trafficsim run' or "
+                    "'replay'), not a campaign's: report needs the output folder of 'trafficsim "
+                    "campaign' ('trafficsim render' draws a run)")
+    assert not (run / "report").exists()
+
+
+def test_an_encounter_beyond_the_campaign_is_blamed_on_the_table(campaign, tmp_path, capsys):
+    """An ``encounters.parquet`` holding encounter 1002 of a 3-encounter campaign names the
+    file and its ``encounter`` column, not ``--encounter`` (a flag not given)."""
+    import shutil
+
+    from tests.conftest import error_line
+
+    spec, out = campaign
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    table = pq.read_table(copy / "encounters.parquet")
+    enc = table.column("encounter").to_numpy().copy()
+    enc[enc == enc.max()] = 1002
+    table = table.set_column(table.column_names.index("encounter"), "encounter", pa.array(enc))
+    pq.write_table(table, copy / "encounters.parquet")
+    line = error_line(capsys, ["report", copy, "--no-progress"])
+    assert line == (f"trafficsim: error: {copy / 'encounters.parquet'}: encounter: encounter "
+                    f"1002 is not one of the campaign's 3 (0 .. 2, spec {spec}): the table is "
+                    "not this campaign's (run 'trafficsim campaign' on this folder again to "
+                    "write it anew from its chunks)")
+    assert "--encounter" not in line and not (copy / "report").exists()
 
 
 # --------------------------------------------------------------------------------------------

@@ -358,7 +358,7 @@ def test_every_command_refuses_a_value_out_of_range(tmp_path, capsys, command):
     scenario.write_text("schema_version: 1\nname: s\nduration_s: 60\nships:\n"
                         "  - {name: a, type: ship.yaml, north_m: 0, east_m: 0, heading_deg: 0}\n")
     campaign = tmp_path / "c.yaml"
-    campaign.write_text("schema_version: 1\nname: c\nn_encounters: 2\nduration_s: 60\n"
+    campaign.write_text("schema_version: 1\nname: c\nn_encounters: 2\nduration_s: 1800\n"
                         "policy: no_avoidance\nship_types: {ship.yaml: 1}\n")
     args = [a.format(ship=ship, scenario=scenario, campaign=campaign, out=tmp_path / "o")
             for a in command]

@@ -50,10 +50,20 @@ def _chunk_path(out: Path, start: int, stop: int) -> Path:
     return out / "chunks" / f"{start:08d}-{stop:08d}.parquet"
 
 
+def _chunk_schema() -> Any:
+    """The ``pyarrow.Schema`` of a chunk's rows (:data:`~.runner.COLUMNS`), without metadata."""
+    import pyarrow as pa
+
+    from trafficsim.campaign.runner import COLUMNS
+
+    return pa.schema([(name, pa.type_for_alias(kind)) for name, kind in COLUMNS.items()])
+
+
 def _chunk_done(path: Path, digest: str) -> bool:
     """Whether ``path`` holds a finished chunk of the inputs of ``digest``. Chunks are written
-    atomically, so only damage from outside (a disk fault, an edit) makes one unreadable; such
-    a chunk is run again, as its rows are fixed by the inputs.
+    atomically, so only damage from outside (a disk fault, an edit) makes one unreadable or
+    changes its columns (one dropped, added or of another type, or empty values) or timings;
+    such a chunk is run again, as its rows are fixed by the inputs.
 
     Raises:
         InputError: the chunk holds results of other inputs, or is no file.
@@ -64,14 +74,22 @@ def _chunk_done(path: Path, digest: str) -> bool:
         return False
     _expect_file(path, "a chunk file of the campaign's results")
     try:  # the whole table: damage inside the data leaves the footer readable
-        meta = pq.read_table(path).schema.metadata or {}
+        table = pq.read_table(path)
     except (OSError, ValueError):  # (pyarrow's ArrowInvalid is a ValueError)
         return False
+    meta = table.schema.metadata or {}
     written = meta.get(b"inputs_sha256")  # (absent in chunks of older versions)
-    if written is not None and written.decode() != digest:
+    if written is not None and written.decode(errors="replace") != digest:
         raise InputError(f"{path} holds results of other inputs (another spec, or ship or "
                          "rules files changed since); use another --out folder or delete it")
-    return b"ship_steps" in meta
+    if (not table.schema.remove_metadata().equals(_chunk_schema())
+            or any(column.null_count for column in table.columns)):
+        return False
+    try:
+        int(meta[b"ship_steps"]), float(meta[b"seconds"])
+    except (KeyError, ValueError):
+        return False
+    return True
 
 
 def _spec_hash(path: Path) -> str:
@@ -252,6 +270,7 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
     with _executor(executor, workers, address) as pool:  # (a bad executor flag: nothing made)
         out.mkdir(parents=True, exist_ok=True)
         digest = inputs_digest(spec)
+        new = not (out / "campaign.json").exists()
         _check_folder(out, spec, digest)
         every = chunks(spec)
         todo = [c for c in every if not _chunk_done(_chunk_path(out, *c), digest)]
@@ -259,15 +278,21 @@ def run_campaign(spec_path: str | os.PathLike[str], out_dir: str | os.PathLike[s
         ship_steps_now = 0
         bar = tqdm(total=len(every), initial=len(every) - len(todo), unit="chunk",
                    disable=not progress, desc=spec.name)
-        if pool is None:
-            results = ((c, _job(str(spec.path), *c)) for c in todo)
-        else:
-            futures = {pool.submit(_job, str(spec.path), *c): c for c in todo}
-            results = ((futures[f], f.result()) for f in cf.as_completed(futures))
-        for (start, stop), rows in results:
-            _write_chunk(_chunk_path(out, start, stop), rows, digest)
-            ship_steps_now += int(rows["_ship_steps"])
-            bar.update(1)
+        try:
+            if pool is None:
+                results = ((c, _job(str(spec.path), *c)) for c in todo)
+            else:
+                futures = {pool.submit(_job, str(spec.path), *c): c for c in todo}
+                results = ((futures[f], f.result()) for f in cf.as_completed(futures))
+            for (start, stop), rows in results:
+                _write_chunk(_chunk_path(out, start, stop), rows, digest)
+                ship_steps_now += int(rows["_ship_steps"])
+                bar.update(1)
+        except BaseException:
+            # nothing to resume: a corrected spec may start afresh in this folder
+            if new and not any((out / "chunks").glob("*.parquet")):
+                (out / "campaign.json").unlink(missing_ok=True)
+            raise
     bar.close()
     wall = time.perf_counter() - t0
     return finish(spec, out, ship_steps_now / wall if ship_steps_now else None)

@@ -45,10 +45,19 @@ def campaign_spec(campaign_dir: str | Path) -> CampaignSpec:
                          "campaign' was expected)", path=str(folder))
     try:
         info = json.loads(manifest.read_text())
-        spec_path = Path(info["spec"])
-        digest = info["spec_sha256"]
-    except (OSError, ValueError, KeyError, TypeError) as err:
+    except (OSError, ValueError) as err:
         raise InputError(f"unreadable ({err})", path=str(manifest)) from None
+    if not isinstance(info, dict):
+        raise InputError(f"unreadable (expected a JSON object, got {type(info).__name__})",
+                         path=str(manifest))
+    for key, what in (("spec", "the path of the campaign's spec"),
+                      ("spec_sha256", "the SHA-256 of the campaign's spec")):
+        if key not in info:
+            raise InputError(f"missing key (expected {what})", path=str(manifest), key=key)
+        if not isinstance(info[key], str) or not info[key]:
+            raise InputError(f"expected {what} as text, got {info[key]!r}", path=str(manifest),
+                             key=key)
+    spec_path, digest = Path(info["spec"]), info["spec_sha256"]
     if not spec_path.is_file():
         raise InputError(f"the campaign's spec {spec_path} is gone; a replay needs "
                          "it", path=str(manifest))
@@ -74,7 +83,7 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
     Raises:
         InputError: see :func:`campaign_spec`; ``out_dir`` holding a campaign's results; an
             encounter index outside the campaign; a record period that is not a positive
-            multiple of the campaign's step.
+            multiple of the campaign's step, or longer than its ``duration_s``.
     """
     from trafficsim.campaign.runner import prepare
     from trafficsim.folders import refuse_other_results
@@ -93,6 +102,10 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
                              f"({spec.dt_s:g} s), got {record_every_s:g}",
                              key="--record-every-s")
         every = max(1, every)
+    if record_every_s is not None and every * spec.dt_s > spec.duration_s * (1.0 + 1e-9):
+        raise InputError(f"must not exceed the encounter's duration ({spec.duration_s:g} s, "
+                         f"duration_s of {spec.path}), got {record_every_s:g} (only the start "
+                         "would be recorded)", key="--record-every-s")
     encounters, sim = prepare(spec, encounter, encounter + 1)
     if sim.decider is not None:
         sim.decider.record = True  # decisions.parquet (recording changes nothing else)

@@ -18,13 +18,29 @@ from typing import Any
 import numpy as np
 
 from trafficsim.batch import build_batch
-from trafficsim.campaign.compliance import PairObserver
+from trafficsim.campaign.compliance import RULES, PairObserver
 from trafficsim.campaign.generator import Encounter, classify, draw
 from trafficsim.campaign.spec import CampaignSpec
 from trafficsim.colregs.decider import Decider
 from trafficsim.engine import Simulation
 from trafficsim.ships.base import EAST, NORTH, PSI, U
 from trafficsim.units import NM
+
+#: the columns of a chunk's rows (and of ``encounters.parquet``), in order, with their Arrow
+#: types; a chunk file of another schema is damaged and runs again (:mod:`.execute`)
+COLUMNS: dict[str, str] = {
+    "encounter": "int64", "encounter_type": "string", "pair_type": "string", "seed": "int64",
+    **dict.fromkeys(("ship_i", "ship_j", "type_i", "type_j", "behaviour_i", "behaviour_j"),
+                    "string"),
+    **dict.fromkeys(("dcpa0_nm", "tcpa0_min", "range0_nm", "min_range_m", "t_cpa_s"), "double"),
+    **dict.fromkeys(("collision", "domain_violation", "blind_spot"), "bool"),
+    "blind_spot_role": "string", "diverged_at_s": "double", "diverged": "bool",
+    **{f"{name}{side}": kind for side in ("_i", "_j") for name, kind in (
+        ("manoeuvres", "string"), ("rules_fired", "string"), ("course_change_stbd_deg", "double"),
+        ("course_change_port_deg", "double"), ("crossed_ahead", "bool"))},
+    "compliance_i": "double", "compliance_j": "double",
+    **{f"score_rule{r}": "double" for r in RULES},
+}
 
 
 def rules_path(spec: CampaignSpec) -> Path | None:

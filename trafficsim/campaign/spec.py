@@ -6,15 +6,15 @@ A campaign draws ``n_encounters`` random encounters and runs them all::
     name: default                  # required, non-empty
     n_encounters: 1000             # 1 .. 10,000,000
     seed: 1                        # int >= 0; with the encounter index it fixes each encounter
-    duration_s: 1800               # per encounter, > 0
+    duration_s: 1800               # per encounter, > 0 and >= tcpa_min's upper end
     dt_s: 1.0                      # optional, default 1.0
     chunk_encounters: 500          # optional, default 500: encounters per chunk (memory,
                                    #   and the unit of work, of resuming and of the executors)
     policy: colregs                # colregs (every ship runs the rules) or no_avoidance
     rules: ../rules/colregs.yaml   # optional, relative to this file
     domain: coldwell               # ship domain of features and metrics
-    decision_period_s: 10          # optional, a whole multiple of dt_s; default 10 s rounded
-                                   #   to a whole number of steps
+    decision_period_s: 10          # optional, a whole multiple of dt_s, <= duration_s; default
+                                   #   10 s rounded to a whole number of steps
     encounter_types:               # relative weights (any subset; at least one > 0)
       head_on: 1
       crossing_give_way: 1         # the other ship crosses from the own ship's starboard side
@@ -50,12 +50,13 @@ import os
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, PrivateAttr, ValidationInfo, field_validator
+from pydantic import Field, PrivateAttr, ValidationInfo, field_validator, model_validator
 
 from trafficsim.errors import ShipLibraryError
 from trafficsim.io.scenario import (
     MAX_DT_S,
     MAX_DURATION_S,
+    _within_duration,
     default_decision_period,
     known_schema_version,
     rules_file_errors,
@@ -201,7 +202,21 @@ class CampaignSpec(Strict):
         dt = info.data.get("dt_s")
         if dt is not None and not _whole(period, dt):
             raise ValueError(f"must be a whole multiple of dt_s ({dt:g} s), got {period:g}")
+        _within_duration(period, info, default_decision_period(None, dt),
+                         "the ships would decide once, at the start")
         return period
+
+    @model_validator(mode="after")
+    def _every_cpa_within_duration(self) -> CampaignSpec:
+        # An encounter drawn with a start TCPA beyond the run ends before its CPA: its
+        # "smallest range" would be the last step's, and every statistic meaningless.
+        latest_s = 60.0 * self.tcpa_min[1]
+        if self.duration_s < latest_s * (1.0 - 1e-9):
+            raise FieldError(f"must be at least tcpa_min's upper end, {self.tcpa_min[1]:g} min "
+                             f"= {latest_s:g} s, so that every encounter reaches its CPA "
+                             f"(lengthen it or lower tcpa_min), got {self.duration_s:g}",
+                             loc=("duration_s",))
+        return self
 
 
 def load_spec(path: str | os.PathLike[str]) -> CampaignSpec:

@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from trafficsim import __version__
-from trafficsim.errors import InputError
+from trafficsim.campaign.compliance import RULES
+from trafficsim.errors import DataError, InputError
 from trafficsim.io.results import read_parquet
 from trafficsim.render.frame import FrameOptions
 from trafficsim.units import NM
@@ -59,23 +60,73 @@ class Report:
     seconds: float
 
 
+#: the columns of ``encounters.parquet`` the report reads, with what each must hold
+#: (``diverged`` may be absent: tables from before it count every encounter as run to the end)
+COLUMNS = {"encounter": "integer", "encounter_type": "text", "min_range_m": "number",
+           "t_cpa_s": "number", "collision": "bool", "domain_violation": "bool",
+           "blind_spot": "bool", "blind_spot_role": "text", "behaviour_i": "text",
+           "behaviour_j": "text", "compliance_i": "number", "compliance_j": "number",
+           **{f"score_rule{r}": "number" for r in RULES}}
+OPTIONAL = {"diverged": "bool"}
+EXPECTED = {"integer": "whole numbers", "number": "numbers", "bool": "true or false",
+            "text": "text"}
+RERUN = "run 'trafficsim campaign' on this folder again to write it anew from its chunks"
+
+
 def read_encounters(campaign_dir: Path) -> dict[str, np.ndarray]:
-    """The rows of ``encounters.parquet``.
+    """The rows of ``encounters.parquet``, every column the report reads checked.
 
     Raises:
-        InputError: no such folder, or a campaign that has not finished.
-        DataError: an ``encounters.parquet`` that does not read.
+        InputError: no such folder, a run's folder, or a campaign that has not finished.
+        DataError: an ``encounters.parquet`` that does not read, or a column missing, of
+            another type, with empty values (numbers may be empty: not graded) or a negative
+            encounter index (names the file and the column).
     """
+    from trafficsim.folders import results_kind
+
     path = campaign_dir / "encounters.parquet"
     if not campaign_dir.is_dir():
         raise InputError("no such folder (the output folder of 'trafficsim "
                          "campaign' was expected)", path=str(campaign_dir))
+    if not path.is_file() and results_kind(campaign_dir) == "run":
+        raise InputError("holds a run's results (of 'trafficsim run' or 'replay'), not a "
+                         "campaign's: report needs the output folder of 'trafficsim campaign' "
+                         "('trafficsim render' draws a run)", path=str(campaign_dir))
     if not path.is_file():
+        finish = ("; run the campaign command again to finish it"
+                  if (campaign_dir / "campaign.json").is_file() else "")
         raise InputError("no encounters.parquet here (the output folder of a "
-                         "finished 'trafficsim campaign' was expected; run the campaign "
-                         "command again to finish it)", path=str(campaign_dir))
+                         f"finished 'trafficsim campaign' was expected{finish})",
+                         path=str(campaign_dir))
     table = read_parquet(path, "encounters table")
-    return {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+    for name, kind in {**COLUMNS, **OPTIONAL}.items():
+        if name in table.column_names:
+            _check_column(table, path, name, kind)
+        elif name in COLUMNS:
+            raise DataError(f"missing column (expected {EXPECTED[kind]} per ship pair; {RERUN})",
+                            path=str(path), key=name)
+    rows = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}
+    if np.any(rows["encounter"] < 0):
+        raise DataError(f"expected encounter indices >= 0, got {int(rows['encounter'].min())} "
+                        f"({RERUN})", path=str(path), key="encounter")
+    return rows
+
+
+def _check_column(table: Any, path: Path, name: str, kind: str) -> None:
+    """Raise a DataError naming ``path`` and column ``name`` unless it holds ``kind``."""
+    import pyarrow.types as pat
+
+    arrow = table.schema.field(name).type
+    ok = {"integer": pat.is_integer, "bool": pat.is_boolean,
+          "number": lambda t: pat.is_integer(t) or pat.is_floating(t),
+          "text": lambda t: pat.is_string(t) or pat.is_large_string(t)}[kind](arrow)
+    if not ok:
+        raise DataError(f"expected {EXPECTED[kind]}, got {arrow} values ({RERUN})",
+                        path=str(path), key=name)
+    if kind != "number" and table.column(name).null_count:
+        raise DataError(f"expected {EXPECTED[kind]} in every row, got "
+                        f"{table.column(name).null_count} empty values ({RERUN})",
+                        path=str(path), key=name)
 
 
 def worst_encounters(rows: dict[str, np.ndarray], k: int) -> list[Pick]:
@@ -135,7 +186,9 @@ def write_report(campaign_dir: str | Path, out_dir: str | Path | None = None, wo
 
     Raises:
         InputError: not a finished campaign folder; with ``worst > 0`` a spec that is gone or
-            changed since the campaign ran (replays need it).
+            changed since the campaign ran (replays need it). DataError: a damaged
+            ``encounters.parquet`` (:func:`read_encounters`), or with ``worst > 0`` one holding
+            encounters beyond the spec's ``n_encounters``.
     """
     from tqdm import tqdm
 
@@ -147,10 +200,15 @@ def write_report(campaign_dir: str | Path, out_dir: str | Path | None = None, wo
     t0 = time.perf_counter()
     campaign_dir = Path(campaign_dir)
     rows = read_encounters(campaign_dir)
-    out = Path(out_dir) if out_dir is not None else campaign_dir / "report"
-    out.mkdir(parents=True, exist_ok=True)
     picks = worst_encounters(completed(rows), worst)
     spec = campaign_spec(campaign_dir) if picks else None
+    if spec is not None and int(rows["encounter"].max()) >= spec.n_encounters:
+        raise DataError(f"encounter {int(rows['encounter'].max())} is not one of the "
+                        f"campaign's {spec.n_encounters} (0 .. {spec.n_encounters - 1}, spec "
+                        f"{spec.path}): the table is not this campaign's ({RERUN})",
+                        path=str(campaign_dir / "encounters.parquet"), key="encounter")
+    out = Path(out_dir) if out_dir is not None else campaign_dir / "report"
+    out.mkdir(parents=True, exist_ok=True)
     figures = write_figures(rows, out)
     _drop_stale(out / "encounters", {p.encounter for p in picks})
     for pick in tqdm(picks, unit="encounter", disable=not progress, leave=False):
