@@ -235,3 +235,18 @@ def test_an_mmg_parameter_folder_is_checked_as_a_ship(tmp_path):
     assert check_file(folder) == ([], "ok")
     (error,) = check_file(tmp_path)[0]
     assert error.path == str(tmp_path) and "MMG parameter folder" in error.message
+
+
+def test_a_pipe_is_refused_as_no_regular_file(tmp_path: Path) -> None:
+    # validate reads a file more than once (is it a rules file? then its own loader), so a
+    # pipe would be found empty the second time; the refusal opens nothing (no writer needed)
+    import os
+
+    pipe = tmp_path / "scenario.yaml"
+    os.mkfifo(pipe)
+    code, _, err = _run([pipe])
+    assert code == 2
+    assert err.strip().splitlines() == [
+        f"trafficsim: error: {pipe}: is not a regular file (a pipe or a device): validate "
+        "reads a file more than once and looks for the files it names beside it; save it to a "
+        "file first"]

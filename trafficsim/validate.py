@@ -116,6 +116,10 @@ def check_file(path: Path) -> tuple[list[InputError], str]:
         except InputError as err:
             return _errors(err), ""
         return [], "ok"
+    if path.exists() and not path.is_file():  # a pipe or a device: it reads only once
+        return [InputError("is not a regular file (a pipe or a device): validate reads a file "
+                           "more than once and looks for the files it names beside it; save "
+                           "it to a file first", path=str(path))], ""
     try:
         doc = load_yaml(path)
     except InputError as err:
