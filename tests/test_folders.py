@@ -1,5 +1,6 @@
 """Output folders: a command refuses to write its results among results of another kind (a
-run's or a replay's summary.json replaced a campaign's, a campaign's replaced a run's)."""
+run's or a replay's summary.json replaced a campaign's, a campaign's replaced a run's, a
+diagnosis's report replaced an identification's)."""
 
 import json
 import shutil
@@ -85,3 +86,65 @@ def test_results_of_the_same_kind_are_written_over_as_before(capsys, folders, tm
         assert cli.main(["report", str(campaign), "--worst", "1", "--no-progress"]) == 0
     assert (campaign / "report" / "index.html").is_file()
     capsys.readouterr()
+
+
+def test_results_kind_tells_trials_identifications_diagnoses_and_reports(tmp_path):
+    kinds = {"trial": {"indices.json": "{}"},
+             "identify": {"report.json": json.dumps({"coefficients": {}})},
+             "diagnose": {"report.json": json.dumps({"verdict": "v"})},
+             "report": {"index.html": "<html></html>"}}
+    for kind, files in kinds.items():
+        folder = tmp_path / kind
+        folder.mkdir()
+        for name, text in files.items():
+            (folder / name).write_text(text)
+        assert results_kind(folder) == kind
+    only_ship = tmp_path / "ship_only"  # an identification that stopped before its report
+    only_ship.mkdir()
+    (only_ship / "ship.yaml").write_text("name: x\n")
+    assert results_kind(only_ship) == "identify"
+    self_test = tmp_path / "self_test"
+    self_test.mkdir()
+    (self_test / "selftest.json").write_text("{}")
+    assert results_kind(self_test) == "diagnose"
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "report.json").write_text(json.dumps({"something": 1}))
+    assert results_kind(tmp_path / "other") is None
+
+
+@pytest.fixture(scope="module")
+def trial_folder(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("trial")
+    assert cli.main(["trial", "container", "--manoeuvre", "turning", "--out", str(out)]) == 0
+    return out
+
+
+@pytest.mark.parametrize("into, files, holds, argv, writes", [
+    ("trial", None, "a trial's results (trial.csv, indices.json)",
+     ["identify", "--model", "nomoto", "--base", "container", "--data", "{trial}/trial.csv",
+      "--out", "{folder}"], "an identification"),
+    ("identify", {"ship.yaml": "name: x\n", "report.json": '{"coefficients": {}}'},
+     "an identification's results (ship.yaml, report.json, report.md)",
+     ["diagnose", "--ship", "container", "--data", "{trial}/trial.csv", "--out", "{folder}"],
+     "a diagnosis"),
+    ("diagnose", {"report.json": '{"verdict": "v"}'},
+     "a diagnosis's results (report.json, report.md, residuals_by_phase.png or selftest.json)",
+     ["identify", "--model", "nomoto", "--base", "container", "--data", "{trial}/trial.csv",
+      "--out", "{folder}"], "an identification"),
+    ("run", {"summary.json": '{"scenario": "s"}'}, RUN_HOLDS[len("holds "):],
+     ["trial", "container", "--manoeuvre", "turning", "--out", "{folder}"], "a trial"),
+    ("run", {"summary.json": '{"scenario": "s"}'}, RUN_HOLDS[len("holds "):],
+     ["diagnose", "--self-test", "1", "--out", "{folder}"], "a self-test"),
+])
+def test_trials_fits_and_diagnoses_are_not_written_among_results_of_another_kind(
+        capsys, tmp_path, trial_folder, into, files, holds, argv, writes):
+    """identify and diagnose both write report.json and report.md: one replaced the other's."""
+    folder = trial_folder if files is None else tmp_path / into
+    folder.mkdir(exist_ok=True)
+    for name, text in (files or {}).items():
+        (folder / name).write_text(text)
+    before = _snapshot(folder)
+    line = error_line(capsys, [a.format(trial=trial_folder, folder=folder) for a in argv])
+    assert line == (f"trafficsim: error: --out: {folder} holds {holds}; {writes} must not be "
+                    "written among them: use another --out folder")
+    assert _snapshot(folder) == before

@@ -21,6 +21,7 @@ import numpy as np
 
 from trafficsim.errors import InputError
 from trafficsim.estimation import pv
+from trafficsim.folders import refuse_other_results
 from trafficsim.io.results import write_csv, write_json
 from trafficsim.navigation import Navigation, merge_sensors
 from trafficsim.ships import manoeuvres
@@ -45,6 +46,7 @@ def run_trial(ship: str, manoeuvre: str, rudder_deg: float | None, heading_deg: 
 
     A value the manoeuvre rejects is reported under its command-line flag (``--speed-kn``), and
     so is a manoeuvre that does not complete (its indices would be undefined)."""
+    refuse_other_results(out_dir, "trial", "a trial")
     if sensors and not SP_RANGE_M2PS3[0] <= sp_m2ps3 <= SP_RANGE_M2PS3[1]:
         raise InputError(f"expected a receiver filter S_p from {SP_RANGE_M2PS3[0]:g} to "
                          f"{SP_RANGE_M2PS3[1]:g} m^2/s^3, got {sp_m2ps3:g}", key="--sp")

@@ -24,6 +24,7 @@ from trafficsim import effects
 from trafficsim.diagnose import data as ddata
 from trafficsim.diagnose import fit, report
 from trafficsim.errors import InputError
+from trafficsim.folders import refuse_other_results
 from trafficsim.identify import datacheck, preprocess
 from trafficsim.identify.command import horizon_of, read_runs, working_interval_s
 from trafficsim.ships.library import load_ship
@@ -101,6 +102,7 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
     family's subset of ``trafficsim identify``, :data:`trafficsim.identify.parameters.
     DEFAULT_FIT`; a comma-separated string or a sequence of names)."""
     start = time.perf_counter()
+    refuse_other_results(out, "diagnose", "a diagnosis")
     spec = load_base(ship)
     names = _candidates(candidates, spec)
     refit_names = _refit(spec, refit)
@@ -223,6 +225,8 @@ def self_test(n: int, out: Path | None, seed: int = 0) -> dict[str, Any]:
 
     from trafficsim.diagnose import selftest
 
+    if out is not None:
+        refuse_other_results(out, "diagnose", "a self-test")
     def progress(i: int, t: dict[str, Any]) -> None:
         print(f"  trial {i + 1}/{n}: hidden {t['hidden']}, first-ranked {t['first_ranked']}, "
               f"magnitude {t['magnitude_fitted']:.3g} (true {t['magnitude_true']:.3g}), "

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 
 from trafficsim.errors import DataError, InputError
+from trafficsim.folders import refuse_other_results
 from trafficsim.identify import (
     augmented_ekf,
     datacheck,
@@ -246,6 +247,7 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     ``report.json``).
     """
     start = time.perf_counter()
+    refuse_other_results(out, "identify", "an identification")
     if model not in MODELS:
         raise InputError(f"unknown model '{model}'; expected one of {', '.join(MODELS)}",
                          key="--model")
