@@ -247,3 +247,51 @@ def test_service_propeller_speed_needs_the_propeller_ahead(tmp_path: Path) -> No
     assert str(err.value).endswith("check the sign of the column")
     datacheck.check_propulsion(neg_trials, neg_runs, 100.0)  # never faster than 30 m/s
     datacheck.check_propulsion([*neg_trials, *trials], [*neg_runs, *runs], u)
+
+
+def _circle(path: Path, heading_scale: float = 1.0, rpm: float = 80.0, turn_degps: float = 1.0,
+            n: int = 90) -> tuple[list, list]:
+    """A cargo ship turning at ``turn_degps`` at 7 m/s for ``n`` s (heading column times
+    ``heading_scale``), read and smoothed."""
+    radius = 7.0 / np.radians(turn_degps) if turn_degps else np.inf
+    rows = []
+    for i in range(n):
+        psi = np.radians(turn_degps * i)
+        north, east = ((radius * np.sin(psi), radius * (1.0 - np.cos(psi))) if turn_degps
+                       else (7.0 * i, 0.0))
+        rows.append([float(i), north, east, heading_scale * np.degrees(psi), 10.0, rpm])
+    trial = read_trial(_csv(path, rows))
+    return [trial], preprocess.smooth_runs([trial], 160.93, 15 * KNOT)
+
+
+def test_heading_and_propeller_columns_in_other_units_are_refused(tmp_path: Path) -> None:
+    """A heading written in radians turns 57 times too little for the track it steers; an rpm
+    column holding rev/s turns 60 times too slow for the way the ship makes."""
+    cargo = load_ship("cargo")
+    datacheck.check_units(*_circle(tmp_path / "ok.csv"), cargo)
+    with pytest.raises(DataError) as err:
+        datacheck.check_units(*_circle(tmp_path / "rad.csv", heading_scale=np.pi / 180.0),
+                              cargo)
+    text = str(err.value)
+    assert err.value.key == "heading_deg" and text.startswith(f"{tmp_path / 'rad.csv'}:2:")
+    assert ("the heading turns through 1.55 deg while the ship's track turns through 87.9 deg"
+            in text)
+    assert text.endswith("a heading in radians, or a frozen compass, reads so; expected "
+                         "degrees clockwise from north")
+    with pytest.raises(DataError) as err:
+        datacheck.check_units(*_circle(tmp_path / "rps.csv", rpm=80.0 / 60.0), cargo)
+    text = str(err.value)
+    assert err.value.key == "rpm" and text.startswith(f"{tmp_path / 'rps.csv'}:2:")
+    assert ("the propeller turns at a median 1.333 rpm (here 1.333333333 as read) while the ship "
+            "makes way above 30 % of its service speed: less than 1/20 of the base ship "
+            "'cargo''s largest (106.7 rpm); a column holding rev/s where rpm is expected reads "
+            "so") in text
+
+
+def test_a_straight_run_cannot_tell_the_heading_unit(tmp_path: Path) -> None:
+    """Without a turn of the track of 20 deg the heading's unit is not told (nor is it needed
+    for a refusal: such a run excites no turning coefficient)."""
+    datacheck.check_units(*_circle(tmp_path / "s.csv", heading_scale=np.pi / 180.0,
+                                   turn_degps=0.0), load_ship("cargo"))
+    datacheck.check_units(*_circle(tmp_path / "slow.csv", heading_scale=np.pi / 180.0,
+                                   turn_degps=0.2), load_ship("cargo"))

@@ -114,6 +114,7 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
     work_dt = working_interval_s(trials, length, u_service, dt_s)
     horizon = horizon_of(trials, length, u_service, horizon_s, work_dt)
     kin = preprocess.smooth_runs(trials, length, u_service, dt_s=work_dt)
+    datacheck.check_units(trials, kin, spec)
     if hold_files:
         train = ddata.dataset(kin[: len(train_files)], horizon)
         hold = ddata.dataset(kin[len(train_files):], horizon)

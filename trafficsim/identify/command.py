@@ -275,6 +275,7 @@ def identify(model: str, data: Sequence[Path], out: Path, base: str,
     horizon = horizon_of(trials, length, u_service, horizon_s, work_dt)
     kin = preprocess.smooth_runs(trials, length, u_service,
                                  smoother or preprocess.SmootherSettings(), dt_s=work_dt)
+    datacheck.check_units(trials, kin, base_spec, columns)
     train, hold = kin[: len(train_files)], kin[len(train_files):]
 
     names = tuple(fit_names) if fit_names else DEFAULT_FIT[model]

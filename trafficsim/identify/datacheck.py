@@ -19,7 +19,14 @@ column as the file names it, the value as the file holds it), or an
   none of which both the rudder and the heading move by :data:`MIN_EXCURSION_DEG` or more;
   and the propeller speed at the service speed (``rps_service`` of ``nomoto``) from runs in
   which the ship makes way ahead above :data:`AHEAD_FRACTION` of its service speed only with
-  the propeller stopped or astern (an rpm column whose sign is reversed reads so).
+  the propeller stopped or astern (an rpm column whose sign is reversed reads so);
+* columns in other units than their names say, told by what the ship does while it makes way
+  above :data:`AHEAD_FRACTION` of its service speed: a heading that turns through less than
+  :data:`HEADING_TURN_FRACTION` of the track's own turn (of at least
+  :data:`MIN_TRACK_TURN_DEG`; radians in a degrees column turn 57 times too little), and a
+  propeller that turns below :data:`RPS_FLOOR_FRACTION` of the base ship's largest speed
+  (rev/s in an rpm column read 60 times too slow; in the FRT-DS-ESSO runs the median at speed
+  is 0.30-0.77 of it).
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ from trafficsim.errors import DataError, InputError
 from trafficsim.estimation.smoother import unwrap_finite
 from trafficsim.io import trialdata
 from trafficsim.io.trialdata import TrialData
+from trafficsim.units import KN
 
 if TYPE_CHECKING:  # (preprocess imports this module)
     from trafficsim.identify.preprocess import Kinematics
@@ -53,6 +61,14 @@ AHEAD_FRACTION = 0.3
 RPS_FACTOR = 2.0
 #: smallest rudder and heading excursion (largest minus smallest) that excites the yaw, deg
 MIN_EXCURSION_DEG = 1.0
+#: the smallest turn of the track at speed (course over ground, deg) that tells a heading
+#: column's unit, and the fraction of it the heading must turn through (in the FRT-DS-ESSO
+#: runs the heading turns through 0.53-3.3 times the track's turn; the same runs' headings
+#: written in radians 0.01-0.04 times)
+MIN_TRACK_TURN_DEG = 20.0
+HEADING_TURN_FRACTION = 0.1
+#: the smallest median propeller speed at speed, as a fraction of the base ship's largest
+RPS_FLOOR_FRACTION = 1.0 / 20.0
 #: coefficients a run without turning determines (surge and propulsion only)
 SURGE_ONLY = frozenset({"rps_service", "surge_tau_s", "R0", "X_0F", "X_0A", "a1", "a8", "a9"})
 
@@ -284,3 +300,41 @@ def check_propulsion(trials: Sequence[TrialData], runs: Sequence[Kinematics],
                      f"'{runs[i].name}' at t = {t:.6g} s: {u:.3g} m/s ahead at "
                      f"{60.0 * float(runs[i].trial.rps[j]):.4g} rpm); {hint}",
                      path=path, key=key or None)
+
+
+def check_units(trials: Sequence[TrialData], runs: Sequence[Kinematics],
+                spec: Mapping[str, Any], columns: Mapping[str, str] | None = None) -> None:
+    """Refuse a heading or propeller-speed column whose values are in other units than its
+    name says (module docstring). ``trials``: the runs as read; ``runs``: the same smoothed."""
+    u_service = float(spec["service_speed_kn"]) * KN
+    act = spec.get("actuators", {})
+    most = max(abs(float(act.get("rps_max", 0.0))), abs(float(act.get("rps_min", 0.0))))
+    for trial, run in zip(trials, runs, strict=True):
+        north, east, t = run.smooth["north_m"], run.smooth["east_m"], run.t_s
+        if t.size < 3:
+            continue
+        vn, ve = np.gradient(north, t), np.gradient(east, t)
+        fast = np.isfinite(vn) & np.isfinite(ve) & (np.hypot(vn, ve) > AHEAD_FRACTION * u_service)
+        if fast.sum() < 3:
+            continue
+        first = int(np.argmin(np.abs(trial.t_s - t[int(np.argmax(fast))])))
+        track = float(np.degrees(np.ptp(np.unwrap(np.arctan2(ve[fast], vn[fast])))))
+        heading = _excursion_deg(run.trial.psi_rad[fast], angle=True)
+        if (track >= MIN_TRACK_TURN_DEG and np.isfinite(run.trial.psi_rad[fast]).any()
+                and heading < HEADING_TURN_FRACTION * track):
+            raise _error(trial, "psi_rad", first, columns,
+                         f"the heading turns through {heading:.3g} deg while the ship's track "
+                         f"turns through {track:.3g} deg at speed (above "
+                         f"{100 * AHEAD_FRACTION:g} % of the service speed): a heading in "
+                         "radians, or a frozen compass, reads so; expected degrees clockwise "
+                         "from north")
+        rps = run.trial.rps[fast]
+        ahead = rps[np.isfinite(rps) & (rps > 0.0)]
+        if most > 0.0 and ahead.size and float(np.median(ahead)) < RPS_FLOOR_FRACTION * most:
+            raise _error(trial, "rps", first, columns,
+                         f"the propeller turns at a median {60.0 * float(np.median(ahead)):.4g} "
+                         f"rpm (here {{value}} as read) while the ship makes way above "
+                         f"{100 * AHEAD_FRACTION:g} % of its service speed: less than "
+                         f"1/{1.0 / RPS_FLOOR_FRACTION:g} of the base ship "
+                         f"'{spec.get('name')}''s largest ({60.0 * most:.4g} rpm); a column "
+                         "holding rev/s where rpm is expected reads so")
