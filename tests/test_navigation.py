@@ -446,6 +446,87 @@ def test_a_perfect_receiver_is_a_valid_config():
     check_sensor_config({"gnss": {"sigma_m": 0.0}})
 
 
+@pytest.mark.parametrize(("section", "key", "inside", "beyond", "where", "message"), [
+    ("navigation", "pv_sp_m2ps3", 1e4, 1.01e4, "navigation[0].pv_sp_m2ps3",
+     "must be <= 10000, got 10100.0"),
+    ("navigation", "heading_sp_rad2ps3", 1.0, 1.5, "navigation[0].heading_sp_rad2ps3",
+     "must be <= 1, got 1.5"),
+    ("gnss2", "sigma_m", 1000.0, 1e9, "gnss2[0].sigma_m", "must be <= 1000, got 1000000000.0"),
+    ("gnss3", "antenna_x_m", 250.0, 1e5, "gnss3[0].antenna_x_m",
+     "must be <= 250, got 100000.0"),
+    ("gate", "window_diameter_m", 1e4, 2e4, "gate",
+     "window_diameter_m must be <= 10000, got 20000"),
+    ("ekf", "compass_sigma_deg", 30.0, 1000.0, "ekf",
+     "EKF config 'compass_sigma_deg' must be <= 30, got 1000"),
+    ("radar", "max_range_nm", 96.0, 10_000.0, "radar[0].max_range_nm",
+     "must be <= 96, got 10000.0"),
+    ("ais", "sigma_heading_deg", 30.0, 31.0, "ais[0].sigma_heading_deg",
+     "must be <= 30, got 31.0"),
+    ("tracker", "coast_s", 3600.0, 3601.0, "tracker[0].coast_s", "must be <= 3600, got 3601.0"),
+])
+def test_settings_beyond_their_physical_bounds_are_refused_naming_the_key(
+        section, key, inside, beyond, where, message):
+    """Each section of a ship's ``sensors`` is checked against its physical bounds when the
+    scenario is validated, the error naming the key as the section's builder does."""
+    extra = {"gnss2": {"sigma_m": 2.0}} if section == "gnss3" else {}
+    check_sensor_config({**extra, section: {key: inside}})
+    with pytest.raises(InputError) as err:
+        check_sensor_config({**extra, section: {key: beyond}})
+    assert (err.value.key, err.value.message) == (where, message)
+
+
+def test_adaptive_window_and_floor_are_bounded():
+    check_sensor_config({"navigation": {"adaptive_window_steps": 86_400,
+                                        "adaptive_floor_sigma_m": 1000.0}})
+    with pytest.raises(InputError) as err:
+        check_sensor_config({"navigation": {"adaptive_window_steps": 86_401}})
+    assert (err.value.key, err.value.message) == (
+        "navigation", "adaptive settings: window_steps must be <= 86400, got 86401")
+
+
+CARGO = load_ship("cargo")  # L = 160.93 m, B = 23.17 m
+ON_BOARD = [(section, key) for section in ("gnss", "gnss2", "gnss3", "radar")
+            for key in ("antenna_x_m", "antenna_y_m")] + [("log", "lever_x_m"),
+                                                        ("log", "lever_y_m")]
+
+
+@pytest.mark.parametrize(("section", "key"), ON_BOARD)
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_antennas_and_levers_must_lie_on_board(section, key, sign):
+    """With the ship file known, an antenna or log transducer outside the hull outline's box
+    (``|x| <= L/2``, ``|y| <= B/2`` from the reference point) is refused naming the key and
+    the ship's L and B; on its edge it is accepted; without the ship file only the 250 m
+    bound of any ship applies."""
+    half = 0.5 * (160.93 if key.endswith("x_m") else 23.17)
+    extra = {"gnss2": {"sigma_m": 2.0}} if section == "gnss3" else {}
+    check_sensor_config({**extra, section: {key: sign * half}}, "none", CARGO)
+    beyond = {**extra, section: {key: sign * (half + 0.01)}}
+    check_sensor_config(beyond)
+    with pytest.raises(InputError) as err:
+        check_sensor_config(beyond, "none", CARGO)
+    part = "length L" if key.endswith("x_m") else "beam B"
+    assert err.value.key == f"{section}[0].{key}"
+    assert err.value.message == (
+        f"must lie on board, within +-{half:g} m of the reference point (half the {part} of "
+        f"the ship's hull, L = 160.93 m, B = 23.17 m), got {sign * (half + 0.01):g}")
+
+
+def test_on_board_check_reads_the_hull_of_the_ship_file():
+    """The bounds follow the ship file's particulars, for an ekf ship too; the settings are
+    checked after their types (a bad value is the builder's error, not the hull's)."""
+    tanker = load_ship("kvlcc2")  # L = 320 m, B = 58 m
+    check_sensor_config({"gnss": {"antenna_x_m": 150.0}, "log": {"lever_y_m": -29.0}}, "ekf",
+                        tanker)
+    with pytest.raises(InputError, match=r"\+-145 m .* L = 290 m, B = 58 m\), got 150") as err:
+        check_sensor_config({"gnss": {"antenna_x_m": 150.0}}, "ekf",
+                            dict(tanker, particulars={**tanker["particulars"],
+                                                      "length_m": 290.0}))
+    assert err.value.key == "gnss[0].antenna_x_m"
+    with pytest.raises(InputError, match="expected a number") as err:
+        check_sensor_config({"radar": {"antenna_y_m": "mast"}}, "none", tanker)
+    assert err.value.key == "radar[0].antenna_y_m"
+
+
 def test_unknown_filter_missing_specs_and_adaptive_pv_are_refused():
     x = _truth(1, 0)
     with pytest.raises(InputError, match="unknown filter 'kf'") as err:

@@ -250,3 +250,42 @@ def test_a_pipe_is_refused_as_no_regular_file(tmp_path: Path) -> None:
         f"trafficsim: error: {pipe}: is not a regular file (a pipe or a device): validate "
         "reads a file more than once and looks for the files it names beside it; save it to a "
         "file first"]
+
+
+@pytest.mark.parametrize(("old", "new", "key", "message"), [
+    ("      radar: {sigma_range_m: 25,", "      radar: {antenna_y_m: 12, sigma_range_m: 25,",
+     "ships[0].sensors.radar.antenna_y_m",
+     "must lie on board, within +-11.585 m of the reference point (half the beam B of the "
+     "ship's hull, L = 160.93 m, B = 23.17 m), got 12"),
+    ("{sigma_m: 3.0, antenna_x_m: 40,", "{sigma_m: 3.0, antenna_x_m: 81,",
+     "ships[0].sensors.gnss2.antenna_x_m",
+     "must lie on board, within +-80.465 m of the reference point (half the length L of the "
+     "ship's hull, L = 160.93 m, B = 23.17 m), got 81"),
+    ("      radar: {}\n", "      radar: {}\n      log: {kind: doppler, lever_x_m: -170}\n",
+     "ships[1].sensors.log.lever_x_m",
+     "must lie on board, within +-160 m of the reference point (half the length L of the "
+     "ship's hull, L = 320 m, B = 58 m), got -170"),
+    ("    filter: pv\n    sensors:\n      gnss: {sigma_m: 2.0,",
+     "    filter: pv\n    effects: {lever_arm: {x_m: -50}}\n    sensors:\n"
+     "      gnss: {sigma_m: 2.0,",
+     "ships[0].effects.lever_arm.x_m",
+     "must lie on board, within +-80.465 m of the reference point (half the length L of the "
+     "ship's hull, L = 160.93 m, B = 23.17 m), got -90 (the ship's gnss.antenna_x_m with this "
+     "effect of -50)"),
+])
+def test_an_antenna_or_lever_off_the_hull_is_one_located_error(tmp_path, capsys, old, new,
+                                                               key, message):
+    """``validate`` refuses a GNSS or radar antenna or a log transducer outside the box of the
+    ship's hull outline (its ship file's L and B), in one line naming the file, the line and
+    the key: the key's own line, or that of the effect that moved the antenna there."""
+    from tests.conftest import error_line
+
+    text = (SCENARIOS / "crossing_sensors.yaml").read_text()
+    assert text.count(old) == 1
+    text = text.replace(old, new)
+    path = tmp_path / "s.yaml"
+    path.write_text(text)
+    added = next(t for t in new.splitlines() if t not in old.splitlines())
+    line = text[:text.index(added)].count("\n") + 1
+    assert error_line(capsys, ["validate", path]) == (
+        f"trafficsim: error: {path}:{line}: {key}: {message}")

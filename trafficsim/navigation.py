@@ -30,6 +30,10 @@ Instruments (``sensors:`` of the ship file, overridden key by key by the scenari
 ``compass``, ``log``, ``actuators`` (rudder and rpm feedback) and ``waves`` (wave-frequency
 motion seen by GNSS and compass), each as documented in its module under
 :mod:`trafficsim.sensors`. Random draws come from keyed streams (:mod:`trafficsim.noise`).
+Every setting has physical bounds (each module gives them and their reasons; here the
+``navigation`` spectral densities, :data:`MAX_PV_SP` and :data:`MAX_HEADING_SP`), and where the
+ship file is known the GNSS and radar antennas and the log's transducer must lie on board
+(:func:`check_on_board`).
 
 Several GNSS receivers: ``gnss2`` (and ``gnss3``) take the same keys as ``gnss`` (own sigma,
 antenna lever arm, Gauss-Markov error, gross errors, outages, rate) and are measured by the same
@@ -101,6 +105,17 @@ DEFAULT_GATE_SIGMA = 5.0  # normalised innovation; a fix beyond 5 sigma is a gro
 N_EST = 6
 DEFAULT_HEADING_SP = 1e-5  # rad^2/s^3, angular acceleration spectral density of the heading filter
 DEFAULT_PV_SP = 0.01  # m^2/s^3, the best S_p of [seed 000]
+#: largest S_p, m^2/s^3: a filter that passes 2 m fixes through at 1 s steps (tracking index
+#: sqrt(S_p dt^3) / sigma = 50; far beyond, its covariance overflows), the top of ``trafficsim
+#: trial --sp``; seed 000 tries 0.001-0.1. The ``gnss_lag`` effect's shortest lag, 0.2 s, needs
+#: 2500 at those fixes and steps (:func:`trafficsim.effects.pv_sp`)
+MAX_PV_SP = 10_000
+#: largest heading-filter spectral density, rad^2/s^3: the same tracking index 50 for a 1 deg
+#: compass at 1 s steps (0.76; a ship's yaw acceleration stays below 0.1 rad/s^2)
+MAX_HEADING_SP = 1
+#: the sections and keys of instruments fitted at a body position, checked against the hull
+LEVER_KEYS = {**{name: ("antenna_x_m", "antenna_y_m") for name in ("gnss", *EXTRA_GNSS, "radar")},
+              "log": ("lever_x_m", "lever_y_m")}
 
 
 def merge_sensors(ship_defaults: Mapping[str, Any] | None,
@@ -147,6 +162,29 @@ def check_sensor_config(config: Mapping[str, Any], filter_name: str = "none",
     for name, module in (("radar", radar), ("ais", ais), ("tracker", tracker)):
         if config.get(name) is not None:
             module.build([dict(config[name])])
+    if spec is not None:
+        check_on_board(config, spec)
+
+
+def check_on_board(config: Mapping[str, Any], spec: Mapping[str, Any]) -> None:
+    """Raise :class:`InputError` naming the key if a GNSS or radar antenna or the speed log's
+    transducer lies outside the box of the hull outline, ``|x| <= L/2`` and ``|y| <= B/2``
+    from the reference point (:func:`trafficsim.geometry.hull_outlines` spans exactly that),
+    with ``L`` and ``B`` the ship file's ``particulars``. The settings must be valid numbers
+    already (:func:`check_sensor_config` builds them first)."""
+    length = float(spec["particulars"]["length_m"])
+    beam = float(spec["particulars"]["beam_m"])
+    for name, keys in LEVER_KEYS.items():
+        section = config.get(name) or {}
+        for key, half in zip(keys, (0.5 * length, 0.5 * beam), strict=True):
+            raw = section.get(key)
+            value = 0.0 if raw is None else float(raw)
+            if abs(value) > half:
+                part = "length L" if key.endswith("x_m") else "beam B"
+                raise InputError(
+                    f"must lie on board, within +-{half:g} m of the reference point (half the "
+                    f"{part} of the ship's hull, L = {length:g} m, B = {beam:g} m), got "
+                    f"{value:g}", key=f"{name}[0].{key}")
 
 
 @dataclass
@@ -276,7 +314,8 @@ class Navigation:
             pv_sigma = pv_sigma.copy()
             pv_sigma[multi.idx] = np.sqrt(multi.var)
         # (a perfect receiver, sigma 0, is floored as the compass is for its gain below)
-        column(nav_cfg, "pv_sp_m2ps3", DEFAULT_PV_SP, "navigation", minimum=0.0, strictly=True)
+        column(nav_cfg, "pv_sp_m2ps3", DEFAULT_PV_SP, "navigation", minimum=0.0, strictly=True,
+               maximum=MAX_PV_SP)
         try:
             pv_p = pv.build([{"sigma_m": max(float(s), 1e-6),
                               "sp_m2ps3": c.get("pv_sp_m2ps3", DEFAULT_PV_SP), "dt_s": dt}
@@ -289,7 +328,7 @@ class Navigation:
         pv_s = pv.init(pv_p, x[NORTH] - vel[0] * dt, x[EAST] - vel[1] * dt, vel[0], vel[1],
                        converged=True)
         heading_sp = column(nav_cfg, "heading_sp_rad2ps3", DEFAULT_HEADING_SP, "navigation",
-                            minimum=0.0, strictly=True)
+                            minimum=0.0, strictly=True, maximum=MAX_HEADING_SP)
         heading_gain = pv.steady_state_gain(np.maximum(compass_p.sigma_rad, 1e-6), heading_sp, dt)
         heading_gain = np.asarray(heading_gain).reshape(n, 2)
         est = x[:N_EST].copy()

@@ -367,12 +367,27 @@ def test_build_defaults_units_and_per_ship_values() -> None:
     ({"floor_sigma_m": -1.0}, "floor_sigma_m"),
     ({"floor_sigma_deg": 1.0}, "unknown"),
     ({"window": 10}, "unknown"),
+    ({"window_steps": 86_401}, "window_steps must be <= 86400, got 86401"),
+    ({"floor_sigma_m": 1000.5}, "floor_sigma_m must be <= 1000, got 1000.5"),
 ])
 def test_build_rejects_bad_settings_naming_the_key(cfg: dict, match: str) -> None:
     """Bad values and keys of another group are refused with the key in the message, even
     when only one ship of several is wrong."""
     with pytest.raises(ValueError, match=match):
         adaptive.build([{}, cfg], "gnss")
+
+
+@pytest.mark.parametrize(("group", "key", "most"), [
+    ("gnss", "floor_sigma_m", 1000), ("compass", "floor_sigma_deg", 30),
+    ("log", "floor_sigma_mps", 5)])
+def test_floor_and_window_are_bounded_as_the_instruments(group: str, key: str,
+                                                         most: float) -> None:
+    """The floor at most the instrument's own noise bound, the window at most a day of 1 s
+    steps: the bounds themselves are accepted, beyond is refused naming the key."""
+    p = adaptive.build([{key: most, "window_steps": 86_400}], group)
+    assert p.window_steps[0] == 86_400
+    with pytest.raises(ValueError, match=f"{key} must be <= {most}, got {most + 1}"):
+        adaptive.build([{}, {key: most + 1.0}], group)
 
 
 def test_estimate_converges_to_a_correlated_anisotropic_r_of_an_optimal_filter() -> None:

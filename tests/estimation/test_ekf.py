@@ -533,6 +533,27 @@ def test_build_rejects_unknown_keys() -> None:
     assert p.gnss_var_m2[1] == ekf.DEFAULTS["gnss_sigma_m"] ** 2
 
 
+@pytest.mark.parametrize("key", sorted(ekf.DEFAULTS))
+def test_build_refuses_settings_beyond_their_physical_bound(key: str) -> None:
+    """Every key has an upper bound (:data:`ekf.MAXIMA`): the bound itself is accepted, just
+    beyond it is refused naming the key; the defaults lie well inside."""
+    most = ekf.MAXIMA[key]
+    assert ekf.DEFAULTS[key] <= most / 10
+    ekf.build([{}, {key: most}])
+    with pytest.raises(ValueError) as err:
+        ekf.build([{}, {key: 1.01 * most}])
+    assert str(err.value) == f"EKF config {key!r} must be <= {most}, got {1.01 * most:g}"
+
+
+@pytest.mark.parametrize(("key", "most"), [
+    ("gnss_sigma_m", 1000), ("compass_sigma_deg", 30), ("log_sigma_mps", 5),
+    ("rudder_noise_deg", 10), ("rps_noise", 2), ("init_heading_sigma_deg", 180)])
+def test_measurement_bounds_are_the_instruments(key: str, most: float) -> None:
+    """The filter's own noise settings are bounded as the instruments they default from
+    (:mod:`trafficsim.sensors`): a ship whose instruments build always builds its filter."""
+    assert ekf.MAXIMA[key] == most
+
+
 def test_initial_state_and_measurement_covariance_layout() -> None:
     p = ekf.build([{"gnss_sigma_m": 3.0, "log_sigma_mps": 0.3}] * 2)
     st = ekf.initial_state(p, np.array([1.0, 2.0]), np.array([3.0, 4.0]),

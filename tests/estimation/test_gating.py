@@ -299,6 +299,16 @@ def test_build_rejects_nan(cfg) -> None:
         gating.build([cfg])
 
 
+def test_build_refuses_a_window_wider_than_ten_km() -> None:
+    """A position window of at most 10 km, ten times the coarsest fix; a normalised gate
+    (``gate_sigma``, which takes precedence) has no upper bound."""
+    assert gating.build([{"window_diameter_m": 10_000.0}]).threshold[0] == 5000.0
+    with pytest.raises(ValueError) as err:
+        gating.build([{}, {"window_diameter_m": 10_001.0}])
+    assert str(err.value) == "window_diameter_m must be <= 10000, got 10001"
+    assert gating.build([{"gate_sigma": 1e6, "window_diameter_m": 1e6}]).threshold[0] == 1e6
+
+
 def test_normalised_distance_full_equals_diagonal_for_a_diagonal_s() -> None:
     rng = np.random.default_rng(92)
     nu = rng.normal(size=(30, 2))

@@ -970,6 +970,23 @@ def test_build_rejects_bad_values_naming_the_key(cfg, key) -> None:
         tracker.build([{}, cfg])
 
 
+@pytest.mark.parametrize(("key", "inside", "beyond", "message"), [
+    ("accel_psd_m2ps3", 10.0, 10.5, "must be <= 10, got 10.5"),
+    ("coast_s", 3600.0, 3601.0, "must be <= 3600, got 3601.0"),
+    ("init_speed_sigma_mps", 50.0, 51.0, "must be <= 50, got 51.0"),
+    ("ais_sigma_position_m", 1000.0, 1e6, "must be <= 1000, got 1000000.0"),
+    ("ais_sigma_velocity_mps", 10.0, 10.5, "must be <= 10, got 10.5"),
+])
+def test_build_refuses_settings_beyond_their_physical_bound(key, inside, beyond,
+                                                           message) -> None:
+    """Bounds that keep the filter meaningful (module docstring): just inside is accepted,
+    beyond is refused naming the ship and key."""
+    tracker.build([{}, {key: inside}])
+    with pytest.raises(InputError) as err:
+        tracker.build([{}, {key: beyond}])
+    assert (err.value.key, err.value.message) == (f"tracker[1].{key}", message)
+
+
 def test_nees_with_irregular_overtaking_ais_reports_only() -> None:
     """AIS only, truth from the tracker's model (q = 0.01, exact discrete steps of 0.5 s),
     reports 2-10 s apart with latencies 0-12 s (so reports are often overtaken, sometimes by

@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
+import pytest
 
+from trafficsim.errors import InputError
 from trafficsim.ships import base
 
 #: tolerance multiplier for statistical checks (fixed seeds; about 1 in 1.7 million to fail by
@@ -42,4 +45,15 @@ def assert_rate(hits: int, trials: int, p: float) -> None:
     """Binomial count within Z standard deviations of ``p * trials``."""
     tol = Z * math.sqrt(trials * p * (1.0 - p)) + 1.0
     assert abs(hits - p * trials) < tol, (hits, p * trials, tol)
+
+
+def assert_bound(build: Callable[[list[dict]], object], what: str, key: str, inside: float,
+                 beyond: float, message: str, **same: object) -> None:
+    """A physical bound of a config key: ``inside`` (just within it) builds; ``beyond`` is
+    refused for the second ship, naming ``<what>[1].<key>`` and saying ``message``. ``same``:
+    further keys both configs carry (e.g. ``kind``)."""
+    build([{**same}, {**same, key: inside}])
+    with pytest.raises(InputError) as err:
+        build([{**same}, {**same, key: beyond}])
+    assert (err.value.key, err.value.message) == (f"{what}[1].{key}", message)
 

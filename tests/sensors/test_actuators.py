@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.sensors import assert_mean, assert_std, truth
+from tests.sensors import assert_bound, assert_mean, assert_std, truth
 from trafficsim.errors import InputError
 from trafficsim.noise import NoiseBank
 from trafficsim.sensors import actuators
@@ -151,3 +151,19 @@ def test_config_errors_name_the_ship_and_key(cfg, key):
     with pytest.raises(InputError) as err:
         actuators.build([{}, cfg])
     assert err.value.key == key
+
+
+@pytest.mark.parametrize(("key", "inside", "beyond", "message"), [
+    ("rudder_sigma_deg", 10.0, 10.5, "must be <= 10, got 10.5"),
+    ("rudder_bias_deg", 10.0, 11.0, "must be <= 10, got 11.0"),
+    ("rudder_bias_deg", -10.0, -10.5, "must be >= -10, got -10.5"),
+    ("rudder_resolution_deg", 10.0, 35.0, "must be <= 10, got 35.0"),
+    ("shaft_sigma_rpm", 120.0, 121.0, "must be <= 120, got 121.0"),
+    ("shaft_bias_rpm", -120.0, -121.0, "must be >= -120, got -121.0"),
+    ("shaft_bias_rpm", 120.0, 120.5, "must be <= 120, got 120.5"),
+    ("shaft_resolution_rpm", 120.0, 1000.0, "must be <= 120, got 1000.0"),
+])
+def test_physical_upper_bounds(key, inside, beyond, message):
+    """Generous bounds no real indicator exceeds (module docstring): just inside is accepted,
+    beyond is refused naming the ship and key."""
+    assert_bound(actuators.build, "actuators", key, inside, beyond, message)

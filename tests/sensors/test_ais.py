@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from tests.sensors import assert_bound
 from trafficsim.errors import InputError
 from trafficsim.noise import independent_streams, peek_normals
 from trafficsim.sensors import ais
@@ -564,6 +565,19 @@ def test_config_errors_name_the_key(cfg, key) -> None:
     with pytest.raises(InputError) as err:
         ais.build([{}, cfg])
     assert err.value.key == key
+
+
+@pytest.mark.parametrize(("key", "inside", "beyond", "message"), [
+    ("sigma_position_m", 1000.0, 1001.0, "must be <= 1000, got 1001.0"),
+    ("sigma_velocity_mps", 10.0, 10.5, "must be <= 10, got 10.5"),
+    ("sigma_heading_deg", 30.0, 31.0, "must be <= 30, got 31.0"),
+    ("max_range_nm", 200.0, 201.0, "must be <= 200, got 201.0"),
+    ("turn_rate_degps", 30.0, 30.5, "must be <= 30, got 30.5"),
+])
+def test_physical_upper_bounds(key, inside, beyond, message) -> None:
+    """Generous bounds no real transponder exceeds (module docstring): just inside is
+    accepted, beyond is refused naming the ship and key."""
+    assert_bound(ais.build, "ais", key, inside, beyond, message)
 
 
 # ---------------------------------------------------------------- schedule changes, content

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.sensors import Z, assert_mean, assert_std, random_headings
+from tests.sensors import Z, assert_bound, assert_mean, assert_std, random_headings
 from trafficsim.errors import InputError
 from trafficsim.noise import NoiseBank
 from trafficsim.sensors import compass, wrap_2pi, wrap_pi
@@ -234,3 +234,34 @@ def test_config_errors_name_the_ship_and_key(cfg, key):
     with pytest.raises(InputError) as err:
         compass.build([{}, cfg], 1.0)
     assert err.value.key == key
+
+
+@pytest.mark.parametrize(("key", "inside", "beyond", "message"), [
+    ("sigma_deg", 30.0, 1000.0, "must be <= 30, got 1000.0"),
+    ("drift_sigma_deg", 30.0, 30.5, "must be <= 30, got 30.5"),
+    ("drift_tau_s", 86_400.0, 86_401.0, "must be <= 86400, got 86401.0"),
+    ("bias_deg", 180.0, 180.5, "must be <= 180, got 180.5"),
+    ("bias_deg", -180.0, -181.0, "must be >= -180, got -181.0"),
+])
+@pytest.mark.parametrize("kind", ["gyro", "magnetic"])
+def test_physical_upper_bounds(key, inside, beyond, message, kind):
+    """Generous bounds no real compass exceeds (module docstring): just inside is accepted,
+    beyond is refused naming the ship and key."""
+    assert_bound(lambda c: compass.build(c, 1.0), "compass", key, inside, beyond, message,
+                 kind=kind)
+
+
+def test_deviation_coefficients_are_bounded():
+    """Each of A..E within +-30 deg: the curve at the bounds is accepted, one coefficient
+    beyond is refused naming the ship's ``deviation_deg``."""
+    edge = [30.0, -30.0, 30.0, -30.0, 30.0]
+    p = compass.build([{}, {"kind": "magnetic", "deviation_deg": edge}], 1.0)
+    np.testing.assert_allclose(p.dev_c, [0.0, math.radians(30.0)])
+    for j in range(5):
+        coef = [0.0] * 5
+        coef[j] = 30.5 if j % 2 else -30.5
+        with pytest.raises(InputError) as err:
+            compass.build([{}, {"kind": "magnetic", "deviation_deg": coef}], 1.0)
+        assert err.value.key == "compass[1].deviation_deg"
+        assert err.value.message == ("each coefficient must be within +-30 deg, got "
+                                     f"{[float(c) for c in coef]}")

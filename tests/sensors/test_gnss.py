@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.sensors import assert_mean, assert_rate, assert_std, random_headings, truth
+from tests.sensors import assert_bound, assert_mean, assert_rate, assert_std, random_headings, truth
 from trafficsim.errors import InputError
 from trafficsim.noise import NoiseBank
 from trafficsim.sensors import gnss
@@ -141,8 +141,9 @@ def test_fix_every_k_steps_and_last_fix_held_between():
 
 
 def test_held_reading_is_nan_until_the_first_fix():
-    # the receiver starts in an outage that lasts the whole step: nothing to report yet
-    params = gnss.build([{"dropout_rate_per_h": 1e9, "dropout_mean_s": 1e9}], 1.0)
+    # the receiver starts in an outage that lasts the whole step: nothing to report yet (the
+    # most frequent and longest outages: p_start = 1 - exp(-1) = 0.63 > the uniform 0.5)
+    params = gnss.build([{"dropout_rate_per_h": 3600, "dropout_mean_s": 86400}], 1.0)
     state = gnss.init(params, np.zeros((1, GNSS_NORMAL_DIMS)))
     state, fix = gnss.step(params, state, truth(1), np.zeros((1, GNSS_NORMAL_DIMS)),
                            np.full((1, GNSS_UNIFORM_DIMS), 0.5))
@@ -359,6 +360,28 @@ def test_config_errors_name_the_ship_and_key(cfg, key, match):
     with pytest.raises(InputError, match=match) as err:
         gnss.build([{}, cfg], 1.0)
     assert err.value.key == key
+
+
+
+@pytest.mark.parametrize(("key", "inside", "beyond", "message"), [
+    ("sigma_m", 1000.0, 1000.5, "must be <= 1000, got 1000.5"),
+    ("sigma_m", 1000.0, 1e9, "must be <= 1000, got 1000000000.0"),
+    ("drms_m", 1000.0, 1001.0, "must be <= 1000, got 1001.0"),
+    ("gm_sigma_m", 1000.0, 1000.5, "must be <= 1000, got 1000.5"),
+    ("gross_size_m", 10_000.0, 10_001.0, "must be <= 10000, got 10001.0"),
+    ("rate_hz", 100.0, 101.0, "must be <= 100, got 101.0"),
+    ("gm_tau_s", 86_400.0, 86_401.0, "must be <= 86400, got 86401.0"),
+    ("dropout_mean_s", 86_400.0, 86_401.0, "must be <= 86400, got 86401.0"),
+    ("dropout_rate_per_h", 3600.0, 3601.0, "must be <= 3600, got 3601.0"),
+    ("antenna_x_m", 250.0, 250.5, "must be <= 250, got 250.5"),
+    ("antenna_x_m", -250.0, -100_000.0, "must be >= -250, got -100000.0"),
+    ("antenna_y_m", -250.0, -250.5, "must be >= -250, got -250.5"),
+    ("antenna_y_m", 250.0, 251.0, "must be <= 250, got 251.0"),
+])
+def test_physical_upper_bounds(key, inside, beyond, message):
+    """Generous bounds no real receiver exceeds (module docstring): just inside is accepted,
+    beyond is refused naming the ship and key."""
+    assert_bound(lambda c: gnss.build(c, 1.0), "gnss", key, inside, beyond, message)
 
 
 @pytest.mark.parametrize("dt", [0.0, -1.0, math.nan])

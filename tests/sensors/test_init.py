@@ -139,6 +139,48 @@ def test_column_minimum_is_inclusive_unless_strict():
     assert column([{"k": 1e-300}], "k", 1.0, "s", minimum=0.0, strictly=True)[0] == 1e-300
 
 
+@pytest.mark.parametrize(("values", "strictly_max", "message"), [
+    ([1.0, 1000.5], False, "must be <= 1000, got 1000.5"),
+    ([1.0, 1e9], False, "must be <= 1000, got 1000000000.0"),
+    ([1.0, 1000], True, "must be < 1000, got 1000.0"),
+])
+def test_column_maximum_errors_name_ship_and_key(values, strictly_max, message):
+    """Above the maximum (or at it, with ``strictly_max``) is refused in the minimum's style,
+    naming the second ship's key; the first ship's value is fine."""
+    with pytest.raises(InputError) as err:
+        column([{"k": v} for v in values], "k", 0.0, "sec", minimum=0.0, maximum=1000,
+               strictly_max=strictly_max)
+    assert err.value.key == "sec[1].k"
+    assert err.value.message == message
+
+
+def test_column_maximum_is_inclusive_unless_strict_and_in_config_units():
+    """The bound applies to the value as written (before ``scale``), defaults included, on the
+    fast path (plain numbers) and the slow one (other number types) alike."""
+    out = column([{"k": 30}, {"k": np.float32(29.5)}, {}], "k", 30.0, "s", scale=0.5,
+                 maximum=30)
+    np.testing.assert_array_equal(out, [15.0, 14.75, 15.0])
+    assert column([{"k": math.nextafter(1.0, 0.0)}], "k", 0.0, "s", maximum=1.0,
+                  strictly_max=True)[0] < 1.0
+    for cfgs in ([{"k": 30.000001}], [{"k": np.float64(31.0)}], [{}]):
+        with pytest.raises(InputError, match="<= 30") as err:
+            column(cfgs, "k", 31.0, "s", scale=0.5, maximum=30)
+        assert err.value.key == "s[0].k"
+    with pytest.raises(InputError, match="< 1") as err:
+        column([{"k": 0.5}, {"k": np.float64(1.0)}], "k", 0.0, "s", maximum=1,
+               strictly_max=True)
+    assert err.value.key == "s[1].k"
+
+
+def test_column_two_sided_bounds():
+    np.testing.assert_array_equal(
+        column([{"k": -180}, {"k": 180.0}], "k", 0.0, "s", minimum=-180, maximum=180),
+        [-180.0, 180.0])
+    for bad, match in ((-180.5, ">= -180"), (180.5, "<= 180")):
+        with pytest.raises(InputError, match=match):
+            column([{"k": bad}], "k", 0.0, "s", minimum=-180, maximum=180)
+
+
 def test_column_integer_beyond_float_range_is_an_input_error():
     """YAML reads a long digit string as a Python int; ``float()`` of it overflows. The
     project treats that as an input error naming the key, not a crash."""

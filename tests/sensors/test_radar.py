@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from tests.sensors import assert_bound
 from trafficsim.errors import InputError
 from trafficsim.noise import NoiseBank, independent_streams, peek_normals
 from trafficsim.sensors import radar
@@ -436,6 +437,20 @@ def test_config_errors_name_the_ship_and_key(cfg, key) -> None:
     with pytest.raises(InputError) as err:
         radar.build([{}, cfg])
     assert err.value.key == key
+
+
+@pytest.mark.parametrize(("key", "inside", "beyond", "message"), [
+    ("sigma_range_m", 1000.0, 1000.5, "must be <= 1000, got 1000.5"),
+    ("sigma_bearing_deg", 30.0, 31.0, "must be <= 30, got 31.0"),
+    ("max_range_nm", 96.0, 10_000.0, "must be <= 96, got 10000.0"),
+    ("scan_period_s", 60.0, 60.5, "must be <= 60, got 60.5"),
+    ("antenna_x_m", -250.0, -250.5, "must be >= -250, got -250.5"),
+    ("antenna_y_m", 250.0, 251.0, "must be <= 250, got 251.0"),
+])
+def test_physical_upper_bounds(key, inside, beyond, message) -> None:
+    """Generous bounds no ship's radar exceeds (module docstring): just inside is accepted,
+    beyond is refused naming the ship and key."""
+    assert_bound(radar.build, "radar", key, inside, beyond, message)
 
 
 def test_a_minimum_range_beyond_the_maximum_is_refused():

@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from tests.sensors import Z, assert_mean, assert_std, random_headings, truth
+from tests.sensors import Z, assert_bound, assert_mean, assert_std, random_headings, truth
 from trafficsim.errors import InputError
 from trafficsim.noise import NoiseBank
 from trafficsim.sensors import KNOT_MPS, speed_log
@@ -218,3 +218,23 @@ def test_config_errors_name_the_ship_and_key(cfg, key):
     with pytest.raises(InputError) as err:
         speed_log.build([{}, cfg])
     assert err.value.key == key
+
+
+@pytest.mark.parametrize(("key", "inside", "beyond", "message"), [
+    ("sigma_mps", 5.0, 5.5, "must be <= 5, got 5.5"),
+    ("transverse_sigma_mps", 5.0, 6.0, "must be <= 5, got 6.0"),
+    ("sigma_rel", 0.999, 1.0, "must be < 1, got 1.0"),
+    ("scale_error", 0.999, 1.0, "must be < 1, got 1.0"),
+    ("bias_mps", 5.0, 5.01, "must be <= 5, got 5.01"),
+    ("bias_mps", -5.0, -6.0, "must be >= -5, got -6.0"),
+    ("transverse_bias_mps", -5.0, -5.5, "must be >= -5, got -5.5"),
+    ("transverse_bias_mps", 5.0, 100.0, "must be <= 5, got 100.0"),
+    ("lever_x_m", 250.0, 250.5, "must be <= 250, got 250.5"),
+    ("lever_x_m", -250.0, -251.0, "must be >= -250, got -251.0"),
+    ("lever_y_m", 250.0, 1e5, "must be <= 250, got 100000.0"),
+    ("lever_y_m", -250.0, -250.5, "must be >= -250, got -250.5"),
+])
+def test_physical_upper_bounds(key, inside, beyond, message):
+    """Generous bounds no real log exceeds (module docstring): just inside is accepted, beyond
+    is refused naming the ship and key."""
+    assert_bound(speed_log.build, "log", key, inside, beyond, message, kind="doppler")

@@ -108,6 +108,13 @@ def test_a_loaded_ship_is_the_callers_own():
      "unknown key 'substeps'"),
     ("integration: {max_dt_s: 1.0}", "integration: {max_dt_s: 1.0}\nsensors: {gnsss: {}}",
      "unknown sensor 'gnsss'"),
+    ("integration: {max_dt_s: 1.0}",  # (a ship file's own instruments lie on its own hull)
+     "integration: {max_dt_s: 1.0}\nsensors:\n  gnss:\n    antenna_y_m: 29.5",
+     "sensors.gnss.antenna_y_m: must lie on board, within +-29 m of the reference point (half "
+     "the beam B of the ship's hull, L = 320 m, B = 58 m), got 29.5"),
+    ("integration: {max_dt_s: 1.0}",
+     "integration: {max_dt_s: 1.0}\nsensors:\n  radar:\n    antenna_x_m: -161",
+     "sensors.radar.antenna_x_m: must lie on board, within +-160 m"),
 ])
 def test_more_bad_files_are_located_ship_file_errors(tmp_path, old, new, expect):
     """Syntax, schema version, wrong types, non-finite and out-of-range values, duplicate

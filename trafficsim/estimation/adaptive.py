@@ -42,6 +42,12 @@ GROUPS: Mapping[str, tuple[str, float]] = {
 }
 DEFAULT_WINDOW_STEPS = 60
 DEFAULT_FLOOR_SIGMA = {"gnss": 0.1, "compass": 0.05, "log": 0.01}
+#: longest window: a day of 1 s steps (the ring buffers grow with it, and a longer window
+#: adapts to nothing within a run)
+MAX_WINDOW_STEPS = 86_400
+#: largest floor, in the floor key's unit: the instruments' own noise bounds (GNSS 1000 m,
+#: compass 30 deg, log 5 m/s; :mod:`trafficsim.sensors`)
+MAX_FLOOR_SIGMA = {"gnss": 1000, "compass": 30, "log": 5}
 
 
 @dataclass(frozen=True)
@@ -62,9 +68,10 @@ class AdaptiveParams:
 def build(configs: Sequence[Mapping[str, Any]], group: str) -> AdaptiveParams:
     """Settings for one measurement group (``"gnss"``, ``"compass"`` or ``"log"``).
 
-    Keys: ``window_steps`` (default 60), ``min_samples`` (default half the window, at least 3),
-    and the floor standard deviation ``floor_sigma_m`` (gnss, default 0.1 m),
-    ``floor_sigma_deg`` (compass, 0.05 deg) or ``floor_sigma_mps`` (log, 0.01 m/s).
+    Keys: ``window_steps`` (default 60, at most :data:`MAX_WINDOW_STEPS`), ``min_samples``
+    (default half the window, at least 3), and the floor standard deviation ``floor_sigma_m``
+    (gnss, default 0.1 m), ``floor_sigma_deg`` (compass, 0.05 deg) or ``floor_sigma_mps`` (log,
+    0.01 m/s), at most :data:`MAX_FLOOR_SIGMA`.
     """
     if group not in GROUPS:
         raise ValueError(f"group must be one of {list(GROUPS)}, got {group!r}")
@@ -79,6 +86,8 @@ def build(configs: Sequence[Mapping[str, Any]], group: str) -> AdaptiveParams:
                       dtype=np.int64)
     if np.any(window < 3):
         raise ValueError("window_steps must be >= 3")
+    if np.any(window > MAX_WINDOW_STEPS):
+        raise ValueError(f"window_steps must be <= {MAX_WINDOW_STEPS}, got {window.max()}")
     min_samples = np.array([int(c.get("min_samples", max(3, w // 2)))
                             for c, w in zip(configs, window, strict=True)], dtype=np.int64)
     if np.any((min_samples < 2) | (min_samples > window)):
@@ -86,6 +95,9 @@ def build(configs: Sequence[Mapping[str, Any]], group: str) -> AdaptiveParams:
     floor = np.array([float(c.get(floor_key, DEFAULT_FLOOR_SIGMA[group])) for c in configs])
     if np.any(floor <= 0.0):
         raise ValueError(f"{floor_key} must be > 0")
+    if np.any(floor > MAX_FLOOR_SIGMA[group]):
+        raise ValueError(f"{floor_key} must be <= {MAX_FLOOR_SIGMA[group]}, got "
+                         f"{floor.max():g}")
     return AdaptiveParams(window, min_samples, (floor * factor) ** 2)
 
 

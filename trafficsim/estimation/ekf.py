@@ -173,13 +173,35 @@ DEFAULTS: Mapping[str, float] = {
     "init_yaw_rate_sigma_degps": 1.0,
     "init_current_sigma_mps": 1.0,
 }
+#: upper bound of each key of :data:`DEFAULTS`, generous limits that keep the filter meaningful:
+#: measurement noise as the instruments' bounds (:mod:`trafficsim.sensors`: 1000 m, 30 deg,
+#: 5 m/s, 10 deg, 120 rpm); process noise far beyond a ship's motion (a velocity random walk of
+#: 1 m/s in one second, a current changing by 6 m/s in an hour); initial uncertainty a gross
+#: error (10 km), any heading, 100 kn, a fast craft's 30 deg/s turn, a 20 kn tidal race
+MAXIMA: Mapping[str, float] = {
+    "gnss_sigma_m": 1000,
+    "compass_sigma_deg": 30,
+    "log_sigma_mps": 5,
+    "position_noise_m_per_rts": 10,
+    "surge_noise_mps2_per_rthz": 1,
+    "sway_noise_mps2_per_rthz": 1,
+    "yaw_noise_degps2_per_rthz": 10,
+    "current_noise_mps_per_rts": 0.1,
+    "rudder_noise_deg": 10,
+    "rps_noise": 2,  # rev/s, 120 rpm
+    "init_position_sigma_m": 10_000,
+    "init_heading_sigma_deg": 180,
+    "init_velocity_sigma_mps": 50,
+    "init_yaw_rate_sigma_degps": 30,
+    "init_current_sigma_mps": 10,
+}
 
 
 def build(configs: Sequence[Mapping[str, Any]]) -> EkfParams:
     """Filter parameters from per-ship config dicts (keys and defaults: :data:`DEFAULTS`).
 
     Raises:
-        ValueError: on an unknown key or a negative value.
+        ValueError: on an unknown key, a negative value or one beyond :data:`MAXIMA`.
     """
     for cfg in configs:
         unknown = set(cfg) - set(DEFAULTS)
@@ -190,6 +212,9 @@ def build(configs: Sequence[Mapping[str, Any]]) -> EkfParams:
         out = base.stack(configs, key, DEFAULTS[key])
         if not np.all((out >= 0.0) & np.isfinite(out)):  # (NaN fails too)
             raise ValueError(f"EKF config {key!r} must be a finite number >= 0")
+        if np.any(out > MAXIMA[key]):
+            raise ValueError(f"EKF config {key!r} must be <= {MAXIMA[key]}, got "
+                             f"{float(out.max()):g}")
         return out
 
     deg = math.pi / 180.0

@@ -44,6 +44,10 @@ import numpy as np
 DEFAULT_WINDOW_DIAMETER_M = 100.0  # [seed 002, 6.6, figure 6.5b and 6.6]
 DEFAULT_REOPEN_FACTOR = 2.0        # our choice (the thesis gives none)
 DEFAULT_MAX_REJECTIONS = 3         # our choice ("several consecutive failures")
+#: widest position window, m: ten times the coarsest fix a receiver may have (1000 m,
+#: :data:`trafficsim.sensors.gnss.MAX_SIGMA_M`); the thesis' windows are 50-100 m [seed 002, 6.6].
+#: (``gate_sigma`` has no upper bound: a very wide gate is how to gate nothing.)
+MAX_WINDOW_DIAMETER_M = 10_000
 
 
 @dataclass(frozen=True)
@@ -69,8 +73,9 @@ def build(configs: Sequence[Mapping[str, Any]]) -> GateParams:
     """Gate parameters from per-ship config dicts.
 
     Keys (optional): ``window_diameter_m`` (position window, default 100 m [seed 002, 6.6];
-    threshold = diameter / 2) or ``gate_sigma`` (threshold on a normalised innovation, takes
-    precedence when given), ``reopen_factor`` (default 2), ``max_rejections`` (default 3).
+    threshold = diameter / 2; at most :data:`MAX_WINDOW_DIAMETER_M`) or ``gate_sigma``
+    (threshold on a normalised innovation, takes precedence when given), ``reopen_factor``
+    (default 2), ``max_rejections`` (default 3).
     """
     thr = np.array([float(c["gate_sigma"]) if "gate_sigma" in c
                     else 0.5 * float(c.get("window_diameter_m", DEFAULT_WINDOW_DIAMETER_M))
@@ -80,6 +85,11 @@ def build(configs: Sequence[Mapping[str, Any]]) -> GateParams:
                    dtype=np.int64)
     if not (np.all(thr > 0) and np.all(fac >= 1) and np.all(cnt >= 1)):  # (NaN fails too)
         raise ValueError("gate needs a positive window, reopen_factor >= 1, max_rejections >= 1")
+    for c in configs:
+        if "gate_sigma" not in c and float(c.get("window_diameter_m", 0.0)) > \
+                MAX_WINDOW_DIAMETER_M:
+            raise ValueError(f"window_diameter_m must be <= {MAX_WINDOW_DIAMETER_M}, got "
+                             f"{float(c['window_diameter_m']):g}")
     return GateParams(thr, fac, cnt, np.array(["gate_sigma" not in c for c in configs],
                                                dtype=bool))
 

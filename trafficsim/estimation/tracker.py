@@ -88,6 +88,13 @@ Config keys (per observer ship; defaults in brackets): ``accel_psd_m2ps3`` [0.00
 ``max_gate_failures`` [3], ``latency_compensation`` [true], ``ais_sigma_position_m`` [5.0],
 ``ais_sigma_velocity_mps`` [0.1], ``use_radar`` [true], ``use_ais`` [true].
 
+Upper bounds that keep the filter meaningful: ``accel_psd_m2ps3`` at most 10 m^2/s^3 (a hundred
+times the largest of seed 000's tries, 0.1 [seed 000, sect. 2]: a white acceleration of some
+3 m/s^2 rms over a second, beyond any ship, and a velocity that merely differences the plots),
+``coast_s`` at most one hour (an AIS-only track of a ship at anchor hears a report every 3 min;
+an hour-old track is no picture of a ship), ``init_speed_sigma_mps`` at most 50 m/s (about
+100 kn), and the assumed AIS noise as bounded in :mod:`trafficsim.sensors.ais`.
+
 All pairs run in one compiled loop (``@kernel``) with closed-form predictions; ``S^-1`` comes in
 closed form for a radar plot (2x2) and by 2x2 blocks for an AIS report (4x4, a Schur complement
 solve: no explicit 4x4 inverse, which loses accuracy when position and velocity are strongly
@@ -118,7 +125,14 @@ from trafficsim.errors import InputError
 from trafficsim.geometry import cos_sin, cpa
 from trafficsim.jit import kernel, prefetch
 from trafficsim.sensors import check_keys, column, flags
-from trafficsim.sensors.ais import COG_STEP_RAD, POSITION_STEP_M, SOG_STEP_MPS, AisReports
+from trafficsim.sensors.ais import (
+    COG_STEP_RAD,
+    MAX_SIGMA_POSITION_M,
+    MAX_SIGMA_VELOCITY_MPS,
+    POSITION_STEP_M,
+    SOG_STEP_MPS,
+    AisReports,
+)
 from trafficsim.sensors.radar import RadarPlots
 
 N_STATE = 4
@@ -126,6 +140,9 @@ POS_N, POS_E, VEL_N, VEL_E = range(N_STATE)
 #: accepted measurements remembered per track for exact out-of-sequence reprocessing
 HISTORY = 4
 DEFAULT_Q_M2PS3 = 0.001  # one of the values of [seed 000, sect. 2]; see module docstring
+MAX_Q_M2PS3 = 10  # a hundred times the largest of [seed 000, sect. 2]
+MAX_COAST_S = 3600  # an hour: a track that old is no picture of a ship
+MAX_INIT_SPEED_SIGMA_MPS = 50  # about 100 kn
 KEYS = ("accel_psd_m2ps3", "coast_s", "init_speed_sigma_mps", "gate_probability",
         "max_gate_failures", "latency_compensation", "ais_sigma_position_m",
         "ais_sigma_velocity_mps", "use_radar", "use_ais")
@@ -234,19 +251,22 @@ def build(configs: Sequence[Mapping]) -> TrackerParams:
     if np.any(fails != np.round(fails)):
         raise InputError("max_gate_failures must be an integer", key=f"{what}.max_gate_failures")
     return TrackerParams(
-        q_m2ps3=column(configs, "accel_psd_m2ps3", DEFAULT_Q_M2PS3, what, minimum=0.0),
-        coast_s=column(configs, "coast_s", 30.0, what, minimum=0.0, strictly=True),
+        q_m2ps3=column(configs, "accel_psd_m2ps3", DEFAULT_Q_M2PS3, what, minimum=0.0,
+                       maximum=MAX_Q_M2PS3),
+        coast_s=column(configs, "coast_s", 30.0, what, minimum=0.0, strictly=True,
+                       maximum=MAX_COAST_S),
         init_speed_sigma_mps=column(configs, "init_speed_sigma_mps", 10.0, what, minimum=0.0,
-                                    strictly=True),
+                                    strictly=True, maximum=MAX_INIT_SPEED_SIGMA_MPS),
         gate2=np.array([chi2_quantile_even(p, 2) for p in p_gate]),
         gate4=np.array([chi2_quantile_even(p, 4) for p in p_gate]),
         max_gate_failures=fails.astype(np.int64),
         latency_compensation=flags(configs, "latency_compensation", what),
         use_radar=flags(configs, "use_radar", what),
         use_ais=flags(configs, "use_ais", what),
-        ais_sigma_position_m=column(configs, "ais_sigma_position_m", 5.0, what, minimum=0.0),
+        ais_sigma_position_m=column(configs, "ais_sigma_position_m", 5.0, what, minimum=0.0,
+                                    maximum=MAX_SIGMA_POSITION_M),
         ais_sigma_velocity_mps=column(configs, "ais_sigma_velocity_mps", 0.1, what,
-                                      minimum=0.0),
+                                      minimum=0.0, maximum=MAX_SIGMA_VELOCITY_MPS),
     )
 
 

@@ -48,6 +48,7 @@ from __future__ import annotations
 import math
 import os
 import re
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -339,12 +340,16 @@ def _within_duration(period: float, info: ValidationInfo, default: float,
                          f"({otherwise})")
 
 
-def validate_sensors(sensors: dict[str, dict[str, Any]]) -> None:
-    """Check a ``sensors:`` mapping by building its instruments; errors point at the key."""
-    from trafficsim.navigation import check_sensor_config
+def validate_sensors(sensors: dict[str, dict[str, Any]],
+                     particulars: Mapping[str, float] | None = None) -> None:
+    """Check a ``sensors:`` mapping by building its instruments (and, with the ship's
+    ``particulars``, that its antennas and levers lie on board); errors point at the key."""
+    from trafficsim.navigation import check_on_board, check_sensor_config
 
     try:
         check_sensor_config(sensors)
+        if particulars is not None:
+            check_on_board(sensors, {"particulars": particulars})
     except InputError as err:
         # sensors' own keys read "<sensor>[0].<setting>" (ship 0 of a batch of one) or
         # "<sensor>.<setting>": point at the deepest part of that path the file holds

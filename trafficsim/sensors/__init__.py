@@ -18,6 +18,10 @@ Modules: :mod:`.gnss` (position fixes), :mod:`.compass` (gyro and magnetic headi
 feedback), :mod:`.waves` (wave-frequency motion added to measured heading and position).
 Sensors of other ships (radar, AIS) live beside them and use the same helpers.
 
+Settings are refused beyond physical bounds as well as below them (``column``'s ``maximum``):
+generous limits no real instrument exceeds, each module giving its reasons; antennas and levers
+must also lie on board the ship (:func:`trafficsim.navigation.check_on_board`).
+
 This file holds the small helpers the modules share (config columns, angle wrapping,
 first-order Gauss-Markov coefficients). Truth comes as the ``(8, n)`` state of
 :mod:`trafficsim.ships.base`.
@@ -37,6 +41,13 @@ from trafficsim.jit import inline_kernel
 
 TWO_PI = 2.0 * math.pi
 KNOT_MPS = 1852.0 / 3600.0
+#: farthest an antenna or log transducer may sit from the reference point in any ship, m (body
+#: x and y): half the length of the longest ship built (458 m overall); with the ship file
+#: known, its own hull bounds it (:func:`trafficsim.navigation.check_on_board`)
+MAX_LEVER_M = 250
+#: longest correlation time, outage or coast of an instrument or filter setting, s: one day
+#: (a "slowly wandering" error with a longer time is a constant bias over any run)
+ONE_DAY_S = 86400
 
 
 def check_keys(configs: Sequence[Mapping], allowed: Iterable[str], what: str) -> None:
@@ -54,7 +65,8 @@ _PLAIN_NUMBERS = {float, int}
 
 def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float],
            what: str, scale: float = 1.0, minimum: float | None = None,
-           strictly: bool = False) -> np.ndarray:
+           strictly: bool = False, maximum: float | None = None,
+           strictly_max: bool = False) -> np.ndarray:
     """``(n,)`` float array of ``cfg.get(key, default) * scale`` over ships.
 
     Args:
@@ -64,6 +76,8 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
         what: name of the config section, for error messages.
         scale: unit conversion applied after reading (e.g. degrees to radians).
         minimum: if given, values below it (or equal, with ``strictly``) are an error.
+        maximum: if given, values above it (or equal, with ``strictly_max``) are an error.
+            Both bounds are in the config's unit (before ``scale``).
     """
     n = len(configs)
     defaults = np.broadcast_to(np.asarray(default, dtype=float), (n,)).tolist()
@@ -74,8 +88,10 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
             out = np.array(values, dtype=float)
         except OverflowError:  # an integer beyond the float range: reported below
             out = None
-        if out is not None and np.isfinite(out).all() and (minimum is None or not np.any(
-                out <= minimum if strictly else out < minimum)):
+        if (out is not None and np.isfinite(out).all()
+                and (minimum is None or not np.any(out <= minimum if strictly else out < minimum))
+                and (maximum is None
+                     or not np.any(out >= maximum if strictly_max else out > maximum))):
             return out * scale
     out = np.empty(n)
     for i, cfg in enumerate(configs):  # build time only, never on the step path
@@ -90,6 +106,9 @@ def column(configs: Sequence[Mapping], key: str, default: float | Sequence[float
         if minimum is not None and (value < minimum or (strictly and value == minimum)):
             rel = ">" if strictly else ">="
             raise InputError(f"must be {rel} {minimum}, got {value}", key=f"{what}[{i}].{key}")
+        if maximum is not None and (value > maximum or (strictly_max and value == maximum)):
+            rel = "<" if strictly_max else "<="
+            raise InputError(f"must be {rel} {maximum}, got {value}", key=f"{what}[{i}].{key}")
         out[i] = value
     return out * scale
 

@@ -12,6 +12,11 @@ perfect sensors; configure noise, bias and resolution per ship.
 Config keys (per ship): ``rudder_sigma_deg`` [0.0], ``rudder_bias_deg`` [0.0],
 ``rudder_resolution_deg`` [0.0], ``shaft_sigma_rpm`` [0.0], ``shaft_bias_rpm`` [0.0],
 ``shaft_resolution_rpm`` [0.0]. Readings are in SI (rad, rev/s) like the truth rows RUDDER, RPS.
+
+Upper bounds, generous limits no real indicator reaches: the rudder's noise, bias (in size) and
+resolution at most 10 deg (more than a quarter of a 35 deg helm; seed 002's LVDT reads the ram
+directly [sec 3.4]), the shaft's at most 120 rpm (the whole range of a slow-speed diesel, a few
+per cent of a small craft's engine speed).
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ ACTUATOR_PURPOSE = "actuators"
 
 KEYS = ("rudder_sigma_deg", "rudder_bias_deg", "rudder_resolution_deg", "shaft_sigma_rpm",
         "shaft_bias_rpm", "shaft_resolution_rpm")
+MAX_RUDDER_ERROR_DEG = 10  # over a quarter of a 35 deg helm
+MAX_SHAFT_ERROR_RPM = 120  # the whole range of a slow-speed diesel
 
 
 @dataclass(frozen=True)
@@ -64,15 +71,20 @@ def build(configs: Sequence[Mapping]) -> ActuatorSensorParams:
     what = "actuators"
     check_keys(configs, KEYS, what)
     deg, rpm = math.radians(1.0), 1.0 / 60.0
+    rud, shaft = MAX_RUDDER_ERROR_DEG, MAX_SHAFT_ERROR_RPM
     return ActuatorSensorParams(
-        rudder_sigma_rad=column(configs, "rudder_sigma_deg", 0.0, what, deg, minimum=0.0),
-        rudder_bias_rad=column(configs, "rudder_bias_deg", 0.0, what, deg),
+        rudder_sigma_rad=column(configs, "rudder_sigma_deg", 0.0, what, deg, minimum=0.0,
+                                maximum=rud),
+        rudder_bias_rad=column(configs, "rudder_bias_deg", 0.0, what, deg, minimum=-rud,
+                               maximum=rud),
         rudder_resolution_rad=column(configs, "rudder_resolution_deg", 0.0, what, deg,
-                                     minimum=0.0),
-        shaft_sigma_rps=column(configs, "shaft_sigma_rpm", 0.0, what, rpm, minimum=0.0),
-        shaft_bias_rps=column(configs, "shaft_bias_rpm", 0.0, what, rpm),
+                                     minimum=0.0, maximum=rud),
+        shaft_sigma_rps=column(configs, "shaft_sigma_rpm", 0.0, what, rpm, minimum=0.0,
+                               maximum=shaft),
+        shaft_bias_rps=column(configs, "shaft_bias_rpm", 0.0, what, rpm, minimum=-shaft,
+                              maximum=shaft),
         shaft_resolution_rps=column(configs, "shaft_resolution_rpm", 0.0, what, rpm,
-                                    minimum=0.0))
+                                    minimum=0.0, maximum=shaft))
 
 
 def quantise(value: np.ndarray, resolution: np.ndarray) -> np.ndarray:

@@ -56,6 +56,13 @@ Config keys (per ship; defaults in brackets): ``enabled`` [true] (transponder fi
 ``sigma_position_m`` [5.0], ``sigma_velocity_mps`` [0.1], ``sigma_heading_deg`` [0.5],
 ``latency_s`` [2.0], ``first_report_s`` [0.0], ``max_range_nm`` [20.0], ``p_receive`` [1.0],
 ``turn_rate_degps`` [5/30], ``ref_latitude_deg`` [0.0].
+
+Upper bounds, generous limits no real transponder reaches: ``sigma_position_m`` at most 1 km
+(the GNSS receivers' bound, :data:`trafficsim.sensors.gnss.MAX_SIGMA_M`), ``sigma_velocity_mps``
+at most 10 m/s (about 20 kn), ``sigma_heading_deg`` at most 30 deg (a gyro is good to about
+1 deg [seed 002, sec 2.9]), ``max_range_nm`` at most 200 NM (VHF reaches some 20-40 NM; ten
+times that), ``turn_rate_degps`` at most 30 deg/s (no ship turns that fast: a higher threshold
+never fires), ``latency_s`` at most ``MAX_LATENCY_S`` and ``p_receive`` at most 1.
 """
 
 from __future__ import annotations
@@ -104,6 +111,11 @@ MAX_LATENCY_S = (AIS_BUFFER - 2) * INTERVAL_FAST_S
 
 KEYS = ("enabled", "sigma_position_m", "sigma_velocity_mps", "sigma_heading_deg", "latency_s",
         "first_report_s", "max_range_nm", "p_receive", "turn_rate_degps", "ref_latitude_deg")
+MAX_SIGMA_POSITION_M = 1000  # as a GNSS receiver's (gnss.MAX_SIGMA_M)
+MAX_SIGMA_VELOCITY_MPS = 10  # about 20 kn
+MAX_SIGMA_HEADING_DEG = 30  # a gyro is good to about 1 deg [seed 002, sec 2.9]
+MAX_RANGE_NM = 200  # VHF line of sight is some 20-40 NM
+MAX_TURN_RATE_DEGPS = 30  # no ship turns faster
 
 
 @dataclass(frozen=True)
@@ -198,17 +210,20 @@ def build(configs: Sequence[Mapping]) -> AisParams:
                          key=f"{what}.ref_latitude_deg")
     return AisParams(
         enabled=flags(configs, "enabled", what),
-        sigma_position_m=column(configs, "sigma_position_m", 5.0, what, minimum=0.0),
-        sigma_velocity_mps=column(configs, "sigma_velocity_mps", 0.1, what, minimum=0.0),
+        sigma_position_m=column(configs, "sigma_position_m", 5.0, what, minimum=0.0,
+                                maximum=MAX_SIGMA_POSITION_M),
+        sigma_velocity_mps=column(configs, "sigma_velocity_mps", 0.1, what, minimum=0.0,
+                                  maximum=MAX_SIGMA_VELOCITY_MPS),
         sigma_heading_rad=column(configs, "sigma_heading_deg", 0.5, what, scale=math.pi / 180.0,
-                                 minimum=0.0),
+                                 minimum=0.0, maximum=MAX_SIGMA_HEADING_DEG),
         latency_s=latency,
         first_report_s=column(configs, "first_report_s", 0.0, what),
-        max_range_m=column(configs, "max_range_nm", 20.0, what, scale=1852.0, minimum=0.0),
+        max_range_m=column(configs, "max_range_nm", 20.0, what, scale=1852.0, minimum=0.0,
+                           maximum=MAX_RANGE_NM),
         p_receive=p_receive,
         z_receive=probit(p_receive),
         turn_rate_radps=column(configs, "turn_rate_degps", DEFAULT_TURN_RATE_DEGPS, what,
-                               scale=math.pi / 180.0, minimum=0.0),
+                               scale=math.pi / 180.0, minimum=0.0, maximum=MAX_TURN_RATE_DEGPS),
         east_step_m=POSITION_STEP_M * np.cos(lat),
     )
 

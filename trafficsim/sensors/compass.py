@@ -22,6 +22,13 @@ sigma ``sqrt(0.0054) rad = 4.21 deg``: the measured heading variance 0.0054 rad^
 
 Config keys (per ship): ``kind`` ["gyro"], ``sigma_deg`` [by kind], ``bias_deg`` [0.0],
 ``drift_sigma_deg`` [0.0], ``drift_tau_s`` [600.0], ``deviation_deg`` [[0, 0, 0, 0, 0]].
+
+Upper bounds, generous limits no real compass reaches: ``sigma_deg`` and ``drift_sigma_deg`` at
+most 30 deg (seven times the small-craft fluxgate's 4.2 deg [seed 002, sec 3.4]; a gyro's is
+about 1 deg [seed 002, sec 2.9]); each deviation coefficient within +-30 deg (a swung compass's
+curve is corrected to a few degrees [seed 002, sec 3.4, fig 3.5]; five of them still allow a
+150 deg error); ``bias_deg`` within +-180 deg (any more is the same error plus whole turns);
+``drift_tau_s`` at most one day.
 """
 
 from __future__ import annotations
@@ -34,7 +41,7 @@ from functools import cached_property
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.sensors import check_keys, choice, column, gauss_markov, wrap_2pi
+from trafficsim.sensors import ONE_DAY_S, check_keys, choice, column, gauss_markov, wrap_2pi
 
 #: standard normals per ship per step: white noise, Gauss-Markov drive
 COMPASS_NORMAL_DIMS = 2
@@ -44,6 +51,9 @@ KINDS = ("gyro", "magnetic")
 DEFAULT_SIGMA_DEG = {"gyro": 1.0,  # [seed 002, sec 2.9]
                      "magnetic": math.degrees(math.sqrt(0.0054))}  # [seed 002, sec 3.4]
 KEYS = ("kind", "sigma_deg", "bias_deg", "drift_sigma_deg", "drift_tau_s", "deviation_deg")
+MAX_SIGMA_DEG = 30  # white noise and drift: 7 x the fluxgate's 4.2 deg [seed 002, sec 3.4]
+MAX_DEVIATION_DEG = 30  # each coefficient A..E; corrected curves are a few deg [seed 002, 3.4]
+MAX_BIAS_DEG = 180  # beyond, the same error plus whole turns
 
 
 @dataclass(frozen=True)
@@ -101,6 +111,9 @@ def _deviation(configs: Sequence[Mapping], kinds: list[str]) -> np.ndarray:
         if coef.shape != (5,) or not np.all(np.isfinite(coef)):
             raise InputError(f"expected 5 finite numbers [A, B, C, D, E], got {coef.tolist()}",
                              key=key)
+        if np.any(np.abs(coef) > MAX_DEVIATION_DEG):
+            raise InputError(f"each coefficient must be within +-{MAX_DEVIATION_DEG} deg, got "
+                             f"{coef.tolist()}", key=key)
         out[:, i] = coef
     return out
 
@@ -117,14 +130,17 @@ def build(configs: Sequence[Mapping], dt: float) -> CompassParams:
     kinds = choice(configs, "kind", KINDS, "gyro", what)
     deg = math.radians(1.0)
     sigma = column(configs, "sigma_deg", [DEFAULT_SIGMA_DEG[k] for k in kinds], what,
-                   scale=deg, minimum=0.0)
-    drift_sigma = column(configs, "drift_sigma_deg", 0.0, what, scale=deg, minimum=0.0)
-    drift_tau = column(configs, "drift_tau_s", 600.0, what, minimum=0.0, strictly=True)
+                   scale=deg, minimum=0.0, maximum=MAX_SIGMA_DEG)
+    drift_sigma = column(configs, "drift_sigma_deg", 0.0, what, scale=deg, minimum=0.0,
+                         maximum=MAX_SIGMA_DEG)
+    drift_tau = column(configs, "drift_tau_s", 600.0, what, minimum=0.0, strictly=True,
+                       maximum=ONE_DAY_S)
     drift_a, drift_q = gauss_markov(drift_sigma, drift_tau, dt)
     dev = np.radians(_deviation(configs, kinds))
     return CompassParams(
         magnetic=np.array([k == "magnetic" for k in kinds]), sigma_rad=sigma,
-        bias_rad=column(configs, "bias_deg", 0.0, what, scale=deg),
+        bias_rad=column(configs, "bias_deg", 0.0, what, scale=deg, minimum=-MAX_BIAS_DEG,
+                        maximum=MAX_BIAS_DEG),
         dev_a=dev[0], dev_b=dev[1], dev_c=dev[2], dev_d=dev[3], dev_e=dev[4],
         drift_a=drift_a, drift_q=drift_q, drift_sigma_rad=drift_sigma)
 

@@ -38,6 +38,17 @@ Config keys (per ship; defaults in brackets): ``sigma_m`` [2.0] or ``drms_m`` (n
 ``rate_hz`` [1.0], ``gm_sigma_m`` [0.0], ``gm_tau_s`` [300.0], ``gross_prob`` [0.0],
 ``gross_size_m`` [50.0], ``dropout_rate_per_h`` [0.0], ``dropout_mean_s`` [30.0],
 ``antenna_x_m`` [0.0], ``antenna_y_m`` [0.0].
+
+Upper bounds (:data:`MAX_SIGMA_M` ...), generous limits no real receiver reaches: ``sigma_m``,
+``drms_m`` and ``gm_sigma_m`` at most 1000 m (coarse fixes are 10-200 m DRMS: Decca 10-100 m
+[seed 002, sec 3.4], stand-alone GPS with its 100 m 2drms "in the vicinity of 150 to 200 metres"
+[seed 002, sec 1.2]; DGPS 2 m [seed 000]; only Omega's 95 % of 6-7 NM [seed 002, sec 2.5], no fix
+for collision avoidance, is coarser); ``gross_size_m`` at most 10 km (seed 002's gross errors
+fail a 100 m window [seed 002, sec 6.6]); ``rate_hz`` at most 100 Hz (the fastest receivers);
+``gm_tau_s`` and ``dropout_mean_s`` at most one day; ``dropout_rate_per_h`` at most 3600 (an
+outage starting every second); ``gross_prob`` at most 1; the antenna within 250 m
+(:data:`trafficsim.sensors.MAX_LEVER_M`) of the reference point, and on board the ship's own
+hull where the ship file is known.
 """
 
 from __future__ import annotations
@@ -50,7 +61,15 @@ from functools import cached_property
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.sensors import TWO_PI, check_keys, column, gauss_markov, rotate_body_to_earth
+from trafficsim.sensors import (
+    MAX_LEVER_M,
+    ONE_DAY_S,
+    TWO_PI,
+    check_keys,
+    column,
+    gauss_markov,
+    rotate_body_to_earth,
+)
 from trafficsim.ships.base import EAST, NORTH, PSI
 
 #: standard normals per ship per step: white noise north, east; Gauss-Markov drive north, east
@@ -61,6 +80,12 @@ GNSS_NORMAL_PURPOSE = "gnss"
 GNSS_UNIFORM_PURPOSE = "gnss_gross"
 
 DEFAULT_SIGMA_M = 2.0  # DGPS [seed 000, eq 4]
+#: per-axis noise, DRMS and Gauss-Markov error, m: five times the coarsest fixes of [seed 002,
+#: sec 1.2, 3.4] (150-200 m)
+MAX_SIGMA_M = 1000
+MAX_GROSS_SIZE_M = 10_000  # ten times MAX_SIGMA_M; seed 002's gate is 100 m [sec 6.6]
+MAX_RATE_HZ = 100  # the fastest receivers' output rate
+MAX_DROPOUT_RATE_PER_H = 3600  # an outage starting every second of available time
 KEYS = ("sigma_m", "drms_m", "rate_hz", "gm_sigma_m", "gm_tau_s", "gross_prob", "gross_size_m",
         "dropout_rate_per_h", "dropout_mean_s", "antenna_x_m", "antenna_y_m")
 
@@ -142,26 +167,30 @@ def build(configs: Sequence[Mapping], dt: float) -> GnssParams:
                              key=f"{what}[{i}]")
     # drms = sqrt(sx^2 + sy^2) with sx = sy [seed 002, sec 2.8]
     drms_sigma = column(configs, "drms_m", DEFAULT_SIGMA_M * math.sqrt(2.0), what,
-                        minimum=0.0) / math.sqrt(2.0)
-    sigma = column(configs, "sigma_m", drms_sigma, what, minimum=0.0)
-    rate = column(configs, "rate_hz", 1.0, what, minimum=0.0, strictly=True)
-    gm_sigma = column(configs, "gm_sigma_m", 0.0, what, minimum=0.0)
-    gm_tau = column(configs, "gm_tau_s", 300.0, what, minimum=0.0, strictly=True)
-    gross_prob = column(configs, "gross_prob", 0.0, what, minimum=0.0)
-    if np.any(gross_prob > 1.0):
-        raise InputError(f"must be <= 1, got {gross_prob.max():g}",
-                         key=f"{what}[{int(np.argmax(gross_prob))}].gross_prob")
-    dropout_rate = column(configs, "dropout_rate_per_h", 0.0, what, minimum=0.0) / 3600.0
-    dropout_mean = column(configs, "dropout_mean_s", 30.0, what, minimum=0.0, strictly=True)
+                        minimum=0.0, maximum=MAX_SIGMA_M) / math.sqrt(2.0)
+    sigma = column(configs, "sigma_m", drms_sigma, what, minimum=0.0, maximum=MAX_SIGMA_M)
+    rate = column(configs, "rate_hz", 1.0, what, minimum=0.0, strictly=True,
+                  maximum=MAX_RATE_HZ)
+    gm_sigma = column(configs, "gm_sigma_m", 0.0, what, minimum=0.0, maximum=MAX_SIGMA_M)
+    gm_tau = column(configs, "gm_tau_s", 300.0, what, minimum=0.0, strictly=True,
+                    maximum=ONE_DAY_S)
+    gross_prob = column(configs, "gross_prob", 0.0, what, minimum=0.0, maximum=1)
+    dropout_rate = column(configs, "dropout_rate_per_h", 0.0, what, minimum=0.0,
+                          maximum=MAX_DROPOUT_RATE_PER_H) / 3600.0
+    dropout_mean = column(configs, "dropout_mean_s", 30.0, what, minimum=0.0, strictly=True,
+                          maximum=ONE_DAY_S)
     gm_a, gm_q = gauss_markov(gm_sigma, gm_tau, dt)
     return GnssParams(
         sigma_m=sigma, gm_a=gm_a, gm_q=gm_q, gm_sigma_m=gm_sigma, gross_prob=gross_prob,
-        gross_size_m=column(configs, "gross_size_m", 50.0, what, minimum=0.0),
+        gross_size_m=column(configs, "gross_size_m", 50.0, what, minimum=0.0,
+                            maximum=MAX_GROSS_SIZE_M),
         p_start=-np.expm1(-dropout_rate * dt),
         p_end=np.minimum(1.0, dt / dropout_mean),
         every=np.maximum(1, np.rint(1.0 / (rate * dt))).astype(np.int64),
-        antenna_x_m=column(configs, "antenna_x_m", 0.0, what),
-        antenna_y_m=column(configs, "antenna_y_m", 0.0, what),
+        antenna_x_m=column(configs, "antenna_x_m", 0.0, what, minimum=-MAX_LEVER_M,
+                           maximum=MAX_LEVER_M),
+        antenna_y_m=column(configs, "antenna_y_m", 0.0, what, minimum=-MAX_LEVER_M,
+                           maximum=MAX_LEVER_M),
         dt=dt)
 
 

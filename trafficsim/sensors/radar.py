@@ -51,6 +51,14 @@ Config keys (per observer ship; defaults in brackets): ``sigma_range_m`` [22.7],
 ``sigma_bearing_deg`` [0.087], ``max_range_nm`` [12.0], ``min_range_m`` [40.0], ``p_detect``
 [0.8], ``scan_period_s`` [2.5], ``scan_phase_s`` [0.0] (time of the first scan), ``antenna_x_m``
 [0.0], ``antenna_y_m`` [0.0], ``enabled`` [true].
+
+Upper bounds, generous limits no real ship's radar reaches: ``sigma_range_m`` at most 1 km
+(MSC.192(79) allows 50 m or 1 % of range, 95 %), ``sigma_bearing_deg`` at most 30 deg (it
+allows 2 deg, 95 %), ``max_range_nm`` at most 96 NM (the longest range scale of ship radars;
+``min_range_m`` must not exceed it), ``scan_period_s`` at most 60 s (antennas turn at 20-30
+rpm, 2-3 s a scan), ``p_detect`` at most 1, the antenna within 250 m
+(:data:`trafficsim.sensors.MAX_LEVER_M`) of the reference point, and on board the ship's own
+hull where the ship file is known.
 """
 
 from __future__ import annotations
@@ -66,7 +74,7 @@ from trafficsim.errors import InputError
 from trafficsim.geometry import atan2, cos_sin
 from trafficsim.jit import kernel
 from trafficsim.noise import check_streams, normal_from
-from trafficsim.sensors import check_keys, column, flags, wrap_2pi_scalar
+from trafficsim.sensors import MAX_LEVER_M, check_keys, column, flags, wrap_2pi_scalar
 from trafficsim.ships.base import EAST, NORTH, PSI
 
 #: standard normals per directed pair per scan: range noise, bearing noise, detection draw
@@ -80,6 +88,10 @@ DEFAULT_SIGMA_RANGE_M = math.hypot(20.0, 0.01 * NM / math.sqrt(3.0))
 DEFAULT_SIGMA_BEARING_DEG = math.sqrt(0.05**2 + 0.05**2 / 3.0 + 0.1**2 / 3.0 + 0.03**2)
 KEYS = ("sigma_range_m", "sigma_bearing_deg", "max_range_nm", "min_range_m", "p_detect",
         "scan_period_s", "scan_phase_s", "antenna_x_m", "antenna_y_m", "enabled")
+MAX_SIGMA_RANGE_M = 1000  # MSC.192(79): 50 m or 1 % of range (95 %)
+MAX_SIGMA_BEARING_DEG = 30  # MSC.192(79): 2 deg (95 %)
+MAX_RANGE_NM = 96  # the longest range scale of ship radars
+MAX_SCAN_PERIOD_S = 60  # antennas turn at 20-30 rpm
 
 
 def directed_pairs(pair_i: np.ndarray, pair_j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -165,7 +177,8 @@ def build(configs: Sequence[Mapping]) -> RadarParams:
     p_detect = column(configs, "p_detect", 0.8, what, minimum=0.0)
     if np.any(p_detect > 1.0):
         raise InputError(f"p_detect must be <= 1, got {p_detect.max()}", key=f"{what}.p_detect")
-    max_range_m = column(configs, "max_range_nm", 12.0, what, scale=NM, minimum=0.0)
+    max_range_m = column(configs, "max_range_nm", 12.0, what, scale=NM, minimum=0.0,
+                         maximum=MAX_RANGE_NM)
     min_range_m = column(configs, "min_range_m", 40.0, what, minimum=0.0)
     beyond = np.flatnonzero(min_range_m > max_range_m)
     if beyond.size:  # (a radar that can never detect anything)
@@ -174,17 +187,22 @@ def build(configs: Sequence[Mapping]) -> RadarParams:
                          f"({max_range_m[i] / NM:g} NM = {max_range_m[i]:g} m)",
                          key=f"{what}[{i}].min_range_m")
     return RadarParams(
-        sigma_range_m=column(configs, "sigma_range_m", DEFAULT_SIGMA_RANGE_M, what, minimum=0.0),
+        sigma_range_m=column(configs, "sigma_range_m", DEFAULT_SIGMA_RANGE_M, what, minimum=0.0,
+                             maximum=MAX_SIGMA_RANGE_M),
         sigma_bearing_rad=column(configs, "sigma_bearing_deg", DEFAULT_SIGMA_BEARING_DEG, what,
-                                 scale=math.pi / 180.0, minimum=0.0),
+                                 scale=math.pi / 180.0, minimum=0.0,
+                                 maximum=MAX_SIGMA_BEARING_DEG),
         max_range_m=max_range_m,
         min_range_m=min_range_m,
         p_detect=p_detect,
         z_detect=probit(p_detect),
-        scan_period_s=column(configs, "scan_period_s", 2.5, what, minimum=0.0, strictly=True),
+        scan_period_s=column(configs, "scan_period_s", 2.5, what, minimum=0.0, strictly=True,
+                             maximum=MAX_SCAN_PERIOD_S),
         scan_phase_s=column(configs, "scan_phase_s", 0.0, what),
-        antenna_x_m=column(configs, "antenna_x_m", 0.0, what),
-        antenna_y_m=column(configs, "antenna_y_m", 0.0, what),
+        antenna_x_m=column(configs, "antenna_x_m", 0.0, what, minimum=-MAX_LEVER_M,
+                           maximum=MAX_LEVER_M),
+        antenna_y_m=column(configs, "antenna_y_m", 0.0, what, minimum=-MAX_LEVER_M,
+                           maximum=MAX_LEVER_M),
         enabled=flags(configs, "enabled", what),
     )
 

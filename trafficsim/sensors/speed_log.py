@@ -25,6 +25,14 @@ Config keys (per ship): ``kind`` ["em"], ``reference`` [by kind], ``transverse``
 ``sigma_mps`` [by kind], ``sigma_rel`` [by kind], ``transverse_sigma_mps`` [= sigma_mps],
 ``scale_error`` [0.0] (fraction, 0.01 = reads 1 % high), ``bias_mps`` [0.0],
 ``transverse_bias_mps`` [0.0], ``lever_x_m`` [0.0], ``lever_y_m`` [0.0].
+
+Upper bounds, generous limits no real log reaches: ``sigma_mps``, ``transverse_sigma_mps`` and
+the biases (in size) at most 5 m/s, about 10 kn (seven times the pulse log's 0.71 m/s, itself
+"of the order of 1 knot" [seed 002, sec 3.4]); ``sigma_rel`` and ``scale_error`` (in size)
+below 1, an error as large as the speed itself (logs are good to 0.1-2 % of the value or
+range [seed 002, sec 2.10]); the transducer within 250 m
+(:data:`trafficsim.sensors.MAX_LEVER_M`) of the reference point, and on board the ship's own
+hull where the ship file is known.
 """
 
 from __future__ import annotations
@@ -36,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trafficsim.errors import InputError
-from trafficsim.sensors import KNOT_MPS, check_keys, choice, column
+from trafficsim.sensors import KNOT_MPS, MAX_LEVER_M, check_keys, choice, column
 from trafficsim.ships.base import Env, R, U, V, ground_velocity_body
 
 #: standard normals per ship per step: longitudinal, transverse
@@ -51,6 +59,7 @@ DEFAULTS = {  # kind -> (reference, transverse, sigma_mps, sigma_rel)
 }
 KEYS = ("kind", "reference", "transverse", "sigma_mps", "sigma_rel", "transverse_sigma_mps",
         "scale_error", "bias_mps", "transverse_bias_mps", "lever_x_m", "lever_y_m")
+MAX_ERROR_MPS = 5  # noise and bias: 7 x the pulse log's 0.71 m/s [seed 002, sec 3.4]
 
 
 @dataclass(frozen=True)
@@ -114,18 +123,25 @@ def build(configs: Sequence[Mapping]) -> LogParams:
                              key=f"{what}[{i}].transverse")
         ground.append(ref == "ground")
         transverse.append(trans)
-    sigma = column(configs, "sigma_mps", [DEFAULTS[k][2] for k in kinds], what, minimum=0.0)
+    most = MAX_ERROR_MPS
+    sigma = column(configs, "sigma_mps", [DEFAULTS[k][2] for k in kinds], what, minimum=0.0,
+                   maximum=most)
     return LogParams(
         ground=np.array(ground, dtype=bool), transverse=np.array(transverse, dtype=bool),
         sigma_mps=sigma,
-        transverse_sigma_mps=column(configs, "transverse_sigma_mps", sigma, what, minimum=0.0),
+        transverse_sigma_mps=column(configs, "transverse_sigma_mps", sigma, what, minimum=0.0,
+                                    maximum=most),
         sigma_rel=column(configs, "sigma_rel", [DEFAULTS[k][3] for k in kinds], what,
-                         minimum=0.0),
-        scale_error=column(configs, "scale_error", 0.0, what, minimum=-1.0, strictly=True),
-        bias_mps=column(configs, "bias_mps", 0.0, what),
-        transverse_bias_mps=column(configs, "transverse_bias_mps", 0.0, what),
-        lever_x_m=column(configs, "lever_x_m", 0.0, what),
-        lever_y_m=column(configs, "lever_y_m", 0.0, what))
+                         minimum=0.0, maximum=1, strictly_max=True),
+        scale_error=column(configs, "scale_error", 0.0, what, minimum=-1.0, strictly=True,
+                           maximum=1, strictly_max=True),
+        bias_mps=column(configs, "bias_mps", 0.0, what, minimum=-most, maximum=most),
+        transverse_bias_mps=column(configs, "transverse_bias_mps", 0.0, what, minimum=-most,
+                                   maximum=most),
+        lever_x_m=column(configs, "lever_x_m", 0.0, what, minimum=-MAX_LEVER_M,
+                         maximum=MAX_LEVER_M),
+        lever_y_m=column(configs, "lever_y_m", 0.0, what, minimum=-MAX_LEVER_M,
+                         maximum=MAX_LEVER_M))
 
 
 def sensed_velocity(params: LogParams, x: np.ndarray,

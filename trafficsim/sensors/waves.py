@@ -34,6 +34,16 @@ The surge and sway displacements are body-frame and are rotated by the heading i
 offsets. Config keys (per ship): ``heading_sigma_deg`` [0.0], ``surge_sigma_m`` [0.0],
 ``sway_sigma_m`` [0.0], ``peak_period_s`` [8.0] (``2 pi / w0``, encounter period),
 ``damping_ratio`` [0.1] (``lam``), ``form`` ["bandpass"].
+
+The filter itself needs only ``peak_period_s > 0`` and ``damping_ratio > 0`` (exact in every
+damping regime); the upper bounds are physical, generous limits no sea reaches:
+``heading_sigma_deg`` at most 30 deg (twice the 15 deg roll amplitude seed 004 tests its
+platform with [seed 004, sec 5]; wave-induced yaw is a few degrees), ``surge_sigma_m`` and
+``sway_sigma_m`` at most 50 m (wave-frequency motion is of the order of the wave amplitude,
+some metres even in a storm), ``peak_period_s`` from 0.5 s (a model ship in a tank meets waves
+at about 1 s) to 60 s (the encounter period exceeds the wave period in following seas, but
+beyond a minute the motion is no longer wave-frequency), ``damping_ratio`` at most 1 (critical
+damping: fits of wave spectra give 0.05-0.3, and beyond 1 the response no longer oscillates).
 """
 
 from __future__ import annotations
@@ -56,6 +66,10 @@ YAW, SURGE, SWAY = range(N_CHANNELS)
 FORMS = ("bandpass", "lowpass")
 KEYS = ("heading_sigma_deg", "surge_sigma_m", "sway_sigma_m", "peak_period_s",
         "damping_ratio", "form")
+MAX_HEADING_SIGMA_DEG = 30  # twice seed 004's 15 deg roll amplitude
+MAX_DISPLACEMENT_SIGMA_M = 50  # wave-frequency surge and sway are a few metres
+PEAK_PERIOD_RANGE_S = (0.5, 60)  # tank models' encounters to long following-sea ones
+MAX_DAMPING_RATIO = 1  # critical damping
 
 
 @dataclass(frozen=True)
@@ -158,12 +172,17 @@ def build(configs: Sequence[Mapping], dt: float) -> WaveParams:
         raise InputError(f"dt must be > 0, got {dt}", key=what)
     check_keys(configs, KEYS, what)
     forms = choice(configs, "form", FORMS, "bandpass", what)
-    omega0 = TWO_PI / column(configs, "peak_period_s", 8.0, what, minimum=0.0, strictly=True)
-    zeta = column(configs, "damping_ratio", 0.1, what, minimum=0.0, strictly=True)
+    shortest, longest = PEAK_PERIOD_RANGE_S
+    omega0 = TWO_PI / column(configs, "peak_period_s", 8.0, what, minimum=shortest,
+                             maximum=longest)
+    zeta = column(configs, "damping_ratio", 0.1, what, minimum=0.0, strictly=True,
+                  maximum=MAX_DAMPING_RATIO)
+    metres = MAX_DISPLACEMENT_SIGMA_M
     sigma = np.stack([column(configs, "heading_sigma_deg", 0.0, what, math.radians(1.0),
-                             minimum=0.0),
-                      column(configs, "surge_sigma_m", 0.0, what, minimum=0.0),
-                      column(configs, "sway_sigma_m", 0.0, what, minimum=0.0)], axis=1)
+                             minimum=0.0, maximum=MAX_HEADING_SIGMA_DEG),
+                      column(configs, "surge_sigma_m", 0.0, what, minimum=0.0, maximum=metres),
+                      column(configs, "sway_sigma_m", 0.0, what, minimum=0.0, maximum=metres)],
+                     axis=1)
     bandpass = np.array([f == "bandpass" for f in forms], dtype=bool)[:, None]
     p11, p22 = stationary_variances(omega0, zeta)
     # gain so that the output's stationary variance is sigma^2

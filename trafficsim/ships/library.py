@@ -22,7 +22,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import Field, field_validator, model_validator
+from pydantic import Field, ValidationInfo, field_validator, model_validator
 
 from trafficsim.errors import ScenarioError, ShipLibraryError
 from trafficsim.io.yamlio import (
@@ -108,10 +108,13 @@ class ShipFile(Strict):
 
     @field_validator("sensors")
     @classmethod
-    def _valid_sensors(cls, sensors: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    def _valid_sensors(cls, sensors: dict[str, dict[str, Any]],
+                       info: ValidationInfo) -> dict[str, dict[str, Any]]:
         from trafficsim.io.scenario import validate_sensors
 
-        validate_sensors(sensors)
+        hull = info.data.get("particulars")  # (absent when the particulars are invalid)
+        validate_sensors(sensors, None if hull is None else {"length_m": hull.length_m,
+                                                              "beam_m": hull.beam_m})
         return sensors
 
 
