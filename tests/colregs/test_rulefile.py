@@ -1186,3 +1186,55 @@ def test_block_and_flow_styles_give_the_same_tree() -> None:
     (b,) = parse(head.replace("{node}", flow), VOCAB).nodes
     assert a.test == b.test
     assert isinstance(a.test, AllOf) and isinstance(a.test.items[1], AnyOf)
+
+
+BACK_TO_A = "  b: {test: true, yes: {to: a, next: true}, no: {to: a, next: true}}\n"
+RANGED = Vocabulary(features=("dcpa_nm", "bearing_deg", "tcpa_min"),
+                    feature_ranges={"dcpa_nm": (0.0, math.inf), "bearing_deg": (-180.0, 180.0)})
+
+
+@pytest.mark.parametrize(("test", "never"), [
+    ("[dcpa_nm, '<', 0]", "'dcpa_nm < 0'"), ("[dcpa_nm, '<=', -0.5]", "'dcpa_nm <= -0.5'"),
+    ("[dcpa_nm, '==', -1]", "'dcpa_nm == -1'"), ("[bearing_deg, '>', 180]", "'bearing_deg > 180'"),
+    ("[bearing_deg, '>=', 181]", "'bearing_deg >= 181'"),
+    ("[bearing_deg, between, [190, 200]]", "'bearing_deg between [190, 200] = [190, 200]'"),
+    ("[dcpa_nm, '<', limit]", "'dcpa_nm < limit = -1'"),
+])
+def test_a_comparison_no_value_of_the_feature_satisfies_is_refused(test: str, never: str) -> None:
+    """A branch that can never be taken is an authoring error (a sign slip in a threshold),
+    refused at the comparison's value with the feature's range."""
+    text = ("schema_version: 1\nname: t\nstart: a\nparameters: {limit: -1}\nnodes:\n"
+            f"  a: {{test: {test}, yes: b, no: b}}\n{BACK_TO_A}")
+    with pytest.raises(ScenarioError) as info:
+        parse(text, RANGED, "r.yaml")
+    feature = test[1:].split(",")[0]
+    lo, hi = {"dcpa_nm": ("0", "inf"), "bearing_deg": ("-180", "180")}[feature]
+    assert [str(e) for e in info.value.errors] == [
+        f"r.yaml:6: nodes.a.test[2]: can never hold: {feature} takes values from {lo} to {hi}, "
+        f"so {never} is never true"]
+
+
+@pytest.mark.parametrize("test", [
+    "[dcpa_nm, '<', 0.001]", "[dcpa_nm, '<=', 0]", "[dcpa_nm, '!=', -1]", "[dcpa_nm, '>', 1000]",
+    "[bearing_deg, between, [-200, -180]]", "[bearing_deg, '>=', 180]",
+    "[tcpa_min, '<', -1.0e+9]",  # (an unbounded feature: anything goes)
+])
+def test_comparisons_some_value_satisfies_are_kept(test: str) -> None:
+    text = ("schema_version: 1\nname: t\nstart: a\nnodes:\n"
+            f"  a: {{test: {test}, yes: b, no: b}}\n{BACK_TO_A}")
+    assert parse(text, RANGED, "r.yaml").nodes[0].test.feature == test[1:].split(",")[0]
+
+
+def test_feature_ranges_must_be_of_known_features_and_ordered() -> None:
+    with pytest.raises(ValueError, match="feature range"):
+        Vocabulary(features=("a",), feature_ranges={"b": (0.0, 1.0)})
+    with pytest.raises(ValueError, match="feature range"):
+        Vocabulary(features=("a",), feature_ranges={"a": (1.0, 0.0)})
+
+
+def test_the_colregs_vocabulary_bounds_its_geometry_and_memory_features() -> None:
+    from trafficsim.colregs.vocabulary import FEATURE_RANGES, VOCABULARY
+
+    assert VOCABULARY.feature_ranges["dcpa_nm"] == (0.0, math.inf)
+    assert VOCABULARY.feature_ranges["course_diff_abs_deg"] == (0.0, 180.0)
+    assert "tcpa_min" not in FEATURE_RANGES and "own_role" not in FEATURE_RANGES

@@ -120,6 +120,18 @@ NAMES: tuple[str, ...] = (
 #: feature name -> row
 INDEX: dict[str, int] = {name: i for i, name in enumerate(NAMES)}
 
+_ANGLE, _ABS_ANGLE, _NON_NEGATIVE = (-180.0, 180.0), (0.0, 180.0), (0.0, math.inf)
+#: the values each bounded feature takes (the module docstring; ``tcpa_min``, ``bcr_nm``,
+#: ``bct_min`` and ``range_to_domain_nm`` take any), so that a rules file's test no value
+#: satisfies is refused (:attr:`trafficsim.colregs.rulefile.Vocabulary.feature_ranges`)
+RANGES: dict[str, tuple[float, float]] = {
+    "range_nm": _NON_NEGATIVE, "bearing_deg": _ANGLE, "bearing_abs_deg": _ABS_ANGLE,
+    "aspect_deg": _ANGLE, "aspect_abs_deg": _ABS_ANGLE, "course_diff_deg": _ANGLE,
+    "course_diff_abs_deg": _ABS_ANGLE, "dcpa_nm": _NON_NEGATIVE, "speed_ratio": _NON_NEGATIVE,
+    "own_speed_kn": _NON_NEGATIVE, "other_speed_kn": _NON_NEGATIVE,
+    "domain_nm": _NON_NEGATIVE, "time_to_domain_min": _NON_NEGATIVE,
+    "predicted_domain_entry": (0.0, 1.0), "visibility_nm": _NON_NEGATIVE}
+
 (RANGE, BEARING, BEARING_ABS, ASPECT, ASPECT_ABS, COURSE_DIFF, COURSE_DIFF_ABS, DCPA, TCPA, BCR,
  BCT, SPEED_RATIO,
  OWN_SPEED, OTHER_SPEED, DOMAIN, RANGE_TO_DOMAIN, TIME_TO_DOMAIN, DOMAIN_ENTRY,

@@ -138,6 +138,9 @@ class Vocabulary:
         engine_parameters: parameter name -> :class:`EngineParameter`, the parameters the
             caller reads itself: a file may set them without a node using them, and their
             values are checked against the bound. Any other parameter must be used by a node.
+        feature_ranges: feature name -> the smallest and largest value it takes (both may be
+            infinite; NaN, "unknown", aside); a comparison no value in that range satisfies
+            can never hold and is refused. Features not listed are unbounded.
 
     Raises:
         ValueError: duplicate or clashing names, or an action field listing an unknown constant.
@@ -147,6 +150,7 @@ class Vocabulary:
     enums: Mapping[str, float] = field(default_factory=dict)
     actions: Mapping[str, ActionField] = field(default_factory=dict)
     engine_parameters: Mapping[str, EngineParameter] = field(default_factory=dict)
+    feature_ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "features", tuple(self.features))
@@ -163,6 +167,10 @@ class Vocabulary:
             if unknown:
                 raise ValueError(f"vocabulary: action field {name!r} lists unknown enum "
                                  f"constants {unknown}")
+        for name, (lo, hi) in self.feature_ranges.items():
+            if name not in self.features or not lo <= hi:
+                raise ValueError(f"vocabulary: feature range of {name!r} must be lo <= hi of a "
+                                 "known feature")
 
     def enum_names(self, value: float) -> tuple[str, ...]:
         """The enum constants whose value is ``value`` (for explanations)."""
@@ -996,11 +1004,37 @@ class _Checker:
             pair = self.between(operand, (*loc, 2))
             if pair is None or not ok:
                 return None
-            return Comparison(feature, op, pair)
+            return self.satisfiable(Comparison(feature, op, pair), (*loc, 2))
         resolved = self.value(operand, (*loc, 2))
         if resolved is None or not ok:
             return None
-        return Comparison(feature, op, resolved)
+        return self.satisfiable(Comparison(feature, op, resolved), (*loc, 2))
+
+    def satisfiable(self, test: Comparison, loc: tuple[str | int, ...]) -> Comparison | None:
+        """``test``, or None (an error at its value) when no value in the feature's range
+        (:attr:`Vocabulary.feature_ranges`) satisfies it: a branch that can never be taken,
+        such as ``[dcpa_nm, "<", -1]``."""
+        if test.feature not in self.vocab.feature_ranges:
+            return test
+        lo, hi = self.vocab.feature_ranges[test.feature]
+        if isinstance(test.value, tuple):  # between
+            a, b = test.value
+            if not (b.value < lo or a.value > hi):
+                return test
+            operands = [a.written, b.written]
+            written = f"between [{a.render()}, {b.render()}] = [{a.value:g}, {b.value:g}]"
+        else:
+            v = test.value.value
+            if not {"<": v <= lo, "<=": v < lo, ">": v >= hi, ">=": v > hi,
+                    "==": v < lo or v > hi, "!=": False}[test.op]:
+                return test
+            operands = [test.value.written]
+            written = f"{test.op} {test.value.render()}" + (
+                f" = {v:g}" if isinstance(test.value.written, str) else "")
+        self.value_error(operands, loc, f"can never hold: {test.feature} takes values from "
+                                        f"{lo:g} to {hi:g}, so '{test.feature} {written}' is "
+                                        "never true")
+        return None
 
     def between(self, value: Any, loc: tuple[str | int, ...]) -> tuple[Operand, Operand] | None:
         if not isinstance(value, list) or len(value) != 2:

@@ -89,5 +89,12 @@ ENGINE_PARAMETERS: dict[str, EngineParameter] = {
                                       at_least=True),
 }
 
+#: the values the bounded features take (geometry: :data:`trafficsim.colregs.features.RANGES`;
+#: memory: the table above; the enum-valued ones are compared with their constants)
+FEATURE_RANGES: dict[str, tuple[float, float]] = {
+    **features.RANGES, "time_in_role_min": (0.0, math.inf),
+    "other_course_change_deg": (0.0, 180.0), "other_speed_change_ratio": (0.0, math.inf),
+    "own_course_change_deg": (-180.0, 180.0)}
+
 VOCABULARY = Vocabulary(features=FEATURES, enums=ENUMS, actions=ACTIONS,
-                        engine_parameters=ENGINE_PARAMETERS)
+                        engine_parameters=ENGINE_PARAMETERS, feature_ranges=FEATURE_RANGES)
