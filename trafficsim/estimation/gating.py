@@ -85,13 +85,12 @@ def build(configs: Sequence[Mapping[str, Any]]) -> GateParams:
                    dtype=np.int64)
     if not (np.all(thr > 0) and np.all(fac >= 1) and np.all(cnt >= 1)):  # (NaN fails too)
         raise ValueError("gate needs a positive window, reopen_factor >= 1, max_rejections >= 1")
-    for c in configs:
-        if "gate_sigma" not in c and float(c.get("window_diameter_m", 0.0)) > \
-                MAX_WINDOW_DIAMETER_M:
-            raise ValueError(f"window_diameter_m must be <= {MAX_WINDOW_DIAMETER_M}, got "
-                             f"{float(c['window_diameter_m']):g}")
-    return GateParams(thr, fac, cnt, np.array(["gate_sigma" not in c for c in configs],
-                                               dtype=bool))
+    metres = np.array(["gate_sigma" not in c for c in configs], dtype=bool)
+    wide = np.flatnonzero(metres & (thr > 0.5 * MAX_WINDOW_DIAMETER_M))
+    if wide.size:
+        raise ValueError(f"window_diameter_m must be <= {MAX_WINDOW_DIAMETER_M}, got "
+                         f"{2.0 * thr[wide[0]]:g}")
+    return GateParams(thr, fac, cnt, metres)
 
 
 def init_state(n: int) -> np.ndarray:

@@ -195,8 +195,7 @@ def check_run(trial: TrialData, columns: Mapping[str, str] | None = None) -> Non
 def check_propeller(trials: Sequence[TrialData], spec: Mapping[str, Any],
                     columns: Mapping[str, str] | None = None) -> None:
     """Refuse propeller speeds beyond :data:`RPS_FACTOR` times the base ship's engine range."""
-    act = spec.get("actuators", {})
-    most = max(abs(float(act.get("rps_max", 0.0))), abs(float(act.get("rps_min", 0.0))))
+    most = _engine_range(spec)
     if not most > 0.0:
         return
     limit = RPS_FACTOR * most
@@ -207,6 +206,17 @@ def check_propeller(trials: Sequence[TrialData], spec: Mapping[str, Any],
                          f"expected a propeller speed of at most {RPS_FACTOR:g} times the "
                          f"engine range of the base ship '{spec.get('name')}' ({limit:.4g} "
                          f"rev/s = {60.0 * limit:.4g} rpm either way), got {{value}}")
+
+
+def _engine_range(spec: Mapping[str, Any]) -> float:
+    """The base ship's largest propeller speed either way, rev/s (0 without actuators)."""
+    act = spec.get("actuators", {})
+    return max(abs(float(act.get("rps_max", 0.0))), abs(float(act.get("rps_min", 0.0))))
+
+
+def _index_at(trial: TrialData, t_s: float) -> int:
+    """The sample of ``trial`` (as read) nearest the time ``t_s``."""
+    return int(np.argmin(np.abs(trial.t_s - t_s)))
 
 
 def _span(trial: TrialData) -> float | None:
@@ -291,8 +301,7 @@ def check_propulsion(trials: Sequence[TrialData], runs: Sequence[Kinematics],
     hint = ("the rpm is signed (negative astern): check the sign of the column"
             + (", or fit without rps_service (--fit)" if optional else ""))
     if len(trials) == 1:
-        index = int(np.argmin(np.abs(trials[0].t_s - t)))
-        raise _error(trials[0], "rps", index, columns,
+        raise _error(trials[0], "rps", _index_at(trials[0], t), columns,
                      f"rps_service cannot be identified from this data: {why} (here "
                      f"{u:.3g} m/s ahead, the column reading {{value}}); {hint}")
     path, key, where = _where(trials)
@@ -307,8 +316,7 @@ def check_units(trials: Sequence[TrialData], runs: Sequence[Kinematics],
     """Refuse a heading or propeller-speed column whose values are in other units than its
     name says (module docstring). ``trials``: the runs as read; ``runs``: the same smoothed."""
     u_service = float(spec["service_speed_kn"]) * KN
-    act = spec.get("actuators", {})
-    most = max(abs(float(act.get("rps_max", 0.0))), abs(float(act.get("rps_min", 0.0))))
+    most = _engine_range(spec)
     for trial, run in zip(trials, runs, strict=True):
         north, east, t = run.smooth["north_m"], run.smooth["east_m"], run.t_s
         if t.size < 3:
@@ -317,12 +325,12 @@ def check_units(trials: Sequence[TrialData], runs: Sequence[Kinematics],
         fast = np.isfinite(vn) & np.isfinite(ve) & (np.hypot(vn, ve) > AHEAD_FRACTION * u_service)
         if fast.sum() < 3:
             continue
-        first = int(np.argmin(np.abs(trial.t_s - t[int(np.argmax(fast))])))
+        first_fast_s = float(t[int(np.argmax(fast))])  # (where a refusal points)
         track = float(np.degrees(np.ptp(np.unwrap(np.arctan2(ve[fast], vn[fast])))))
         heading = _excursion_deg(run.trial.psi_rad[fast], angle=True)
         if (track >= MIN_TRACK_TURN_DEG and np.isfinite(run.trial.psi_rad[fast]).any()
                 and heading < HEADING_TURN_FRACTION * track):
-            raise _error(trial, "psi_rad", first, columns,
+            raise _error(trial, "psi_rad", _index_at(trial, first_fast_s), columns,
                          f"the heading turns through {heading:.3g} deg while the ship's track "
                          f"turns through {track:.3g} deg at speed (above "
                          f"{100 * AHEAD_FRACTION:g} % of the service speed): a heading in "
@@ -330,9 +338,10 @@ def check_units(trials: Sequence[TrialData], runs: Sequence[Kinematics],
                          "from north")
         rps = run.trial.rps[fast]
         ahead = rps[np.isfinite(rps) & (rps > 0.0)]
-        if most > 0.0 and ahead.size and float(np.median(ahead)) < RPS_FLOOR_FRACTION * most:
-            raise _error(trial, "rps", first, columns,
-                         f"the propeller turns at a median {60.0 * float(np.median(ahead)):.4g} "
+        median = float(np.median(ahead)) if ahead.size else np.inf
+        if most > 0.0 and median < RPS_FLOOR_FRACTION * most:
+            raise _error(trial, "rps", _index_at(trial, first_fast_s), columns,
+                         f"the propeller turns at a median {60.0 * median:.4g} "
                          f"rpm (here {{value}} as read) while the ship makes way above "
                          f"{100 * AHEAD_FRACTION:g} % of its service speed: less than "
                          f"1/{1.0 / RPS_FLOOR_FRACTION:g} of the base ship "

@@ -27,6 +27,7 @@ import numpy as np
 
 from trafficsim import __version__
 from trafficsim.campaign.compliance import RULES
+from trafficsim.campaign.runner import COLUMNS as WRITTEN
 from trafficsim.errors import DataError, InputError
 from trafficsim.io.results import read_parquet
 from trafficsim.render.frame import FrameOptions
@@ -60,14 +61,15 @@ class Report:
     seconds: float
 
 
-#: the columns of ``encounters.parquet`` the report reads, with what each must hold
-#: (``diverged`` may be absent: tables from before it count every encounter as run to the end)
-COLUMNS = {"encounter": "integer", "encounter_type": "text", "min_range_m": "number",
-           "t_cpa_s": "number", "collision": "bool", "domain_violation": "bool",
-           "blind_spot": "bool", "blind_spot_role": "text", "behaviour_i": "text",
-           "behaviour_j": "text", "compliance_i": "number", "compliance_j": "number",
-           **{f"score_rule{r}": "number" for r in RULES}}
-OPTIONAL = {"diverged": "bool"}
+#: the columns of ``encounters.parquet`` the report reads (written with the types of
+#: :data:`trafficsim.campaign.runner.COLUMNS`); ``diverged`` may be absent: tables from before
+#: it count every encounter as run to the end
+READ = ("encounter", "encounter_type", "min_range_m", "t_cpa_s", "collision",
+        "domain_violation", "blind_spot", "blind_spot_role", "behaviour_i", "behaviour_j",
+        "compliance_i", "compliance_j", *(f"score_rule{r}" for r in RULES))
+OPTIONAL = ("diverged",)
+#: what a column of each written type must hold
+KINDS = {"int64": "integer", "double": "number", "bool": "bool", "string": "text"}
 EXPECTED = {"integer": "whole numbers", "number": "numbers", "bool": "true or false",
             "text": "text"}
 RERUN = "run 'trafficsim campaign' on this folder again to write it anew from its chunks"
@@ -99,10 +101,11 @@ def read_encounters(campaign_dir: Path) -> dict[str, np.ndarray]:
                          f"finished 'trafficsim campaign' was expected{finish})",
                          path=str(campaign_dir))
     table = read_parquet(path, "encounters table")
-    for name, kind in {**COLUMNS, **OPTIONAL}.items():
+    for name in (*READ, *OPTIONAL):
+        kind = KINDS[WRITTEN[name]]
         if name in table.column_names:
             _check_column(table, path, name, kind)
-        elif name in COLUMNS:
+        elif name not in OPTIONAL:
             raise DataError(f"missing column (expected {EXPECTED[kind]} per ship pair; {RERUN})",
                             path=str(path), key=name)
     rows = {c: table.column(c).to_numpy(zero_copy_only=False) for c in table.column_names}

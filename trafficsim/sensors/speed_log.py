@@ -123,21 +123,21 @@ def build(configs: Sequence[Mapping]) -> LogParams:
                              key=f"{what}[{i}].transverse")
         ground.append(ref == "ground")
         transverse.append(trans)
-    most = MAX_ERROR_MPS
     sigma = column(configs, "sigma_mps", [DEFAULTS[k][2] for k in kinds], what, minimum=0.0,
-                   maximum=most)
+                   maximum=MAX_ERROR_MPS)
     return LogParams(
         ground=np.array(ground, dtype=bool), transverse=np.array(transverse, dtype=bool),
         sigma_mps=sigma,
         transverse_sigma_mps=column(configs, "transverse_sigma_mps", sigma, what, minimum=0.0,
-                                    maximum=most),
+                                    maximum=MAX_ERROR_MPS),
         sigma_rel=column(configs, "sigma_rel", [DEFAULTS[k][3] for k in kinds], what,
                          minimum=0.0, maximum=1, strictly_max=True),
         scale_error=column(configs, "scale_error", 0.0, what, minimum=-1.0, strictly=True,
                            maximum=1, strictly_max=True),
-        bias_mps=column(configs, "bias_mps", 0.0, what, minimum=-most, maximum=most),
-        transverse_bias_mps=column(configs, "transverse_bias_mps", 0.0, what, minimum=-most,
-                                   maximum=most),
+        bias_mps=column(configs, "bias_mps", 0.0, what, minimum=-MAX_ERROR_MPS,
+                        maximum=MAX_ERROR_MPS),
+        transverse_bias_mps=column(configs, "transverse_bias_mps", 0.0, what,
+                                   minimum=-MAX_ERROR_MPS, maximum=MAX_ERROR_MPS),
         lever_x_m=column(configs, "lever_x_m", 0.0, what, minimum=-MAX_LEVER_M,
                          maximum=MAX_LEVER_M),
         lever_y_m=column(configs, "lever_y_m", 0.0, what, minimum=-MAX_LEVER_M,
