@@ -21,9 +21,11 @@ ship files hold ``a1..c3`` in the paper's units, which are
   ``r`` is derived from the heading [seed 001, sec 4.1]). With ``r`` and ``delta`` in degrees the
   yaw coefficient ``c1`` matches the order of a hull's ``N_v/(I_z - N_rdot)`` and the
   rudder-drag term ``a4 delta^2`` is a sizeable fraction of the thrust; in radians both would be
-  negligible. The same reading reproduces the turning indices of [seed 001, table 2]: with
-  25 deg rudder from 56 rpm (8.5 kn) advance, transfer and tactical diameter come within 5 % of
-  the table (the paper gives neither rudder angle nor speed; ``tests/ships/test_response.py``);
+  negligible. The same reading reproduces the identified model's turning indices of
+  [seed 001, table 2] (advance 805, transfer 525, diameter 978 m): the paper gives neither rudder
+  angle nor speed; fitted to the advance and the transfer (21.4 deg rudder from 45.9 rpm,
+  7.0 kn), the tactical diameter comes out 1023 m, 4.6 % above the table
+  (``tests/ships/test_response.py``);
 * ``n`` in rev/min ("propeller RPM" [seed 001, sec 2]).
 
 Conversion to SI inside (``D = 180/pi`` deg per rad, 60 rpm per rev/s): with ``r, delta`` in rad
