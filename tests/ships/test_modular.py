@@ -118,11 +118,12 @@ def test_turning_circles_at_5_and_10_deg_match_figure_4_4() -> None:
     (s + 0.3874)) [seed 002, appended paper eq 13], has the yaw-rate gain K = 0.599 1/s, so its
     steady diameter 2U/(K delta) is 170 m at 5 deg and 85 m at 10 deg.
     Checks: at 5 deg each side within 25 % and the mean of both within 20 % of 170 m (the model
-    gives 186 / 205 m: its own linear gain is 0.63 1/s, and the nonlinear and even rudder terms,
+    gives 187 / 206 m: its own linear gain is 0.63 1/s, and the nonlinear and even rudder terms,
     kept because they give more than 10 % of the forces [ch 4.1], widen the circles and split the
     sides); at 10 deg the circle is between 0.5 and 0.7 of the 5 deg one (nearly linear below
-    15 deg, as the thesis' validity statement implies; a linear model gives 0.5): 103 / 119 m.
-    A rudder force scaled with U^2 (table 4.2's printed factor) gives about 75 m at 5 deg: fails.
+    15 deg, as the thesis' validity statement implies; a linear model gives 0.5): 107 / 123 m.
+    A rudder force scaled with U^2 alone (table 4.2's printed factor without the module's
+    1 / U_cal) gives about 75 m at 5 deg: fails.
     """
     linear_5 = 2.0 / (0.599 * np.radians(5.0)) * 4.455
     stbd5, port5 = _catfish_diameters(5.0, 9.0)
@@ -132,6 +133,34 @@ def test_turning_circles_at_5_and_10_deg_match_figure_4_4() -> None:
     assert 0.5 * (stbd5 + port5) == pytest.approx(linear_5, rel=0.20)
     for d5, d10 in ((stbd5, stbd10), (port5, port10)):
         assert 0.5 < d10 / d5 < 0.7, (d5, d10)
+
+
+def test_turning_circle_keeps_its_size_at_every_approach_speed() -> None:
+    """Rudder lift grows as U^2 (table 4.2's factor) and the hull's forces as U times the
+    velocities, so a turn from 4.2 kn (the 1100 rpm speed [seed 002, ch 3.2]) has the shape of
+    one from 8.9 kn: the same steady diameters. A rudder force growing only as U would make the
+    4.2 kn circle about 40 % smaller."""
+    for rudder_deg in (5.0, 15.0):
+        slow, fast = _steady_diameters(_catfish(), rudder_deg, 4.2), _catfish_diameters(
+            rudder_deg, 8.9)
+        np.testing.assert_allclose(slow, fast, rtol=0.01)
+
+
+def test_F_at_4455_mps_has_the_nomoto_time_constant_of_eq_8() -> None:
+    """[seed 002, appended paper eq 8]: T2 = 2.581 s, "computed for a forward speed of 4.455
+    m/s" (ch 9.4: "the major hull time constant of 2.6 seconds"). The sway-yaw block of F there
+    has its slow pole at -1/T2 within 1 %. The model's own linearisation (eq 4.2's Coriolis
+    term -m u r, which F's r column lacks) is slower: its slow pole lies below half of that."""
+    spec = _catfish()
+    params = FAMILY.build([spec])
+    x = np.zeros((base.N_STATE, 1))
+    x[U] = 4.455
+    x[RPS] = base.steady_rps_for_speed(FAMILY, params, Actuators.from_specs([spec]), x[U])
+    block = np.ix_([V, R], [V, R])
+    slow = max(np.linalg.eigvals(linearised_F(params, x)[0][block]).real)
+    assert -1.0 / slow == pytest.approx(2.581, rel=0.01)
+    jac = _jacobian(params, x)[0][:, [V, R]][1:]
+    assert 0.0 > max(np.linalg.eigvals(jac).real) > 0.5 * slow
 
 
 def test_turning_is_asymmetric_as_the_thesis_states() -> None:
@@ -343,7 +372,8 @@ def test_F_reproduces_the_thesis_matrix_eq_9_9_at_8_9_kn() -> None:
     Y1 = 0.573, Y6 = -0.308, Y8 = 1, N1 = -0.273, N6 = -0.092, N8 = -1.444, T_R = 1, T_N = 2 s.
     With the module's table readings all entries agree within 0.5 % (or the printed rounding) at
     8.9 kn, the 2200 rpm speed; n is in rad/s there and the rudder sign is flipped here. A rudder
-    force scaled with U^2 (as table 4.2 prints) would make Y1 and N1 4.4 times too large."""
+    force scaled with U^2 alone (as table 4.2 prints, without the module's 1 / U_cal) would make
+    Y1 and N1 4.4 times too large."""
     spec = _catfish()
     params = FAMILY.build([spec])
     x = np.zeros((base.N_STATE, 1))
@@ -378,24 +408,27 @@ def test_ship_file_is_a_copy_safe_plain_mapping() -> None:
 
 def _thesis_accelerations(spec: Mapping[str, Any], x: np.ndarray) -> np.ndarray:
     """Eqs 4.1-4.6 evaluated from the ship file's printed coefficients with the module table's
-    factors (0.5 rho times the powers of L, U and V1 = 1 m/s), rudder d = -RUDDER (thesis + =
-    port) and n = 2 pi RPS (shaft rad/s); the sway/yaw mass matrix solved by numpy. ``(3, n)``."""
+    factors (0.5 rho times the powers of L and U, the rudder terms' U^2 over U_cal = 8.9 kn),
+    rudder d = -RUDDER (thesis + = port) and n = 2 pi RPS (shaft rad/s); the sway/yaw mass
+    matrix solved by numpy. ``(3, n)``."""
     c, p = spec["coefficients"], spec["particulars"]
     h, L, m, Iz = 0.5 * 1025.0, p["length_m"], p["mass_kg"], p["yaw_inertia_kgm2"]
+    u_cal = 8.9 * 1852.0 / 3600.0
     out = np.zeros((3, x.shape[1]))
     for i in range(x.shape[1]):
         u, v, r = x[U, i], x[V, i], x[R, i]
         d, n = -x[RUDDER, i], 2 * np.pi * x[RPS, i]
         Us = np.hypot(u, v)
+        rudder = Us**2 / u_cal
         X = (c["X_uu"] * u * abs(u) + c["X_vv"] * h * L**2 * v**2
-             + c["X_nn"] * n * abs(n) + c["X_dd"] * h * L**2 * Us * d**2 + m * v * r)
+             + c["X_nn"] * n * abs(n) + c["X_dd"] * h * L**2 * rudder * d**2 + m * v * r)
         Y = (c["Y_v"] * h * L**2 * Us * v + c["Y_r"] * h * L**3 * Us * r
              + c["Y_vvv"] * h * L**2 / Us * v**3 + c["Y_rvv"] * h * L**3 / Us * r * v**2
-             + h * L**2 * Us * (c["Y_d"] * d + c["Y_dd"] * d**2 + c["Y_ddd"] * d**3)
+             + h * L**2 * rudder * (c["Y_d"] * d + c["Y_dd"] * d**2 + c["Y_ddd"] * d**3)
              + c["Y_n"] * n - m * u * r)
         N = (c["N_v"] * h * L**3 * Us * v + c["N_r"] * h * L**4 * Us * r
              + c["N_vvv"] * h * L**3 / Us * v**3 + c["N_rvv"] * h * L**4 / Us * r * v**2
-             + h * L**3 * Us * (c["N_d"] * d + c["N_dd"] * d**2 + c["N_ddd"] * d**3)
+             + h * L**3 * rudder * (c["N_d"] * d + c["N_dd"] * d**2 + c["N_ddd"] * d**3)
              + c["N_n"] * n + c["N_ndd"] * n**2 * d**2)
         M = np.array([[m - c["Y_vdot"] * h * L**3, -c["Y_rdot"] * h * L**4],
                       [-c["N_vdot"] * h * L**4, Iz - c["N_rdot"] * h * L**5]])

@@ -12,7 +12,7 @@ propeller (P), rudder (R) and disturbance (D) modules::
     N_H = N_v v + N_r r + N_vvv v^3 + N_rvv r v^2      (likewise)
     X_P = X_nn n|n|,   Y_P = Y_n n,   N_P = N_n n       (n = shaft speed, rad/s)
     X_R = X_dd d^2
-    Y_R = Y_d d + Y_dd d^2 + Y_ddd d^3                  (all rudder terms ~ U * 1 m/s)
+    Y_R = Y_d d + Y_dd d^2 + Y_ddd d^3                  (all rudder terms ~ U^2 / U_cal)
     N_R = N_d d + N_dd d^2 + N_ddd d^3 + N_ndd n^2 d^2
 
 The disturbance module D is empty here: a uniform current enters through the water-relative
@@ -39,7 +39,7 @@ The tables are OCR of a scanned thesis. The yardstick for every ambiguous item i
 numerical F for Catfish [seed 002, eq 9.9 = appended paper eq 9]: X2 = 0.004, X4 = -0.138,
 Y1 = 0.573, Y6 = -0.308, Y8 = 1, N1 = -0.273, N6 = -0.092, N8 = -1.444, T_R = 1 s, T_N = 2 s.
 With the readings below, appendix D evaluated at 8.9 kn (the 2200 rpm speed) reproduces all ten
-entries within 0.5 % (tested); no other reading found does. "V1" is 1 m/s.
+entries within 0.5 % (tested); no other reading found does. "U_cal" is 8.9 kn = 4.579 m/s.
 
 ==================  ===================  ===================================================
 printed             used                 why
@@ -51,7 +51,8 @@ X_uu -269.84,       -269.84 N s2/m2      already dimensional (with the factor th
                                          = -0.138 at 8.9 kn as eq 9.9
 X_vv -0.00758,      x 0.5 rho L^2        printed factor is one L short (not kg/m); SNAME
  "0.5 rho L"
-X_dd -0.005173,     x 0.5 rho L^2 U V1   a rudder term: scaled like Y_d (see Y_d)
+X_dd -0.005173,     x 0.5 rho L^2 U^2    a rudder term: scaled like Y_d (see Y_d)
+                     / U_cal
  "0.5 rho L^2"
 X_nn 0.2772         0.2772 N s2/rad2,    steady u = n sqrt(X_nn / -X_uu): 8.65 kn at 2200 rpm,
                     n = shaft rad/s      4.32 kn at 1100 rpm (stated 8.9 and 4.2). u ~ n is
@@ -79,14 +80,17 @@ Y_vv -0.08          Y_vvv (v^3)          eq 4.5 writes 'Y_vv v^3'; factor L^2/U 
  0.5 rho L^2/U
 Y_rv 0.15           Y_rvv (r v^2)        eq 4.5 '+ Y_rv r v^2', factor L^3/U; sign of eq 4.5
  0.5 rho L^3/U       x 0.5 rho L^3/U     (appendix D prints '- Y_rv r v': a sign slip)
-Y_d 0.0299621       x 0.5 rho L^2 U V1   NOT U^2 as printed: with U^2 eq 9.9's rudder column
- 0.5 rho L^2 U^2                         comes out 4.6x too large (Y1 = 2.62, N1 = -1.25) and
-                                         r/d = 2.9 1/s; with U, Y1 = 0.572, N1 = -0.272 and the
-                                         linear yaw-rate gain r/d = 0.63 1/s (at any speed)
-                                         against 0.599 1/s of the group's transfer function
-                                         G3 [appended paper eq 13]
-Y_dd -0.023234      x 0.5 rho L^2 U V1   even term = the turning asymmetry; sign of eq 4.5 (+)
-Y_ddd 0.1818182     x 0.5 rho L^2 U V1   as printed (same sign as Y_d)
+Y_d 0.0299621       x 0.5 rho L^2 U^2    the printed factor, over U_cal: with U^2 alone eq 9.9's
+ 0.5 rho L^2 U^2     / U_cal             rudder column comes out 4.6x too large (Y1 = 2.62,
+                                         N1 = -1.25) and r/d = 2.9 1/s; over U_cal,
+                                         Y1 = 0.572, N1 = -0.272 at 8.9 kn and the linear
+                                         yaw-rate gain r/d = 0.63 1/s there against 0.599
+                                         1/s of the group's transfer function G3 [appended
+                                         paper eq 13]. Rudder lift grows as U^2 and the hull
+                                         forces as U, so r/d grows as U and the turning
+                                         circle keeps its size at every speed
+Y_dd -0.023234      x 0.5 rho L^2 U^2    even term = the turning asymmetry; sign of eq 4.5 (+)
+Y_ddd 0.1818182     x 0.5 rho L^2 U^2    as printed (same sign as Y_d)
 row 'Y_va', Y_dv    omitted              wind and d v^2 terms, 0.0
 row 'N_n-dot' 0.0   N_n = 0 (optional)   eq 4.6 N_nn n_A: moment of same-handed screws
 row 'N_v-dot'       N_v = -0.01          rows as for sway: N_v, N_vdot, N_r, N_rdot; the
@@ -99,8 +103,9 @@ row 'N_r-dot'       N_rdot = -0.001464   factor fits; ~ -I_z' (-0.00132)
  -0.001464, L^5      x 0.5 rho L^5
 N_vv 0.016, N_rv    N_vvv, N_rvv          as Y_vvv, Y_rvv (factors L^3/U, L^4/U; eq 4.6 signs)
  -0.05
-N_d -0.014981,      x 0.5 rho L^3 U V1   as Y_d. N_d/Y_d = N_dd/Y_dd = N_ddd/Y_ddd = -0.5 in
- N_dd 0.0116172,                         prime terms: one rudder force at x = -L/2 (stern)
+N_d -0.014981,      x 0.5 rho L^3 U^2    as Y_d (over U_cal). N_d/Y_d = N_dd/Y_dd =
+ N_dd 0.0116172,                         N_ddd/Y_ddd = -0.5 in prime terms: one rudder force
+                                         at x = -L/2 (stern)
  N_ddd -0.090909
 N_ndd n^2 d^2       N_ndd = 0, optional  the "further coefficient" of ch 4.6 has no printed
  (ch 4.6, no value)  (N m s2/rad4)       value; the printed asymmetry is the even rudder terms
@@ -112,8 +117,9 @@ app. D Y4, N4       -m r/((m - Y_vdot) D) and -N_theta m r/((m - Y_vdot) D): the
 ==================  ===================  ===================================================
 
 Behaviour (tested): 8.65 kn at 2200 rpm, 4.32 kn at 1100 rpm, 9.83 kn at 2500 rpm. Steady turning
-diameters to starboard / port: 186 / 205 m at 5 deg from 9.0 kn, 103 / 119 m at 10 deg from
-8.8 kn, 72 / 86 m at 15 deg, 25 / 31 m at 35 deg. The thesis states that turning circles to the
+diameters to starboard / port: 187 / 206 m at 5 deg, 107 / 123 m at 10 deg, 76 / 89 m at 15 deg,
+31 / 37 m at 35 deg, the same from every approach speed (all forces grow as U^2 in a turn whose
+velocities scale with U). The thesis states that turning circles to the
 two sides differ "due to rotation of both propellers in the same direction" [seed 002, ch 4.6] but
 not which side is tighter; with the printed even rudder terms and the sign flip, starboard is.
 Setting Y_dd = N_dd = N_ndd = 0 (and Y_n = N_n = 0) makes the model mirror-symmetric.
@@ -123,6 +129,13 @@ makes the rudder force 2.8x (port) to 3.7x (starboard) the linear value at 35 de
 turns are probably tighter than the real boat's.
 
 ``linearised_F`` gives the state-dependent F of eq 4.10 (appendix D) for the later EKF.
+
+Yaw dynamics: the sway-yaw block of F at 4.455 m/s has the poles -0.385 and -1.317 1/s, so its
+slow time constant, 2.60 s, is the group's T2 = 2.581 s [appended paper eq 8; ch 9.4 "2.6
+seconds"] (tested). That F has no Coriolis term -m u in its r column (appendix D puts -m u r in
+the u column, where it vanishes at r = 0); the model keeps eq 4.2's -m u r, whose linearisation
+has the poles -0.167 and -1.229 1/s, so the boat answers the rudder more slowly than eq 8's
+constants say (63 % of the steady yaw rate after about 5 s instead of about 3.8 s).
 
 Implementation: the force equations exist once, in the compiled scalar kernel ``accel`` (numba,
 one ship, parameters packed in the field order of ``ModularParams``); ``linearised_F`` is a
@@ -157,8 +170,10 @@ from trafficsim.ships.base import (
     stack,
 )
 
-#: Velocity that makes the rudder terms dimensional together with U (see the module table).
-V_REF_MPS = 1.0
+#: Speed at which the printed rudder coefficients, with table 4.2's factor U^2, give eq 9.9's
+#: rudder column: 8.9 kn, the 2200 rpm speed (see the module table); the rudder terms are
+#: ``coefficient * 0.5 rho L^k U^2 / U_CAL_MPS``.
+U_CAL_MPS = 8.9 * 1852.0 / 3600.0
 #: Eq 4.10 state order (delta_A, n_A, x, u, y, v, psi, r) as indices into the base state:
 #: ``F[np.ix_(EQ410_ORDER, EQ410_ORDER)]`` lays ``linearised_F`` out as the thesis prints it.
 EQ410_ORDER = (RUDDER, RPS, NORTH, U, EAST, V, PSI, R)
@@ -263,7 +278,7 @@ class ModularFamily:
         L = stack(parts, "length_m")
         h = 0.5 * RHO_WATER
         m = stack(parts, "mass_kg")
-        rudder = h * L**2 * V_REF_MPS
+        rudder = h * L**2 / U_CAL_MPS
         return ModularParams(
             mass=m,
             m11=m - k("X_udot") * h * L**3,
@@ -372,13 +387,14 @@ def _propeller_forces(p: np.ndarray, n: float) -> tuple[float, float, float]:
 def _rudder_forces(p: np.ndarray, speed: float, d: float, n: float) -> tuple[float, float, float]:
     """Rudder module X_R, Y_R (N), N_R (N m) [seed 002, eqs 4.4-4.6, ch 4.6].
 
-    Polynomial in the thesis rudder angle ``d`` (rad, + = port), scaled by U * 1 m/s (module
-    table; ``speed`` = U in m/s), plus the asymmetry term N_ndd n^2 d^2 (``n`` shaft rad/s).
+    Polynomial in the thesis rudder angle ``d`` (rad, + = port), scaled by U^2 (the
+    coefficients hold ``1 / U_CAL_MPS``, module table; ``speed`` = U in m/s), plus the
+    asymmetry term N_ndd n^2 d^2 (``n`` shaft rad/s).
     """
-    d2 = d * d
-    xr = speed * p[_X_DD] * d2
-    yr = speed * d * (p[_Y_D] + d * (p[_Y_DD] + d * p[_Y_DDD]))
-    nr = speed * d * (p[_N_D] + d * (p[_N_DD] + d * p[_N_DDD])) + p[_N_NDD] * n * n * d2
+    d2, u2 = d * d, speed * speed
+    xr = u2 * p[_X_DD] * d2
+    yr = u2 * d * (p[_Y_D] + d * (p[_Y_DD] + d * p[_Y_DDD]))
+    nr = u2 * d * (p[_N_D] + d * (p[_N_DD] + d * p[_N_DDD])) + p[_N_NDD] * n * n * d2
     return xr, yr, nr
 
 
@@ -403,9 +419,9 @@ def linearised_F(params: ModularParams, x: np.ndarray) -> np.ndarray:
     the rudder and engine rows are the lags -1/T_R, -1/T_N of eqs 4.7-4.8 without the demand).
     Assignment (as appendix D, with the sign slips corrected, see the module table):
 
-    * u row: X1 = X_dd U d (rudder col), X2 = X_nn n (n col), X4 = X_uu |u| (u col),
+    * u row: X1 = X_dd U^2 d (rudder col), X2 = X_nn n (n col), X4 = X_uu |u| (u col),
       X6 = X_vv v + m r (v col), all over (m - X_udot).
-    * v, r rows: rudder col (Y_d + Y_dd d + Y_ddd d^2) U [+ N_ndd n^2 d for N], u col -m r,
+    * v, r rows: rudder col (Y_d + Y_dd d + Y_ddd d^2) U^2 [+ N_ndd n^2 d for N], u col -m r,
       v col (Y_v U + Y_rvv r v/U + Y_vvv v^2/U), r col Y_r U, n col Y_n, then the sway/yaw
       added-mass coupling (the Y_theta, N_theta of appendix D) applied to both rows.
     * position rows: the body velocities rotated by psi (eq 4.10 has x' = u, y' = v along the axes
@@ -427,7 +443,8 @@ def linearised_F(params: ModularParams, x: np.ndarray) -> np.ndarray:
     F = np.zeros((n_ships, N_STATE, N_STATE))
 
     # surge [appendix D X1, X2, X4, X6]; d = -RUDDER and n = 2 pi RPS fold into the columns
-    F[:, U, RUDDER] = speed * p.x_dd * x[RUDDER] / p.m11
+    u2 = speed * speed  # the rudder terms' U^2
+    F[:, U, RUDDER] = u2 * p.x_dd * x[RUDDER] / p.m11
     F[:, U, RPS] = p.x_nn * np.abs(nrad) * _TWO_PI / p.m11
     F[:, U, U] = p.x_uu * np.abs(u) / p.m11
     F[:, U, V] = (p.x_vv * v + p.mass * r) / p.m11
@@ -435,14 +452,14 @@ def linearised_F(params: ModularParams, x: np.ndarray) -> np.ndarray:
     # sway and yaw before the added-mass coupling: columns rudder, u, v, r, rps
     cols = (RUDDER, U, V, R, RPS)
     y_rows = (
-        -speed * (p.y_d + d * (p.y_dd + d * p.y_ddd)),
+        -u2 * (p.y_d + d * (p.y_dd + d * p.y_ddd)),
         -p.mass * r,
         speed * p.y_v + inv * v * (p.y_rvv * r + p.y_vvv * v),
         speed * p.y_r,
         _TWO_PI * p.y_n,
     )
     n_rows = (
-        -speed * (p.n_d + d * (p.n_dd + d * p.n_ddd)) - p.n_ndd * nrad * nrad * d,
+        -u2 * (p.n_d + d * (p.n_dd + d * p.n_ddd)) - p.n_ndd * nrad * nrad * d,
         np.zeros(n_ships),
         speed * p.n_v + inv * v * (p.n_rvv * r + p.n_vvv * v),
         speed * p.n_r,
