@@ -400,27 +400,19 @@ def pv_sp(tau_s: float, sigma_m: float, dt_s: float) -> float:
 
 
 def true_start(x0: np.ndarray, effects: Mapping[str, Mapping[str, float]],
-               current_ne: tuple[Any, Any] = (0.0, 0.0),
-               ahead: np.ndarray | None = None) -> np.ndarray:
+               current_ne: tuple[Any, Any] = (0.0, 0.0)) -> np.ndarray:
     """True state ``(8, W)`` at the start of each window from the MEASURED one.
 
     ``x0`` holds the state smoothed from the measured position and heading (over-ground
-    velocities of the antenna, body frame of the measured heading). Undone, in order: report
-    latency (the truth is the measured state ``latency`` later: ``ahead`` ``(8, W)`` when the
-    caller has it from the data, else first-order extrapolation), compass error, antenna
-    lever arm (``p = p_a - R(psi) r_a``, ``v = v_a - r x r_a``), and the current (the model's
+    velocities of the antenna, body frame of the measured heading). Report latency is not
+    undone here: the measured start is the truth ``latency`` earlier, and the replay starts
+    there (:meth:`trafficsim.diagnose.fit.EffectResiduals.delayed`). Undone, in order: compass
+    error, antenna lever arm (``p = p_a - R(psi) r_a``, ``v = v_a - r x r_a``), and the
+    current (the model's
     ``u, v`` are through the water: over-ground minus current; ``current_ne`` north and east,
     scalars or ``(W,)`` per window, plus the ``current`` effect).
     """
     x = np.array(x0, dtype=float, copy=True)
-    if "ais_latency" in effects and ahead is not None:
-        x = np.array(ahead, dtype=float, copy=True)
-    elif "ais_latency" in effects:
-        lat = effects["ais_latency"]["latency_s"]
-        c, s = np.cos(x[2]), np.sin(x[2])
-        x[0] += lat * (x[3] * c - x[4] * s)
-        x[1] += lat * (x[3] * s + x[4] * c)
-        x[2] += lat * x[5]
     if "compass_bias" in effects:
         # heading, and the smoothed velocities from the measured body frame to the true one;
         # the error is a function of the TRUE heading: psi = psi_m - e(psi) by fixed-point

@@ -239,16 +239,24 @@ def test_floor_is_half_the_weighted_noise_per_scored_sample() -> None:
     assert res.floor() == pytest.approx(expected)
 
 
-def test_ahead_interpolates_the_smoothed_state_after_each_window_start() -> None:
+def test_delayed_replays_on_the_inputs_logged_the_latency_earlier() -> None:
+    """Report latency: a window's measured start is the truth ``latency`` earlier, so the
+    replay keeps that start and runs on the inputs logged ``latency`` before each sample (the
+    run's first sample before the run); starts and targets stay as they are."""
     data = exact()
     res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ()), data, fit.scales(data, LENGTH))
-    sm = data.runs[0].smooth
-    keys = ("north_m", "east_m", "psi_rad", "u_mps", "v_mps", "r_radps")
-    assert np.allclose(res.ahead(0.0)[:6], data.windows.x0[:6])
-    later = res.ahead(3.0)  # 1.5 samples after each start (0, 15, 30, 45)
-    for i, s in enumerate((0, 15, 30, 45)):
-        for j, k in enumerate(keys):
-            assert later[j, i] == pytest.approx(0.5 * (sm[k][s + 1] + sm[k][s + 2]))
+    win = data.windows
+    assert np.array_equal(res.delayed(0.0).inputs, win.inputs)
+    later = res.delayed(3.0)  # 1.5 samples before each sample
+    assert later.x0 is win.x0 and later.target is win.target
+    trial = data.runs[0].trial
+    logged = np.stack([trial.rudder_rad, trial.rps], axis=1)
+    for i, start in enumerate((0, 15, 30, 45)):
+        for k in range(int(win.n_samples[i])):
+            at = start + k - 1.5
+            expected = (logged[0] if at <= 0.0
+                        else 0.5 * (logged[int(at - 0.5)] + logged[int(at + 0.5)]))
+            np.testing.assert_allclose(later.inputs[i, k], expected, rtol=1e-12, atol=1e-12)
 
 
 def test_gear_start_follows_the_logged_rudder_at_the_rate_limit() -> None:

@@ -56,7 +56,7 @@ from trafficsim import effects
 from trafficsim.diagnose.data import ANGLES, CHANNELS, PHASES, Dataset
 from trafficsim.identify import output_error
 from trafficsim.identify.parameters import Parametrisation
-from trafficsim.identify.replay import model_rows, simulate
+from trafficsim.identify.replay import Windows, model_rows, simulate, windows_from_runs
 
 MIN_GAIN = 0.05
 FLOOR_FACTOR = 3.0
@@ -219,9 +219,9 @@ class EffectResiduals:
         self.last_diverged = np.zeros(0, dtype=bool)
         names = np.array(data.windows.run_names, dtype=object)
         self._row_run = names[data.windows.run[np.nonzero(mask)[0]]]
-        self._smooth = [(run.t_s, np.stack([run.smooth[k] for k in
-                                            ("north_m", "east_m", "psi_rad", "u_mps", "v_mps",
-                                             "r_radps")])) for run in data.runs]
+        # every run's logged rudder and propeller speed, gaps bridged as the windows bridge them
+        self._logged = [(w.inputs[0, : int(w.n_samples[0])], float(w.t0_s[0]), float(w.dt_s[0]))
+                        for w in (windows_from_runs([run]) for run in data.runs)]
 
     def gear_start(self, steer: np.ndarray) -> np.ndarray:
         """``(k, W)`` rudder angle of each model's steering gear at each window's start: the
@@ -261,14 +261,29 @@ class EffectResiduals:
                 out[on, i] = at[:, j0]
         return out
 
-    def ahead(self, lag_s: float) -> np.ndarray:
-        """``(8, W)`` smoothed measured state ``lag_s`` after each window's start."""
+    def delayed(self, latency_s: float) -> Windows:
+        """The windows with the inputs logged ``latency_s`` before each sample (before a run's
+        first sample: its first).
+
+        With report latency every measured state is the truth ``latency_s`` earlier, so a
+        window's measured start is the truth at ``t0 - latency_s``: the replay starts there,
+        on the inputs logged from then on, and its output, the truth ``latency_s`` before each
+        sample, is compared with the data as it is. The replay thus runs the whole window on
+        the model, as for every other candidate, and sees nothing of the data after the
+        window's start. (A steering gear's angle at the start is still read at ``t0``.)
+        """
         win = self.data.windows
-        x = np.array(win.x0, dtype=float, copy=True)
+        inputs = np.array(win.inputs, copy=True)
         for i in range(win.w):
-            t, states = self._smooth[int(win.run[i])]
-            x[:6, i] = [np.interp(win.t0_s[i] + lag_s, t, row) for row in states]
-        return x
+            logged, start_s, dt_s = self._logged[int(win.run[i])]
+            c = int(win.n_samples[i])
+            at = (win.t0_s[i] - start_s - latency_s) / dt_s + np.arange(c) * win.dt_s[i] / dt_s
+            grid = np.arange(logged.shape[0])
+            for j in range(2):
+                inputs[i, :c, j] = np.interp(at, grid, logged[:, j])
+            inputs[i, c:] = inputs[i, c - 1]
+        return Windows(win.x0, inputs, win.env, win.dt_s, win.n_samples, win.target, win.run,
+                       win.t0_s, win.run_names)
 
     @property
     def m(self) -> int:
@@ -291,20 +306,28 @@ class EffectResiduals:
         """``(k, W, N, c)`` unweighted errors (simulated minus measured, 0 where masked)."""
         thetas = np.atleast_2d(thetas)
         vals = [self.param.values(th) for th in thetas]
-        rows = model_rows([effects.apply_spec(self.param.ship(th), v)
-                           for th, v in zip(thetas, vals, strict=True)])
+        specs = [effects.apply_spec(self.param.ship(th), v)
+                 for th, v in zip(thetas, vals, strict=True)]
         win = self.data.windows
         run_env = self.env_offsets(thetas)
-        x0 = np.stack([effects.true_start(
-            win.x0, v, (run_env[i, :, 0], run_env[i, :, 1]),
-            ahead=self.ahead(v["ais_latency"]["latency_s"]) if "ais_latency" in v else None)
-            for i, v in enumerate(vals)])
+        x0 = np.stack([effects.true_start(win.x0, v, (run_env[i, :, 0], run_env[i, :, 1]))
+                       for i, v in enumerate(vals)])
         env_off = run_env + np.stack([effects.environment_offset(v) for v in vals])[:, None]
         steer = np.array([effects.steering(v) for v in vals], dtype=float).reshape(-1, 2)
         x0[:, 6, :] = self.gear_start(steer)
-        out, diverged = simulate(rows, win, x0, env_off, steer)
+        # report latency: the replay of :meth:`delayed`, one per latency among the models
+        latency = np.array([v.get("ais_latency", {}).get("latency_s", 0.0) for v in vals])
+        out = np.empty((len(vals), win.w, win.n, 6))
+        diverged = np.zeros((len(vals), win.w), dtype=bool)
+        for lat in np.unique(latency):
+            on = np.flatnonzero(latency == lat)
+            out[on], diverged[on] = simulate(
+                model_rows([specs[i] for i in on]), self.delayed(lat) if lat > 0.0 else win,
+                x0[on], env_off[on], steer[on])
         self.last_diverged = diverged
-        meas = effects.measure(np.nan_to_num(out), win.dt_s, vals, current_ne=run_env[..., :2])
+        undelayed = [{k: e for k, e in v.items() if k != "ais_latency"} for v in vals]
+        meas = effects.measure(np.nan_to_num(out), win.dt_s, undelayed,
+                               current_ne=run_env[..., :2])
         meas["cog_psi"] = meas["cog"] - meas["psi"]
         sim = np.stack([meas[c] for c in self.channels], axis=-1)
         err = sim - self._target[None]
