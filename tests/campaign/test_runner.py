@@ -177,6 +177,22 @@ def test_no_avoidance_ships_do_nothing_and_are_not_compliant(straight):
     assert np.all(np.isnan(np.asarray(rows["diverged_at_s"])))
 
 
+def test_the_decision_at_the_start_is_in_the_rules_fired(tmp_path):
+    """Most encounters are first classified by the decision at t = 0, taken when the
+    simulation starts: the rules fired and manoeuvres asked then are in the rows. A 5 s run
+    (that decision only) fires rules that a 15 s run (decisions at 0 and 10 s) must list too."""
+    spec = _rows_spec(tmp_path, extra="policy: colregs")
+    short, longer = (run_chunk(spec.model_copy(update={"duration_s": d}), 0, 6)
+                     for d in (5.0, 15.0))
+    fired = 0
+    for side in ("_i", "_j"):
+        for key in ("rules_fired", "manoeuvres"):
+            for a, b in zip(short[key + side], longer[key + side], strict=True):
+                assert set(filter(None, a.split(","))) <= set(b.split(","))
+                fired += key == "rules_fired" and a != ""
+    assert fired > 0
+
+
 def test_compliant_needs_both_ships_on_the_rules():
     rows = {"behaviour_i": ["colregs", "colregs", "turn_port", "keep_course"],
             "behaviour_j": ["colregs", "late_action", "colregs", "colregs"]}

@@ -125,6 +125,7 @@ class PairObserver:
         de = x[EAST, own] - x[EAST, tgt]
         c, s = np.cos(x[PSI, tgt]), np.sin(x[PSI, tgt])
         obs.side, obs.ahead = -dn * s + de * c, dn * c + de * s
+        obs._decisions(sim)  # the decision at t = 0, taken when the simulation started
         return obs
 
     def observe(self, sim: Simulation) -> None:
