@@ -440,6 +440,22 @@ def test_bad_filter_settings_are_input_errors_naming_their_section(config, secti
     assert (err.value.key or "").startswith(section)
 
 
+@pytest.mark.parametrize(("gate", "message"), [
+    ({"gate_sigmaa": 3.0}, "unknown key(s) ['gate_sigmaa']; expected some of ['gate_sigma', "
+     "'max_rejections', 'reopen_factor', 'window_diameter_m']"),
+    ({"gate_sigma": 3.0, "window_diameter_m": 50.0},
+     "give either window_diameter_m (a position window) or gate_sigma (a window on the "
+     "normalised innovation), not both"),
+])
+def test_a_gate_with_a_misspelt_key_or_two_windows_is_refused(gate, message):
+    """A misspelt gate key would leave the default window in place, and of two windows one
+    would be dropped unsaid: both are refused, naming the ship's gate."""
+    check_sensor_config({"gate": {"gate_sigma": 3.0, "max_rejections": 4, "reopen_factor": 1.5}})
+    with pytest.raises(InputError) as err:
+        check_sensor_config({"gate": gate})
+    assert (err.value.key, err.value.message) == ("gate[0]", message)
+
+
 def test_a_perfect_receiver_is_a_valid_config():
     """The gnss module allows ``sigma_m: 0`` (minimum 0); the compass's 0 is accepted (its
     filter gain floors the sigma). A ship with filter ``none`` never runs the pv filter."""

@@ -78,6 +78,7 @@ from trafficsim.jit import kernel
 from trafficsim.noise import NoiseBank, normal_from, uniform_from
 from trafficsim.sensors import (
     actuators,
+    check_keys,
     column,
     compass,
     gnss,
@@ -129,7 +130,14 @@ def merge_sensors(ship_defaults: Mapping[str, Any] | None,
 
 def _gate_params(configs: Sequence[Mapping[str, Any]]) -> gating.GateParams:
     """The ships' gates, a bad one an input error: a position window where
-    ``window_diameter_m`` is given, else ``gate_sigma`` (default :data:`DEFAULT_GATE_SIGMA`)."""
+    ``window_diameter_m`` is given, else ``gate_sigma`` (default :data:`DEFAULT_GATE_SIGMA`);
+    unknown keys, and both windows at once, are refused."""
+    check_keys([c or {} for c in configs], gating.KEYS, "gate")
+    for i, c in enumerate(configs):
+        if c and "window_diameter_m" in c and "gate_sigma" in c:
+            raise InputError("give either window_diameter_m (a position window) or gate_sigma "
+                             "(a window on the normalised innovation), not both",
+                             key=f"gate[{i}]")
     try:
         return gating.build([c if c and "window_diameter_m" in c
                              else {"gate_sigma": DEFAULT_GATE_SIGMA, **(c or {})}

@@ -48,6 +48,8 @@ DEFAULT_MAX_REJECTIONS = 3         # our choice ("several consecutive failures")
 #: :data:`trafficsim.sensors.gnss.MAX_SIGMA_M`); the thesis' windows are 50-100 m [seed 002, 6.6].
 #: (``gate_sigma`` has no upper bound: a very wide gate is how to gate nothing.)
 MAX_WINDOW_DIAMETER_M = 10_000
+#: the keys of a gate's settings (``build``)
+KEYS = ("window_diameter_m", "gate_sigma", "reopen_factor", "max_rejections")
 
 
 @dataclass(frozen=True)
