@@ -187,13 +187,24 @@ def test_an_error_without_a_flag_keeps_its_message(tmp_path):
 
 
 def test_values_at_the_limits_are_accepted(tmp_path):
-    """Twice the service speed, the largest time step, the full rudder to port."""
-    indices, _ = _trial(tmp_path / "a", "cargo", "crash-stop", speed=30.0, dt=60.0)
+    """The fastest speed the engine holds, the largest time step, the full rudder to port."""
+    indices, _ = _trial(tmp_path / "a", "cargo", "crash-stop", speed=20.0, dt=60.0)
     assert indices["time_to_stop_s"] % 60.0 == 0.0  # whole 60 s steps
     _, col = _read_csv(tmp_path / "a" / "trial.csv")
     assert np.all(np.diff(col["t_s"]) == 60.0)
     indices, _ = _trial(tmp_path / "b", "cargo", "turning", rudder=35.0, port=True, dt=5.0)
     assert indices["rudder_deg"] == -35.0
+
+
+def test_a_speed_the_engine_cannot_hold_is_refused_under_its_flag(tmp_path):
+    """Beyond the speed the engine holds at full power the approach would be a ship slowing
+    down: refused, naming that speed, under ``--speed-kn``; nothing is written."""
+    with pytest.raises(InputError) as err:
+        _trial(tmp_path / "a", "cargo", "turning", speed=20.1)
+    assert err.value.key == "--speed-kn"
+    assert "at its largest propeller speed (1.7778 rev/s) it makes 20.00 kn, got 20.1 kn" in (
+        err.value.message)
+    assert not (tmp_path / "a" / "trial.csv").exists()
 
 
 # --- instruments -----------------------------------------------------------------------------

@@ -117,8 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="turn to port (turning circle) or put the first rudder to port "
                             "(zig-zag)")
     trial.add_argument("--speed-kn", type=_positive(float), default=None,
-                       help="approach speed, 0.1 to 2 times the ship's service speed (default: "
-                            "the service speed)")
+                       help="approach speed, 0.1 to 2 times the ship's service speed and one "
+                            "its engine holds (default: the service speed)")
     trial.add_argument("--dt-s", type=_positive(float), default=None,
                        help="time step (default: 1 s, shorter for small ships)")
     trial.add_argument("--sensors", action="store_true",

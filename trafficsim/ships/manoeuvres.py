@@ -60,11 +60,32 @@ class _Ship:
                              f"{to_kn(speed):g} kn", key="speed_kn")
         self.rps0 = float(base.steady_rps_for_speed(self.family, self.params, self.act,
                                                     np.array([speed]))[0])
+        rps_max = float(self.act.rps_max[0])
+        if self._surge(speed, rps_max) < 0.0:  # full power slows her down
+            raise InputError(f"expected a speed '{spec['name']}' can hold: at its largest "
+                             f"propeller speed ({rps_max:g} rev/s) it makes "
+                             f"{to_kn(self._top_speed(rps_max, speed)):.2f} kn, got "
+                             f"{to_kn(speed):g} kn", key="speed_kn")
         self.max_dt = float(spec.get("integration", {}).get("max_dt_s", 1.0))
         self.x = np.zeros((base.N_STATE, 1))
         self.x[U] = speed
         self.x[RPS] = self.rps0
         self.speed0 = speed
+
+    def _surge(self, speed: float, rps: float) -> float:
+        """Straight-ahead surge acceleration at ``speed`` (m/s) and ``rps`` in calm water."""
+        x = np.zeros((base.N_STATE, 1))
+        x[U], x[RPS] = speed, rps
+        return float(base.accelerations(self.family, self.params, x, Env())[0][0])
+
+    def _top_speed(self, rps: float, above: float) -> float:
+        """The steady straight speed at ``rps``, m/s, below ``above`` (which it cannot hold),
+        by bisection on the surge balance."""
+        low, high = 0.0, above
+        for _ in range(60):
+            mid = 0.5 * (low + high)
+            low, high = (mid, high) if self._surge(mid, rps) > 0.0 else (low, mid)
+        return low
 
     def check_rudder(self, rudder_deg: float) -> None:
         """Raise :class:`InputError` for a rudder angle beyond the steering gear's limit."""
