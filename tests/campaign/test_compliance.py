@@ -151,18 +151,31 @@ def test_pose_angles_are_taken_modulo_a_turn():
 
 
 def test_give_way_early_and_substantial_beats_late_and_small():
-    """Start 8000 m, closest 1500 m (s_r = 1), abeam (s_theta = 0.5): safety 0.75.
-    Early, 35 deg at 7600 m: P_delay = 400 / 6500, P_na = 0 -> 0.75 (1 - 400/6500).
-    Late, 10 deg at 2000 m, speed kept: P_delay = 6000 / 6500; P_na_course =
+    """Start 8000 m, closest 1500 m (s_r = 1), abeam (s_theta = 0.5): safety 0.75. The delay
+    runs from detection at 5000 m (colregs.md's stage-2 range).
+    Early, 35 deg at 7600 m, before detection: P_delay = 0, P_na = 0 -> 0.75.
+    Late, 10 deg at 2000 m, speed kept: P_delay = 3000 / 3500; P_na_course =
     0.5 (1 - 100/900) = 4/9 and P_na_speed = 0.5, both >= 0.3, P_na = 2/9
-    -> 0.75 (500/6500)(7/9)."""
+    -> 0.75 (500/3500)(7/9)."""
     obs = _fields(m=2, stbd_cpa=np.radians([35.0, 10.0]), manoeuvre_cpa_m=[7600.0, 2000.0])
     g = grade(obs)
-    early = 0.75 * (1 - 400 / 6500)
-    late = 0.75 * (500 / 6500) * (7 / 9)
+    early = 0.75
+    late = 0.75 * (500 / 3500) * (7 / 9)
     assert g[16] == pytest.approx([early, late], abs=1e-12)
     assert g[15] == pytest.approx([early, late], abs=1e-12)  # neither crossed ahead
     assert g[13] == pytest.approx([early, late], abs=1e-12)
+
+
+def test_the_delay_runs_from_detection_not_from_the_start():
+    """The same 35 deg turn at 4000 m towards a ship passing at 1500 m scores alike whether the
+    run starts 6, 8 or 12 km apart (before, the longer run scored better): the delay runs from
+    the 5000 m detection range, P_delay = 1000 / 3500; a run starting at 4500 m counts from
+    there, P_delay = 500 / 3000."""
+    obs = _fields(m=4, range0_m=[6000.0, 8000.0, 12000.0, 4500.0],
+                  stbd_cpa=np.radians([35.0] * 4), manoeuvre_cpa_m=[4000.0] * 4)
+    g = grade(obs)[16]
+    assert g == pytest.approx([0.75 * (1 - 1000 / 3500)] * 3 + [0.75 * (1 - 500 / 3000)],
+                              abs=1e-12)
 
 
 def test_no_manoeuvre_gives_full_delay_penalty():
@@ -488,8 +501,8 @@ def test_head_on_starboard_turn_beats_port_turn():
     # 30 deg is apparent (P_na_course = 0) and made at the start (P_delay ~ 0)
     p_sts = 1 - ((np.sin(-obs_s.alpha_cpa[0]) + 1) / 2) ** 2 * (
         (np.sin(-obs_s.beta_cpa[0]) + 1) / 2) ** 2
-    p_delay = (obs_s.range0_m[0] - obs_s.range_at_manoeuvre_m[0]) / (
-        obs_s.range0_m[0] - obs_s.closest_m[0])
+    detect = min(obs_s.range0_m[0], 5000.0)
+    p_delay = max(0.0, (detect - obs_s.range_at_manoeuvre_m[0]) / (detect - obs_s.closest_m[0]))
     assert g_s == pytest.approx(1.0 - 0.2 * p_delay - p_sts, abs=1e-9)
     assert g_s > 0.8 and g_p <= 0.4 + 1e-12  # 1 - 0.6 P_nsb at best
 
@@ -555,7 +568,8 @@ def _woerner(seen, crossed=False):
     cos = lambda d: math.cos(math.radians(d))  # noqa: E731
     safety = 0.5 * s_r + 0.5 * (1 - cos(a)) * (1 - cos(b)) / 2
     r_man = r if seen["r_man"] is None else seen["r_man"]
-    p_delay = min(max((seen["r0"] - r_man) / (seen["r0"] - r), 0.0), 1.0)
+    detect = min(seen["r0"], 5000.0)  # the stage-2 range of colregs.md (AIS version)
+    p_delay = min(max((detect - r_man) / (detect - r), 0.0), 1.0)
     course = max(seen["stbd"], seen["port"])
     p_na_course = 0.5 * max(0.0, 1 - course**2 / 900)
     kept = (seen["u0"] - seen["slower"]) / seen["u0"]
@@ -613,13 +627,14 @@ def test_stand_on_slowing_down_is_penalised_by_half_the_share_of_speed_lost():
     (from 10600 m) at 10600 - 6000 = 4600 m: abeam, safety 0.75. P_down = 0.5 * 2 / 6, so
     S17 = 0.75 - 1/6 = 7/12. As a give-way manoeuvre the slow-down is apparent (4/6 of the
     speed kept: P_na_speed = 1/6 < 0.3, so P_na = 0), first seen at 310 s (own 1840 m, passer
-    8740 m): S16 = 0.75 (1 - P_delay), P_delay = (r0 - r_man) / (r0 - 2000)."""
+    8740 m: 7184 m apart, before the passer comes within the 5000 m detection range):
+    P_delay = 0 and S16 = 0.75."""
     own = (0.0, 0.0, [(0.0, 0.0, 6.0), (300.0, 0.0, 4.0)])
     g, _, seen = _check([own, _passer(10600.0)])
     assert seen["t_cpa"] == 1000.0
     assert g[17][0] == pytest.approx(7 / 12, abs=1e-9)
-    r0, r_man = math.hypot(10600, 2000), math.hypot(8740 - 1840, 2000)
-    assert g[16][0] == pytest.approx(0.75 * (1 - (r0 - r_man) / (r0 - 2000)), abs=1e-9)
+    assert math.hypot(8740 - 1840, 2000) > 5000.0
+    assert g[16][0] == pytest.approx(0.75, abs=1e-9)
 
 
 def test_stand_on_speeding_up_is_penalised_by_the_speed_ratio_squared():

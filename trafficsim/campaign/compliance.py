@@ -21,7 +21,9 @@ applies to the own ship's part in the encounter:
   passing ahead of the other's bow, full credit for passing abaft her beam; divided by its
   largest value 2 so that ``S`` lies in [0, 1] (our reading);
 * give-way (Rule 16): ``S16 = S (1 - P_delay)(1 - P_na)``, ``P_delay`` the share of the range
-  from the start to the CPA run before the first manoeuvre, ``P_na`` the non-apparent-manoeuvre
+  from detection to the CPA run before the first manoeuvre (detection: the other ship inside the
+  evaluator's stage-2 range of 5000 m, or the start range if closer; a manoeuvre before it
+  costs nothing), ``P_na`` the non-apparent-manoeuvre
   penalty (course change under 30 deg and speed kept above half);
 * overtaking (Rule 13) ``S16 - 0.3``, crossing give-way (Rule 15) ``S16 - 0.5``, when the own
   ship crossed ahead of the other (the colregs.md criterion "no passing ahead of a crossing
@@ -55,6 +57,9 @@ GAMMA_NM, GAMMA_COL = 0.4, 0.6
 APPARENT_COURSE_RAD = math.radians(30.0)
 MANOEUVRE_COURSE_RAD = math.radians(5.0)
 MANOEUVRE_SPEED_MPS = 0.2
+#: r_detect of the delay penalty: the stage-2 range of NTNU's AutoVerification (AIS version;
+#: 7000 m in the other), colregs.md sections 1 and 2.4
+DETECT_RANGE_M = 5000.0
 #: the rule graded for the own ship's part in each kind of pair
 RULE_OF_KIND = {"head_on": 14, "crossing_give_way": 15, "crossing_stand_on": 17,
                 "overtaking": 13, "overtaken": 17}
@@ -259,8 +264,9 @@ def grade(obs: PairObserver) -> dict[int, np.ndarray]:
                * (1.0 - np.cos(np.clip(beta, np.pi / 2, 1.5 * np.pi))) / 2.0)
     safety = 0.5 * s_r + 0.5 * s_theta
     r_man = np.where(np.isnan(obs.manoeuvre_cpa_m), r_cpa, obs.manoeuvre_cpa_m)
-    span = np.maximum(obs.range0_m - r_cpa, 1e-9)
-    p_delay = np.clip((obs.range0_m - r_man) / span, 0.0, 1.0)
+    r_detect = np.minimum(obs.range0_m, DETECT_RANGE_M)
+    span = np.maximum(r_detect - r_cpa, 1e-9)
+    p_delay = np.clip((r_detect - r_man) / span, 0.0, 1.0)
     course = np.maximum(obs.stbd_cpa, obs.port_cpa)
     p_na_course = 0.5 * np.maximum(0.0, 1.0 - course**2 / APPARENT_COURSE_RAD**2)
     u0 = np.maximum(obs.x0[U, obs.own], 1e-9)
