@@ -28,9 +28,9 @@ def _write_csv(path: Path, columns: dict) -> Path:
     return path
 
 
-def _simple_run(path: Path, n: int = 60) -> Path:
+def _simple_run(path: Path, n: int = 60, east_m: float = 0.0) -> Path:
     t = np.arange(float(n))
-    return _write_csv(path, {"t_s": t, "north_m": 7 * t, "east_m": 0.01 * t * t,
+    return _write_csv(path, {"t_s": t, "north_m": 7 * t, "east_m": east_m + 0.01 * t * t,
                              "heading_deg": 0.1 * t, "rudder_deg": t * 0 + 10,
                              "rpm": t * 0 + 80})
 
@@ -63,15 +63,36 @@ def test_expand_paths(tmp_path: Path) -> None:
 def test_read_runs_names_and_order(tmp_path: Path) -> None:
     """Training runs first, then held-out; a run is named by its stem, with its folder where
     two files share a stem."""
-    for folder in ("day1", "day2"):
+    for east, folder in enumerate(("day1", "day2")):
         (tmp_path / folder).mkdir()
-        _simple_run(tmp_path / folder / "zz.csv")
+        _simple_run(tmp_path / folder / "zz.csv", east_m=100.0 * east)
     _simple_run(tmp_path / "turn.csv")
     train, hold, trials = command.read_runs([tmp_path / "day1", tmp_path / "turn.csv"],
                                             [tmp_path / "day2"])
     assert train == [tmp_path / "day1" / "zz.csv", tmp_path / "turn.csv"]
     assert hold == [tmp_path / "day2" / "zz.csv"]
     assert [t.name for t in trials] == ["day1/zz", "turn", "day2/zz"]
+
+
+def test_a_held_out_run_the_fit_has_seen_is_refused(tmp_path: Path) -> None:
+    """The same file on both sides, or one recording cut into two files, is refused naming the
+    held-out file; runs that share only a few samples (the common straight approach of two
+    noise-free simulated trials) are accepted."""
+    t = np.arange(60.0)
+    cols = {"t_s": t, "north_m": 7 * t, "east_m": 0.01 * t * t, "heading_deg": 0.1 * t,
+            "rudder_deg": t * 0 + 10, "rpm": t * 0 + 80}
+    whole = _write_csv(tmp_path / "whole.csv", cols)
+    with pytest.raises(DataError, match=r"given as training data .* and held out") as err:
+        command.read_runs([whole], [whole])
+    assert err.value.path == str(whole)
+    cut = _write_csv(tmp_path / "cut.csv", {k: v[:40] for k, v in cols.items()})
+    with pytest.raises(DataError, match=r"shares 40 samples \(t = 0 to 39 s\) with the "
+                                        r"training run .*whole.csv"):
+        command.read_runs([whole], [cut])
+    turned = {k: v.copy() for k, v in cols.items()}
+    turned["heading_deg"][5:] += 20.0
+    turned["north_m"][5:] -= 3.0
+    command.read_runs([whole], [_write_csv(tmp_path / "turned.csv", turned)])
 
 
 @pytest.mark.parametrize("native, given, expect", [

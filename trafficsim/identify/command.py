@@ -101,6 +101,7 @@ def read_runs(data: Sequence[Path], holdout: Sequence[Path],
               for p in files]
     for trial in trials:
         datacheck.check_run(trial, columns)
+    datacheck.check_split(trials[: len(train_files)], trials[len(train_files):])
     return train_files, hold_files, trials
 
 

@@ -347,3 +347,31 @@ def check_units(trials: Sequence[TrialData], runs: Sequence[Kinematics],
                          f"1/{1.0 / RPS_FLOOR_FRACTION:g} of the base ship "
                          f"'{spec.get('name')}''s largest ({60.0 * most:.4g} rpm); a column "
                          "holding rev/s where rpm is expected reads so")
+
+
+#: share of the shorter run's samples two runs must have in common (same time stamp,
+#: position and heading) to be one recording; noise-free simulated trials of one ship share a
+#: few samples of their common approach, a recording cut into two files nearly all of one
+SHARED_FRACTION = 0.5
+
+
+def check_split(train: Sequence[TrialData], holdout: Sequence[TrialData]) -> None:
+    """Refuse a held-out run that is (part of) a training run: the same file on both sides, or
+    one recording in two files (:data:`SHARED_FRACTION` of the shorter one's samples with the
+    same time stamp, position and heading), which would score the fit on data it was fitted
+    to."""
+    for h in holdout:
+        for t in train:
+            if h.path and t.path and Path(h.path).resolve() == Path(t.path).resolve():
+                raise DataError("given as training data (--data) and held out (--holdout): a "
+                                "held-out run must be one the fit has not seen", path=h.path)
+            _, ih, it = np.intersect1d(h.t_s, t.t_s, assume_unique=True, return_indices=True)
+            same = ((h.north_m[ih] == t.north_m[it]) & (h.east_m[ih] == t.east_m[it])
+                    & (h.psi_rad[ih] == t.psi_rad[it]))
+            if int(same.sum()) >= max(2, SHARED_FRACTION * min(h.t_s.size, t.t_s.size)):
+                times = h.t_s[ih][same]
+                raise DataError(
+                    f"shares {int(same.sum())} samples (t = {times[0]:g} to {times[-1]:g} s) "
+                    f"with the training run {t.path or t.name}: one recording cannot be both "
+                    "fitted and held out", path=h.path or None)
+
