@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from trafficsim import effects
-from trafficsim.diagnose import fit
+from trafficsim.diagnose import fit, selftest
 from trafficsim.diagnose.data import CHANNELS, PHASES, Dataset, dataset
 from trafficsim.identify import replay
 from trafficsim.identify.preprocess import Kinematics
@@ -458,6 +458,21 @@ def trio(hidden: Mapping[str, Any] | None, seed: int | None = 1, noise: float = 
                      sailed("c", TURN, 3.0, hidden, rng, noise)], HORIZON)
     hold = dataset([sailed("b", TURN_B, 1.0, hidden, rng, noise)], HORIZON)
     return train, hold
+
+
+def test_a_near_tie_is_named_in_the_verdict() -> None:
+    """A hidden steering lag: a report latency explains the late response nearly as well, and
+    the verdict says so; an effect far behind (resistance) is not named."""
+    hidden = {"steering_lag": {"tau_s": 8.0, "rate_degps": 1.5}}
+    runs = selftest.simulate_trial(SPEC, effects.check(hidden), np.random.default_rng(0))
+    train, hold = selftest.prepare(SPEC, *runs)
+    diag = fit.diagnose(SPEC, train, hold, ("steering_lag", "ais_latency", "resistance"),
+                        forward_steps=1)
+    first, second = diag.singles[0].effects[0], diag.singles[1].effects[0]
+    assert {first, second} == {"steering_lag", "ais_latency"} and diag.attributable
+    assert f"; nearly as good alone: {second} (" in diag.verdict
+    assert diag.verdict.endswith("(the data hardly tell them apart)")
+    assert "resistance" not in diag.verdict
 
 
 @pytest.mark.parametrize(("hidden", "noise", "tol"), [

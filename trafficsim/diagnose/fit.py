@@ -60,6 +60,10 @@ from trafficsim.identify.replay import Windows, model_rows, simulate, windows_fr
 
 MIN_GAIN = 0.05
 FLOOR_FACTOR = 3.0
+#: penalised score within which another effect, alone, is named beside the chosen first one:
+#: the data hardly tell them apart (a steering lag and a report latency both make the
+#: response look late to the rudder)
+NEAR_TIE = 0.02
 
 
 @dataclass
@@ -709,6 +713,12 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
         sh = chosen.shrinkage(base)[1]
         verdict = (f"{' + '.join(chosen.effects)}: held-out gap {100 * sh:.0f} % smaller "
                    f"({gap_ratio:.1f} times the noise floor before)")
+        rivals = [c for c in singles if c.effects[0] not in chosen.effects
+                  and score[chosen.effects[0]] - score[c.effects[0]] <= NEAR_TIE]
+        if rivals:
+            verdict += ("; nearly as good alone: " + ", ".join(
+                f"{c.effects[0]} ({100 * c.shrinkage(base)[1]:.0f} %)" for c in rivals)
+                + " (the data hardly tell them apart)")
     diag = Diagnosis(base, singles, chosen, steps, floor_t, floor_h, n_eff, attributable,
                      verdict, 0.0, {}, refit)
     diag.residuals = residual_summary(spec, diag, train, hold, sc)
