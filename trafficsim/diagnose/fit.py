@@ -45,6 +45,7 @@ the factor is above 1).
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -223,9 +224,6 @@ class EffectResiduals:
         self.last_diverged = np.zeros(0, dtype=bool)
         names = np.array(data.windows.run_names, dtype=object)
         self._row_run = names[data.windows.run[np.nonzero(mask)[0]]]
-        # every run's logged rudder and propeller speed, gaps bridged as the windows bridge them
-        self._logged = [(w.inputs[0, : int(w.n_samples[0])], float(w.t0_s[0]), float(w.dt_s[0]))
-                        for w in (windows_from_runs([run]) for run in data.runs)]
 
     def gear_start(self, steer: np.ndarray) -> np.ndarray:
         """``(k, W)`` rudder angle of each model's steering gear at each window's start: the
@@ -277,17 +275,27 @@ class EffectResiduals:
         window's start. (A steering gear's angle at the start is still read at ``t0``.)
         """
         win = self.data.windows
-        inputs = np.array(win.inputs, copy=True)
-        for i in range(win.w):
-            logged, start_s, dt_s = self._logged[int(win.run[i])]
-            c = int(win.n_samples[i])
-            at = (win.t0_s[i] - start_s - latency_s) / dt_s + np.arange(c) * win.dt_s[i] / dt_s
+        inputs = np.empty_like(win.inputs)
+        # each window's samples, the padding repeating its last
+        k = np.minimum(np.arange(win.n)[None, :], win.n_samples[:, None] - 1)
+        for r, whole in enumerate(self._logged):
+            on = win.run == r
+            if not on.any():
+                continue
+            logged = whole.inputs[0, : int(whole.n_samples[0])]
+            at = ((win.t0_s[on, None] - whole.t0_s[0] - latency_s + k[on] * win.dt_s[on, None])
+                  / whole.dt_s[0])
             grid = np.arange(logged.shape[0])
             for j in range(2):
-                inputs[i, :c, j] = np.interp(at, grid, logged[:, j])
-            inputs[i, c:] = inputs[i, c - 1]
+                inputs[on, :, j] = np.interp(at, grid, logged[:, j])
         return Windows(win.x0, inputs, win.env, win.dt_s, win.n_samples, win.target, win.run,
                        win.t0_s, win.run_names)
+
+    @functools.cached_property
+    def _logged(self) -> list[Windows]:
+        """Every run as one window: its logged rudder and propeller speed, gaps bridged as
+        the windows bridge them (built at the first :meth:`delayed`)."""
+        return [windows_from_runs([run]) for run in self.data.runs]
 
     @property
     def m(self) -> int:
