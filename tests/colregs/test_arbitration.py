@@ -15,6 +15,7 @@ from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
 from trafficsim.colregs.arbitration import (
+    APPARENT_CHANGE_DEG,
     N_CANDIDATES,
     OFFSETS_RAD,
     _cost,
@@ -159,6 +160,28 @@ def test_port_side_is_honoured():
     assert choose_one([(*CROSSING, 3 * NM)], horizon_s=3600.0)[0] == cand(45.0)
 
 
+def test_asked_side_is_kept_when_only_the_other_side_passes():
+    """Rules 14, 15 and 19(d): a ship 1.13 NM on the starboard bow (045 deg) steering west at
+    12 kn, both ships reaching the same point in 4 min. Turned 90 deg to port the own ship
+    runs parallel to her and keeps the 1.13 NM (the only candidate that passes at 1 NM); every
+    starboard turn falls short. Starboard asked: the starboard candidate with the largest
+    margin (the hard turn that passes astern of her), never the port turn; either side
+    allowed, the port turn is taken."""
+    r = 1.13 * NM / math.sqrt(2.0)
+    threats = [(r, r, 0.0, -V, NM)]
+    assert worst_margin(0.0, V, 0.5, cand(-90.0), threats, H) >= 0.0
+    assert all(worst_margin(0.0, V, 0.5, cand(a, red), threats, H) < 0.0
+               for a in np.arange(0.0, 91.0, 5.0) for red in (False, True))
+    chosen, ok = choose_one(threats)
+    assert not ok and 5.0 * (chosen % N_OFF) - 90.0 >= 0.0
+    best = max(worst_margin(0.0, V, 0.5, k, threats, H) for k in range(N_CANDIDATES)
+               if k % N_OFF >= cand(0.0))
+    assert worst_margin(0.0, V, 0.5, chosen, threats, H) == pytest.approx(best, abs=1e-3)
+    # a running port turn is not kept when starboard is asked, even while it keeps the distance
+    assert choose_one(threats, current=cand(-90.0)) == (chosen, False)
+    assert choose_one(threats, side=EITHER) == (cand(-90.0), True)
+
+
 def test_either_side_prefers_starboard_among_equals():
     chosen, ok = choose_one([(*CROSSING, 3 * NM)], side=EITHER, horizon_s=3600.0)
     assert (chosen, ok) == (cand(45.0), True)
@@ -207,8 +230,14 @@ def test_running_manoeuvre_is_kept_while_valid_rule_8b():
     assert choose_one(threats, current=cand(50.0, True)) == (cand(50.0, True), True)
     # the route course (offset 0) no longer satisfies the pair: replaced by the least turn
     assert choose_one(threats, current=cand(0.0)) == (cand(30.0), True)
-    # a turn that stopped satisfying the pair (3 NM asked now) is replaced
-    assert choose_one([(*CROSSING, 3 * NM)], current=cand(30.0)) == (cand(45.0), True)
+    # a turn that stopped satisfying the pair (2.5 NM asked now, 4630 m) is replaced by one
+    # substantial change (Rule 8(b)): 45 deg, not 35 deg (4726 m), the least that passes anew;
+    # a speed reduction on the same course would do too but is not asked
+    wider = [(*CROSSING, 2.5 * NM)]
+    assert dcpa_crossing(30.0) < 2.5 * NM < dcpa_crossing(35.0)
+    assert choose_one(wider) == (cand(35.0), True)
+    assert choose_one(wider, current=cand(30.0)) == (cand(45.0), True)
+    assert choose_one(wider, current=cand(30.0), reduce=True) == (cand(30.0, True), True)
 
 
 def test_running_alongside_is_not_kept():
@@ -280,15 +309,27 @@ def test_speed_reduction_when_no_alteration_works():
 
 def test_a_speed_reduction_comes_before_an_alteration_smaller_than_asked():
     """The docstring's order where the asked alteration is not safe: slacken speed on the base
-    course (Rule 8(e)) before any too-small alteration at full or reduced speed (Rule 8(b)),
-    and either before the wrong side."""
+    course (Rule 8(e)) before any too-small alteration at full or reduced speed (Rule 8(b))."""
     def cost(offset, reduced):
-        return _cost(float(offset), reduced, STARBOARD, 30.0, False, False)
+        return _cost(float(offset), reduced, 30.0, False, False, math.nan)
 
     bare = cost(0.0, True)
     assert all(bare < cost(d, r) for d in (5.0, 10.0, 25.0) for r in (False, True))
-    assert all(cost(d, r) < cost(-5.0, False) for d in (5.0, 25.0) for r in (False, True))
     assert cost(30.0, False) < bare  # the asked alteration first of all
+
+
+def test_a_replacement_is_readily_apparent_and_goes_further_out():
+    """Rule 8(b): a running 30 deg turn that falls short is replaced by at least 45 deg, or by
+    a speed reduction on its course, never by 35 or 40 deg; a running 80 deg turn by 90 deg
+    (the largest offset) before any smaller alteration, which would undo part of the
+    manoeuvre."""
+    def cost(offset, reduced=False, run=30.0, reduce=False):
+        return _cost(float(offset), reduced, 30.0, reduce, False, run)
+
+    assert cost(30.0 + APPARENT_CHANGE_DEG) < min(cost(35.0), cost(40.0))
+    assert cost(30.0, True, reduce=True) < cost(45.0, reduce=True)
+    assert all(cost(90.0, run=80.0) < cost(d, r, run=80.0) for d in (30.0, 40.0, 60.0, 85.0)
+               for r in (False, True))
 
 
 def test_no_solution_returns_best_margin_and_not_ok():
@@ -430,20 +471,20 @@ def test_vectorised_equals_one_ship_at_a_time(fleet):
         np.logical_or.at(along, pr["pair_ship"], _alongside(
             sh["base"], sh["speed"], sh["factor"], pr["pair_ship"], pr["pn"], pr["pe"],
             pr["ovn"], pr["ove"], pr["req"]))
-    starboard_or_none = (np.arange(N_CANDIDATES) % N_OFF) >= cand(0.0)
+    off = (np.arange(N_CANDIDATES) % N_OFF) * 5.0 - 90.0
     for i in range(s):
+        # every choice is on the asked side; not ok only where nothing there satisfies all
+        side = sh["side"][i]
+        allowed = ~(((side == STARBOARD) & (off < 0.0)) | ((side == PORT) & (off > 0.0)))
+        assert allowed[chosen[i]]
         if ok[i]:
             assert hi[i, chosen[i]] >= -1e-6
         else:
-            assert (lo[i] < 1e-6).all()
-        # a still-valid running manoeuvre that does not run alongside a ship is kept
+            assert (lo[i, allowed] < 1e-6).all()
+        # a still-valid running manoeuvre on the asked side, not alongside a ship, is kept
         cur = sh["current"][i]
-        if cur >= 0 and lo[i, cur] > 1e-6 and not along[i, cur]:
+        if cur >= 0 and lo[i, cur] > 1e-6 and not along[i, cur] and allowed[cur]:
             assert chosen[i] == sh["current"][i]
-        # a chosen alteration is on the asked side whenever one on that side satisfies all
-        off = (chosen[i] % N_OFF) * 5.0 - 90.0
-        if sh["current"][i] < 0 and sh["side"][i] == STARBOARD:
-            assert off >= 0.0 or not (lo[i, starboard_or_none] >= 1e-6).any()
 
 
 def test_vectorised_hand_cases_at_once():
@@ -539,11 +580,13 @@ def pictures(draw):
 def test_choice_agrees_with_brute_force_search(picture, factor, side, least_deg, reduce,
                                                current):
     """Every candidate judged by the closed form; then, from the docstring's preference order:
-    a running manoeuvre that still keeps every distance (and runs alongside nobody) is kept;
-    else, among the safe candidates on the asked side with at least the asked alteration, full
-    speed first unless a reduction is asked, then the smallest alteration, starboard first
-    among equals (and a reduced speed first among equals when it is asked); with no safe
-    candidate at all, the largest worst-case margin on the asked side."""
+    a running manoeuvre on the asked side that still keeps every distance (and runs alongside
+    nobody) is kept; else, on the asked side, among the safe candidates those with at least
+    the asked alteration and, replacing a running manoeuvre, a course at least
+    APPARENT_CHANGE_DEG from its own, the largest offset or the same course, none nearer the
+    base course: full speed first unless a reduction is asked, then the smallest alteration,
+    starboard first among equals (and a reduced speed first among equals when it is asked);
+    with no safe candidate on the asked side, the largest worst-case margin there."""
     threats, base_deg, speed = picture
     table = _brute(base_deg, speed, factor, threats, H)
     # skip pictures where rounding decides (a margin within a millimetre of zero) and where
@@ -558,19 +601,29 @@ def test_choice_agrees_with_brute_force_search(picture, factor, side, least_deg,
     def right_side(o):
         return not ((side == STARBOARD and o < 0.0) or (side == PORT and o > 0.0))
 
-    if current >= 0 and table[current][3]:
+    assert right_side(off)
+    if current >= 0 and table[current][3] and right_side(table[current][0]):
         assert chosen == current
         return
-    adequate = [k for k, (o, _, _, s, _) in enumerate(table)
-                if s and right_side(o) and (least_deg == 0.0 or abs(o) >= least_deg)]
+    pool = [k for k, row in enumerate(table) if row[3] and right_side(row[0])]
+
+    def apparent(o):
+        if current < 0:
+            return True
+        run, step = table[current][0], abs(o - table[current][0])
+        return (step == 0.0 or step >= APPARENT_CHANGE_DEG or abs(o) == 90.0) and \
+            abs(o) >= abs(run)
+
+    adequate = [k for k in pool if (least_deg == 0.0 or abs(table[k][0]) >= least_deg)
+                and apparent(table[k][0])]
     if adequate:
         def key(k):
             o, red = table[k][0], table[k][1]
             return (abs(o), o < 0.0, not red) if reduce else (red, abs(o), o < 0.0)
         assert chosen == min(adequate, key=key)
-    elif any(row[3] for row in table):
+    elif pool:
         assert ok
     else:
-        assert not ok and right_side(off)
-        best = max(m for o, _, m, _, _ in table if right_side(o))
+        assert not ok
+        best = max(row[2] for row in table if right_side(row[0]))
         assert worst >= best - 1e-6

@@ -2,23 +2,38 @@
 
 Each pair's decision asks something of the own ship (alter course to a side by at least some
 angle, reduce speed, pass at some distance). A ship with several threats gets ONE manoeuvre: the
-mildest candidate (course offset from the ship's base course, speed factor) whose predicted
-distance at the closest point of approach is at least the required one for EVERY other ship
-around it - those that asked for the manoeuvre and those that did not, so that avoiding one ship
-creates no new close-quarters situation with another (Rule 8(d)). Where no candidate satisfies
-all of them, the candidate with the largest worst-case margin is taken.
+mildest candidate (course offset from the ship's base course, speed factor) on the requested
+side whose predicted distance at the closest point of approach is at least the required one for
+EVERY other ship around it - those that asked for the manoeuvre and those that did not, so that
+avoiding one ship creates no new close-quarters situation with another (Rule 8(d)).
+
+The requested side is a rule, not a preference: a turn to starboard asked by Rules 14(a), 15,
+17(c) or 19(d) is never replaced by a turn to port because only the port turn passes far
+enough. Where no candidate on the requested side satisfies every pair, the one on that side
+with the largest worst-case margin is taken (a speed reduction on the base course belongs to
+both sides, Rule 8(e)).
 
 Candidates: course offsets -90..+90 degrees in 5 degree steps, each at full speed and at the
-requested reduced speed. Preference: the requested side (starboard first where either is
-allowed), the smallest alteration at or above the requested least one (a large, readily apparent
-alteration rather than a succession of small ones, Rule 8(b)), full speed before reduced speed
-(a speed reduction only where it is asked for or the alteration alone does not suffice,
-Rule 8(e)), and a reduced speed before running alongside a near ship at little relative speed
-(which leaves the encounter unresolved). Where no alteration as large as asked is safe, a speed
-reduction on the base course comes before a smaller alteration (Rule 8(e) has a ship slacken
-her speed where necessary; Rule 8(b) advises against small alterations). A ship already
-manoeuvring keeps its manoeuvre while it still satisfies every pair and does not run alongside
-a ship.
+requested reduced speed. Preference: starboard first where either side is allowed, the
+smallest alteration at or above the requested least one (a large, readily apparent alteration
+rather than a succession of small ones, Rule 8(b)), full speed before reduced speed (a speed
+reduction only where it is asked for or the alteration alone does not suffice, Rule 8(e)), and
+a reduced speed before running alongside a near ship at little relative speed (which leaves the
+encounter unresolved). Where no alteration as large as asked is safe, a speed reduction on the
+base course comes before a smaller alteration (Rule 8(e) has a ship slacken her speed where
+necessary; Rule 8(b) advises against small alterations).
+
+A ship already manoeuvring keeps its manoeuvre while it still satisfies every pair and does not
+run alongside a ship. The turn and the change of speed take time that the straight-line
+prediction does not see, so a manoeuvre chosen on the limit may soon fall short; replaced by the
+next that just suffices, it would be followed by another, a little larger, and so on (the
+succession of small alterations Rule 8(b) advises against). A manoeuvre that does fall short is
+replaced by one that differs from it substantially: by at least ``APPARENT_CHANGE_DEG`` in
+course (half Woerner/Minne's readily apparent course change of 30 deg, colregs.md section 2.3,
+added to an alteration that was already that large; or all the way to the largest offset), or
+by its speed alone (their readily apparent speed reduction is to 50 %); and by a larger
+alteration before a smaller one, which would undo part of the manoeuvre (towards the ship it
+avoids, as a rule).
 
 Prediction: straight lines, own velocity = factor x route speed along the candidate course, the
 other ship's estimated velocity held (the DCPA of [colregs.md section 4]), closest approach
@@ -36,7 +51,8 @@ from trafficsim.geometry import cos_sin, hypot_below
 from trafficsim.jit import kernel
 
 #: candidate course offsets, rad (+ = starboard), and whether a candidate runs at reduced speed
-OFFSETS_RAD = np.radians(np.arange(-90.0, 90.0 + 1e-9, 5.0))
+LARGEST_OFFSET_DEG = 90.0
+OFFSETS_RAD = np.radians(np.arange(-LARGEST_OFFSET_DEG, LARGEST_OFFSET_DEG + 1e-9, 5.0))
 _OFF = np.concatenate([OFFSETS_RAD, OFFSETS_RAD])
 _REDUCED = np.concatenate([np.zeros(OFFSETS_RAD.size, bool), np.ones(OFFSETS_RAD.size, bool)])
 N_CANDIDATES = _OFF.size
@@ -44,6 +60,10 @@ N_CANDIDATES = _OFF.size
 #: ALONGSIDE_SPEED_MPS runs alongside it: allowed, but only when nothing else is safe
 ALONGSIDE_RANGE_FACTOR = 2.0
 ALONGSIDE_SPEED_MPS = 1.0
+#: a replaced manoeuvre's course changes by at least this much, or only its speed changes:
+#: half the readily apparent course change of colregs.md section 2.3 (30 deg), on top of an
+#: alteration that was already at least that (the rules' turn_deg)
+APPARENT_CHANGE_DEG = 15.0
 
 
 def candidate_offset_rad(k: np.ndarray) -> np.ndarray:
@@ -136,14 +156,14 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
             ove: np.ndarray, required: np.ndarray, horizon_s: float, cos_off: np.ndarray,
             sin_off: np.ndarray, off_deg: np.ndarray, reduced: np.ndarray, chosen: np.ndarray,
             ok_out: np.ndarray) -> None:
-    """:func:`choose`, ship by ship over the ship's pairs: a running manoeuvre that still keeps
-    every pair's distance without running alongside a ship is kept, the only candidate looked
-    at (most ships at most decision steps); otherwise, per candidate, whether it keeps every
-    pair's distance and whether it runs alongside a ship, then the cheapest safe candidate by
-    the preference cost of the module docstring. Safety needs only the sign of each margin,
-    told by the squares (:func:`~trafficsim.geometry.hypot_below`); the worst margins
-    themselves are worked out only for a ship with no safe candidate, which takes the
-    largest."""
+    """:func:`choose`, ship by ship over the ship's pairs: a running manoeuvre on the requested
+    side that still keeps every pair's distance without running alongside a ship is kept, the
+    only candidate looked at (most ships at most decision steps); otherwise, per candidate,
+    whether it keeps every pair's distance and whether it runs alongside a ship; then, on the
+    requested side, the cheapest candidate keeping every distance by the preference cost of
+    the module docstring. Safety needs only the sign of each margin, told by the squares
+    (:func:`~trafficsim.geometry.hypot_below`); the worst margins themselves are worked out
+    only for a ship with no safe candidate on the requested side, which takes the largest."""
     s, n_cand, q = base.shape[0], off_deg.shape[0], pair_ship.shape[0]
     first = np.zeros(s + 1, dtype=np.int64)  # the pairs of ship i: mine[first[i]:first[i + 1]]
     for p in range(q):
@@ -161,21 +181,24 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
         cb, sb = cos_sin(base[i])
         pairs = mine[first[i]:first[i + 1]]
         run = current[i]
+        run_deg = math.nan
         if run >= 0:
-            keeps, beside = _verdict(cb, sb, speed[i], factor[i], reduced[run], cos_off[run],
-                                     sin_off[run], pairs, pn, pe, ovn, ove, required,
-                                     horizon_s)
-            if keeps and not beside:  # a running manoeuvre that still satisfies every pair
-                chosen[i], ok_out[i] = run, True
-                continue
-        stuck = True
+            run_deg = off_deg[run]
+            if not _wrong_side(side[i], run_deg):
+                keeps, beside = _verdict(cb, sb, speed[i], factor[i], reduced[run],
+                                         cos_off[run], sin_off[run], pairs, pn, pe, ovn, ove,
+                                         required, horizon_s)
+                if keeps and not beside:  # a running manoeuvre still satisfying every pair
+                    chosen[i], ok_out[i] = run, True
+                    continue
+        stuck = True  # nothing safe on the requested side
         for k in range(n_cand):
             safe[k], alongside[k] = _verdict(cb, sb, speed[i], factor[i], reduced[k],
                                              cos_off[k], sin_off[k], pairs, pn, pe, ovn, ove,
                                              required, horizon_s)
-            stuck = stuck and not safe[k]
+            stuck = stuck and (not safe[k] or _wrong_side(side[i], off_deg[k]))
         top = -math.inf
-        if stuck:  # nothing safe: the largest worst-case margin on an allowed side
+        if stuck:  # nothing safe on the requested side: its largest worst-case margin
             for k in range(n_cand):
                 worst[k] = math.inf
                 vn, ve = _own_velocity(cb, sb, speed[i], factor[i], reduced[k], cos_off[k],
@@ -185,17 +208,16 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
                                        horizon_s) - required[p]
                     if margin < worst[k]:
                         worst[k] = margin
-                top = max(top, -math.inf if _wrong_side(side[i], off_deg[k]) else worst[k])
+                if not _wrong_side(side[i], off_deg[k]):
+                    top = max(top, worst[k])
         best_k, best_c = 0, math.inf  # the cheapest eligible candidate
         for k in range(n_cand):
-            if not stuck:
-                eligible = safe[k]
-            else:
-                eligible = (-math.inf if _wrong_side(side[i], off_deg[k])
-                            else worst[k]) >= top - 1e-6
+            if _wrong_side(side[i], off_deg[k]):
+                continue
+            eligible = worst[k] >= top - 1e-6 if stuck else safe[k]
             if eligible:
-                c = _cost(off_deg[k], reduced[k], side[i], least_deg[i], reduce_asked[i],
-                          alongside[k])
+                c = _cost(off_deg[k], reduced[k], least_deg[i], reduce_asked[i], alongside[k],
+                          run_deg)
                 if c < best_c:
                     best_k, best_c = k, c
         chosen[i] = best_k
@@ -240,13 +262,21 @@ def _wrong_side(side: float, offset_deg: float) -> bool:
 
 
 @kernel
-def _cost(offset_deg: float, reduced: bool, side: float, least_deg: float, reduce_asked: bool,
-          alongside: bool) -> float:
-    """Preference cost of a candidate (module docstring): lower is preferred."""
+def _cost(offset_deg: float, reduced: bool, least_deg: float, reduce_asked: bool,
+          alongside: bool, run_deg: float) -> float:
+    """Preference cost of a candidate on the requested side (module docstring): lower is
+    preferred. ``run_deg``: course offset of the running manoeuvre it would replace (NaN for
+    none); a replacement changes it by at least ``APPARENT_CHANGE_DEG``, or to the largest
+    offset, or not at all, and goes back towards the base course only where nothing further
+    out will do."""
     d = offset_deg
     too_small = abs(d) < least_deg - 1e-9 and d != 0.0
+    step = abs(d - run_deg)  # NaN (no running manoeuvre) compares false
+    small_step = (step > 0.0 and step < APPARENT_CHANGE_DEG - 1e-9
+                  and abs(d) < LARGEST_OFFSET_DEG - 1e-9)
+    back = abs(d) < abs(run_deg) - 1e-9
     c = abs(d) + (0.5 if d < 0.0 else 0.0)  # starboard first among equals (EITHER)
-    c += 1000.0 * _wrong_side(side, d) + 500.0 * too_small + 400.0 * alongside
+    c += 500.0 * too_small + 500.0 * small_step + 600.0 * back + 400.0 * alongside
     if reduced:
         c += -0.25 if reduce_asked else 200.0
     if d == 0.0 and least_deg > 0.0:
