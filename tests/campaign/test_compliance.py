@@ -9,9 +9,19 @@ import pytest
 from trafficsim.batch import EncounterEnv, ShipSetup, build_batch
 from trafficsim.campaign.compliance import MIRROR, RULE_OF_KIND, PairObserver, grade
 from trafficsim.campaign.compliance import _observe as _observe_kernel
-from trafficsim.colregs.vocabulary import MANOEUVRES
+from trafficsim.campaign.generator import classify
+from trafficsim.colregs.decider import Decider
+from trafficsim.colregs.vocabulary import (
+    ENUMS,
+    GIVE_WAY,
+    MANOEUVRES,
+    MEMORY,
+    MUTUAL_GIVE_WAY,
+    NO_ROLE,
+    STAND_ON,
+)
 from trafficsim.engine import Simulation
-from trafficsim.ships.base import EAST, N_STATE, NORTH, PSI, U
+from trafficsim.ships.base import EAST, N_STATE, NORTH, PSI, Env, U
 from trafficsim.ships.library import load_ship
 from trafficsim.units import from_kn
 
@@ -73,7 +83,8 @@ def _fields(m=1, **over):
     """A PairObserver of ``m`` directed pairs whose own ship sails at ``U0`` and which, unless
     overridden, saw: start range 8000 m, closest 1500 m, both ships abeam of each other at the
     closest point (alpha = beta = 90 deg), a first manoeuvre at the start range, and a 40 deg
-    starboard turn (so P_delay = 0 and P_na = 0)."""
+    starboard turn (so P_delay = 0 and P_na = 0); all ships at the origin, at rest over ground,
+    running no rules."""
     x0 = np.zeros((N_STATE, 2 * m))
     x0[U] = U0
     own, tgt = np.arange(m), np.arange(m, 2 * m)
@@ -88,12 +99,13 @@ def _fields(m=1, **over):
                   faster_cpa=full(0.0), slower_cpa=full(0.0),
                   range_at_manoeuvre_m=full(8000.0), manoeuvre_cpa_m=full(8000.0),
                   side=full(1.0), ahead=full(0.0),
-                  crossed_ahead=np.zeros(m, dtype=bool))
+                  crossed_ahead=np.zeros(m, dtype=bool), runs_rules=np.zeros(m, dtype=bool),
+                  first_role=full(math.nan), first_encounter=full(math.nan))
     for k, v in over.items():
         values[k] = np.broadcast_to(np.asarray(v, dtype=values[k].dtype), (m,)).copy()
     return PairObserver(own, tgt, x0, **values, asked=np.zeros((m, len(MANOEUVRES)), bool),
                         fired=np.zeros((m, 0), bool), node_names=[],
-                        net_of_pair=np.full(m, -1))
+                        net_of_pair=np.full(m, -1), v0=np.zeros((2, 2 * m)))
 
 
 @pytest.mark.parametrize("r_cpa, s_r", [
@@ -304,14 +316,15 @@ def _pair(**over):
 
 
 @pytest.mark.parametrize("kind", ["crossing_give_way", "crossing_stand_on", "overtaking",
-                                  "overtaken", "head_on"])
+                                  "overtaken", "head_on", "crossing_mutual"])
 def test_scores_take_each_ship_by_the_rule_of_its_part(kind):
     """Ship i is graded by the rule of ``kind``, ship j by the rule of the mirrored kind
-    (give-way <-> stand-on, overtaking <-> overtaken, head-on both Rule 14); each
-    ``score_ruleN`` column holds the ship the rule binds, head-on the lower of the two."""
+    (give-way <-> stand-on, overtaking <-> overtaken, head-on and the mutual give-way crossing
+    both Rule 14); each ``score_ruleN`` column holds the ship the rule binds, where it binds
+    both the lower of the two."""
     obs = _pair()
     g = grade(obs)
-    out = obs.scores([kind])
+    out = obs.scores([kind, MIRROR[kind]])
     ri, rj = RULE_OF_KIND[kind], RULE_OF_KIND[MIRROR[kind]]
     assert out["compliance_i"][0] == pytest.approx(g[ri][0])
     assert out["compliance_j"][0] == pytest.approx(g[rj][1])
@@ -321,7 +334,7 @@ def test_scores_take_each_ship_by_the_rule_of_its_part(kind):
             assert out[f"score_rule{r}"][0] == pytest.approx(g[r][bound[0]])
         else:
             assert np.isnan(out[f"score_rule{r}"][0])
-    if kind == "head_on":
+    if ri == 14:
         assert out["score_rule14"][0] == pytest.approx(min(g[14]))
     else:
         assert np.isnan(out["score_rule14"][0])
@@ -334,11 +347,11 @@ def test_head_on_rule16_column_is_the_lower_of_the_two_ships():
         obs = _pair(stbd_cpa=np.radians(stbd))
         g = grade(obs)
         assert g[16][0] != g[16][1]
-        assert obs.scores(["head_on"])["score_rule16"][0] == pytest.approx(min(g[16]))
+        assert obs.scores(["head_on"] * 2)["score_rule16"][0] == pytest.approx(min(g[16]))
 
 
 def test_scores_of_an_unknown_kind_are_nan():
-    out = _pair().scores(["no_such_kind"])
+    out = _pair().scores(["no_such_kind"] * 2)
     assert np.isnan(out["compliance_i"][0]) and np.isnan(out["compliance_j"][0])
     assert all(np.isnan(out[f"score_rule{r}"][0]) for r in (13, 14, 15, 16, 17))
 
@@ -372,7 +385,9 @@ def _state(ships, t):
 
 def _sim(x):
     return SimpleNamespace(batch=SimpleNamespace(x=x, pair_i=np.array([0]),
-                                                 pair_j=np.array([1])), decider=None)
+                                                 pair_j=np.array([1]), env=Env(),
+                                                 behaviours=["keep_course"] * 2),
+                           decider=None)
 
 
 def _run(ships, end_s=2000, every_s=10):
@@ -739,3 +754,165 @@ def test_overtaking_then_crossing_the_bow_loses_0_3_for_rule_13():
     assert seen["t_cpa"] < 1300.0
     assert g[16][0] > 0.3
     assert g[13][0] == pytest.approx(g[16][0] - 0.3, abs=1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# graded_kinds(): each ship graded for the part the rules gave it
+# --------------------------------------------------------------------------------------------
+
+def _encounter(ships, behaviour, env=None, steps=2400):
+    """Cargo ships at 12 kn on routes along their courses ``ships`` = [(north, east,
+    heading_deg), ...], all of one ``behaviour`` (``colregs``: each runs the bundled rules),
+    observed once per 10 s decision period as a campaign observes them."""
+    spec = load_ship("cargo")
+    setups = []
+    for k, (n, e, h) in enumerate(ships):
+        psi = math.radians(h)
+        route = np.array([[n + 40000.0 * math.cos(psi), e + 40000.0 * math.sin(psi)]])
+        setups.append(ShipSetup(f"s{k}", spec, 0, n, e, psi, from_kn(12.0), route, k,
+                                behaviour=behaviour))
+    batch = build_batch(setups, [env or EncounterEnv()])
+    decider = (None if behaviour == "keep_course"
+               else Decider.build(batch.behaviours, batch.pair_i, batch.pair_j))
+    sim = Simulation.start(batch, 1.0, decider=decider)
+    obs = PairObserver.start(sim)
+    for _ in range(steps // 10):
+        sim.run(10)
+        obs.observe(sim)
+    return obs
+
+
+def _by_headings(obs):
+    """The start kind of every directed pair by t = 0 headings and water speeds, without the
+    mutual class (how a pair used to be graded)."""
+    x = obs.x0
+    return [classify(x[PSI, o], x[PSI, t], x[NORTH, t] - x[NORTH, o], x[EAST, t] - x[EAST, o],
+                     x[U, o], x[U, t]) for o, t in zip(obs.own, obs.tgt, strict=True)]
+
+
+# the audit's mutual port-to-port crossing: courses 160 deg apart, each ship sees the other
+# about 3 deg (A) and 17 deg (B) on her port bow, outside the 10 deg head-on sector
+MUTUAL_PORT = [(0.0, 0.0, 0.0), (7397.8, -387.7, 200.0)]
+# nearly reciprocal headings (172 deg apart, each ship within 6 deg of the other's bow: head-on
+# by the headings) in a 1 kn current setting east: over ground the courses are 162.5 deg apart,
+# so the network sees a crossing, ship 0 stand-on (ship 1 on her port bow), ship 1 give-way
+DRIFTED = [(0.0, 0.0, 0.0), (15000.0, -560.0, 172.0)]
+
+
+def _current():
+    return EncounterEnv(from_kn(1.0), math.pi / 2)
+
+
+def test_a_mutual_port_to_port_crossing_grades_both_ships_as_giving_way():
+    """Rule 14(c): the network makes both ships mutual give-way (its mutual_crossing) and
+    both turn some 30 deg to starboard; each is graded as head-on, S14 (starboard turn,
+    port-to-port passing: about 0.97), not as a stand-on ship that altered course (S17 = 0.25,
+    which the headings' crossing_stand_on class gave)."""
+    obs = _encounter(MUTUAL_PORT, "colregs", steps=1200)
+    assert _by_headings(obs) == ["crossing_stand_on"] * 2
+    assert obs.first_role.tolist() == [MUTUAL_GIVE_WAY] * 2
+    assert obs.first_encounter.tolist() == [ENUMS["crossing"]] * 2
+    assert obs.graded_kinds() == (["crossing_mutual"] * 2, ["network"] * 2)
+    assert np.all(np.degrees(obs.stbd_cpa) > 25.0)
+    g = grade(obs)
+    out = obs.scores(obs.graded_kinds()[0])
+    for side, k in (("_i", 0), ("_j", 1)):
+        assert out["compliance" + side][0] == pytest.approx(g[14][k])
+        assert out["compliance" + side][0] > 0.9
+        assert g[17][k] < 0.3  # the old grade
+    assert out["score_rule14"][0] == pytest.approx(min(g[14]))
+    assert out["score_rule16"][0] == pytest.approx(min(g[16]))
+    assert np.isnan(out["score_rule15"][0]) and np.isnan(out["score_rule17"][0])
+
+
+def test_a_pair_the_network_reads_otherwise_than_the_start_headings_takes_the_network_role():
+    """By the t = 0 headings the drifted pair is head-on (both graded by Rule 14); the network,
+    on courses over ground, makes ship 0 stand-on and ship 1 give-way in a crossing. Ship 0
+    stands on and is graded by Rule 17 (not marked down by Rule 14 for not turning); ship 1
+    gives way to starboard and is graded by Rule 15."""
+    obs = _encounter(DRIFTED, "colregs", env=_current())
+    assert _by_headings(obs) == ["head_on"] * 2
+    assert obs.first_role.tolist() == [STAND_ON, GIVE_WAY]
+    kinds, by = obs.graded_kinds()
+    assert (kinds, by) == (["crossing_stand_on", "crossing_give_way"], ["network"] * 2)
+    # ship 0 stood on: her heading moved less than a manoeuvre's 5 deg (the crab angle with
+    # which her route guidance holds her track against the current)
+    assert math.degrees(max(obs.stbd_cpa[0], obs.port_cpa[0])) < 5.0
+    assert math.degrees(obs.stbd_cpa[1]) > 25.0
+    g = grade(obs)
+    out = obs.scores(kinds)
+    assert out["compliance_i"][0] == pytest.approx(g[17][0])
+    assert out["compliance_j"][0] == pytest.approx(g[15][1])
+    assert g[17][0] > 0.6 > 0.1 > g[14][0]
+
+
+@pytest.mark.parametrize("ships, env", [(MUTUAL_PORT, None), (DRIFTED, _current())],
+                         ids=["mutual", "drifted"])
+def test_a_baseline_is_graded_under_the_kind_of_the_rules_following_run(ships, env):
+    """The same encounter with keep-course ships (the no_avoidance baseline) is graded by its
+    start geometry, which reads the t = 0 state as the network does (its sectors, courses and
+    speeds over ground, the mutual crossing): the same kinds as the rules-following run."""
+    rules = _encounter(ships, "colregs", env=env, steps=1200)
+    baseline = _encounter(ships, "keep_course", env=env, steps=1200)
+    kinds, by = baseline.graded_kinds()
+    assert by == ["geometry"] * 2
+    assert kinds == rules.graded_kinds()[0] == rules.start_kinds()
+
+
+def test_the_first_role_is_kept():
+    """The observer keeps the role and encounter the network first gave each pair: a later
+    role (the network's memory after each decision) does not replace it; a pair without a
+    role yet takes its first."""
+    obs = _fields(m=2)
+    memory = np.zeros((len(MEMORY), 2))
+    row_role, row_enc = MEMORY.index("own_role"), MEMORY.index("encounter")
+    for role, enc in (((GIVE_WAY, NO_ROLE), (ENUMS["crossing"], ENUMS["no_encounter"])),
+                      ((STAND_ON, STAND_ON), (ENUMS["overtaken"], ENUMS["crossing"]))):
+        memory[row_role], memory[row_enc] = role, enc
+        obs._decisions(SimpleNamespace(decider=SimpleNamespace(memory=memory.copy(),
+                                                               last_decision=[None])))
+    assert obs.first_role.tolist() == [GIVE_WAY, STAND_ON]
+    assert obs.first_encounter.tolist() == [ENUMS["crossing"], ENUMS["crossing"]]
+
+
+@pytest.mark.parametrize("runs_rules, role, encounter, kind, by", [
+    (True, STAND_ON, "crossing", "crossing_stand_on", "network"),
+    (True, MUTUAL_GIVE_WAY, "crossing", "crossing_mutual", "network"),
+    (True, MUTUAL_GIVE_WAY, "head_on", "head_on", "network"),
+    (True, GIVE_WAY, "overtaking", "overtaking", "network"),
+    (True, STAND_ON, "overtaken", "overtaken", "network"),
+    (True, math.nan, "no_encounter", "crossing_give_way", "geometry"),  # never engaged
+    (True, GIVE_WAY, "head_on", "crossing_give_way", "geometry"),  # no such role in the table
+    (False, STAND_ON, "crossing", "crossing_give_way", "geometry"),  # a rogue's own roles
+])
+def test_graded_kind_is_the_network_role_of_a_ship_that_runs_the_rules(runs_rules, role,
+                                                                       encounter, kind, by):
+    """Own ship north-bound at 6 m/s; the other west-bound at 6 m/s from (4000, 4000), 45 deg
+    on the own starboard bow and seeing the own ship 45 deg on her port bow: crossing give-way
+    by the start geometry. The first network role wins for a ship that runs the rules."""
+    obs = _fields(m=1, runs_rules=runs_rules, first_role=role,
+                  first_encounter=ENUMS[encounter] if role == role else math.nan)
+    obs.x0[[NORTH, EAST, PSI], 1] = 4000.0, 4000.0, 1.5 * math.pi
+    obs.v0[:] = [[U0, 0.0], [0.0, -U0]]
+    assert obs.start_kinds() == ["crossing_give_way"]
+    assert obs.graded_kinds() == ([kind], [by])
+
+
+@pytest.mark.parametrize("other, kinds", [
+    ((4000.0, 4000.0, 180.0), ["crossing_mutual", "crossing_mutual"]),  # both to starboard
+    ((4000.0, -500.0, 200.0), ["crossing_mutual", "crossing_mutual"]),  # both to port
+    ((4000.0, 200.0, 180.0), ["head_on", "head_on"]),
+    ((4000.0, 4000.0, 270.0), ["crossing_give_way", "crossing_stand_on"]),
+])
+def test_start_kinds_name_the_mutual_crossing(other, kinds):
+    """Calm water: the start geometry of both directed pairs, with the network's mutual
+    crossing (each ship sees the other on the same side)."""
+    obs = _fields(m=1)
+    n, e, h = other
+    obs.x0[[NORTH, EAST, PSI], 1] = n, e, math.radians(h)
+    obs.v0[:, 0] = U0, 0.0
+    obs.v0[:, 1] = U0 * math.cos(math.radians(h)), U0 * math.sin(math.radians(h))
+    back = _fields(m=1)  # the same pair seen from the other ship
+    back.x0[[NORTH, EAST, PSI], 0] = n, e, math.radians(h)
+    back.v0[:, 0], back.v0[:, 1] = obs.v0[:, 1], obs.v0[:, 0]
+    assert obs.start_kinds() + back.start_kinds() == kinds

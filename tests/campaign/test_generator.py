@@ -733,3 +733,30 @@ def test_no_two_ships_of_a_multi_ship_encounter_start_in_an_unavoidable_collisio
                 assert rng[0] >= NM, (index, a.name, b.name)
                 assert rng.min() >= NM * (1 - 1e-9) or rng.argmin() == t.size - 1, (
                     index, a.name, b.name, rng.min())
+
+
+def test_classify_names_the_mutual_crossing_only_when_asked():
+    """Each ship seeing the other on the same side (both to starboard, or both to port; the
+    network's mutual_crossing, Rule 14(c)) is ``crossing_mutual`` with ``mutual``; without it,
+    as the draws classify, the own ship's side alone decides, so the draws are unchanged."""
+    north = 0.0
+    both_stbd = (north, math.pi, 4000.0, 4000.0, 6.0, 6.0)  # reciprocal, 45 deg to starboard
+    both_port = (north, math.radians(200.0), 7397.8, -387.7, 6.0, 6.0)
+    assert classify(*both_stbd, mutual=True) == "crossing_mutual"
+    assert classify(*both_port, mutual=True) == "crossing_mutual"
+    assert classify(*both_stbd) == "crossing_give_way"
+    assert classify(*both_port) == "crossing_stand_on"
+    crossing = (north, math.radians(270.0), 4000.0, 4000.0, 6.0, 6.0)  # she sees us to port
+    assert classify(*crossing, mutual=True) == classify(*crossing) == "crossing_give_way"
+    assert classify(north, math.pi, 5000.0, 100.0, 6.0, 6.0, mutual=True) == "head_on"
+
+
+def test_classify_takes_the_reciprocal_test_on_the_own_course():
+    """Headings 172 deg apart, each ship within 6 deg of the other's bow: head-on; with the own
+    course over ground 4.8 deg to starboard of her heading and the other's course at 167.3 deg
+    (a current setting east) the courses are 162.5 deg apart: a crossing, as the network sees
+    it (bearings from the own bow, the reciprocal test on the courses)."""
+    geometry = (15000.0, -560.0, 6.17, 6.17)
+    assert classify(0.0, math.radians(172.0), *geometry) == "head_on"
+    assert classify(0.0, math.radians(167.3), *geometry,
+                    own_course=math.radians(4.8)) == "crossing_stand_on"

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from trafficsim.campaign.compliance import RULE_OF_KIND
 from trafficsim.campaign.generator import classify, draw
-from trafficsim.campaign.runner import compliant, rules_path, run_chunk
+from trafficsim.campaign.runner import COLUMNS, compliant, rules_path, run_chunk
 from trafficsim.campaign.spec import load_spec
 from trafficsim.cli import main
 from trafficsim.render.report import write_report
@@ -191,6 +192,52 @@ def test_the_decision_at_the_start_is_in_the_rules_fired(tmp_path):
                 assert set(filter(None, a.split(","))) <= set(b.split(","))
                 fired += key == "rules_fired" and a != ""
     assert fired > 0
+
+
+def test_rows_name_the_part_each_ship_was_graded_for(tmp_path):
+    """A ship that runs the rules is graded under the role its network first gave the pair
+    (``graded_by_* = network``, a role node among its rules fired), other pairs under the start
+    geometry; the no_avoidance baseline of the same draws is graded by the start geometry
+    alone, and under the same kinds for the own ship's pairs, which the network engages at
+    t = 0 with perfect knowledge. Each ship's compliance is the score of its kind's rule, the
+    rule column the lower where both ships are bound by that rule."""
+    roles = {"give_way_crossing", "stand_on_crossing", "mutual_crossing", "head_on_role",
+             "give_way_overtaking", "stand_on_overtaken"}
+    rules = run_chunk(_rows_spec(tmp_path, extra="policy: colregs"), 0, 8)
+    base = run_chunk(_rows_spec(tmp_path, extra="policy: no_avoidance", name="b.yaml"), 0, 8)
+    own = [k for k, s in enumerate(rules["ship_i"]) if s == "own"]
+    for side, other in (("_i", "_j"), ("_j", "_i")):
+        kinds, by = rules["graded_kind" + side], rules["graded_by" + side]
+        assert set(kinds) <= set(RULE_OF_KIND) and set(by) <= {"network", "geometry"}
+        assert set(base["graded_by" + side]) == {"geometry"}
+        assert all(by[k] == "network" for k in own)
+        assert [kinds[k] for k in own] == [base["graded_kind" + side][k] for k in own]
+        for k, (kind, source) in enumerate(zip(kinds, by, strict=True)):
+            fired = set(rules["rules_fired" + side][k].split(","))
+            assert (source == "network") == bool(fired & roles), k
+            rule = RULE_OF_KIND[kind]
+            score, column = rules["compliance" + side][k], rules[f"score_rule{rule}"][k]
+            if RULE_OF_KIND[rules["graded_kind" + other][k]] == rule:
+                assert column == min(score, rules["compliance" + other][k])
+            else:
+                assert column == score
+    assert {"graded_kind_i", "graded_kind_j", "graded_by_i", "graded_by_j"} <= set(COLUMNS)
+
+
+def test_rogue_ships_are_graded_by_the_start_geometry(tmp_path):
+    """A rogue ship runs a rules file of its own (turn_port, late_action): its roles are not
+    the part the rules gave it, so it is graded under the start geometry; the ships that run
+    the rules, under their networks' roles."""
+    rows = run_chunk(_rows_spec(tmp_path, extra="rogue_fraction: 0.5"), 0, 8)
+    rogue = network = 0
+    for side in ("_i", "_j"):
+        for behaviour, by in zip(rows["behaviour" + side], rows["graded_by" + side],
+                                 strict=True):
+            if behaviour != "colregs":
+                assert by == "geometry"
+                rogue += 1
+            network += by == "network"
+    assert rogue > 0 and network > 0
 
 
 def test_compliant_needs_both_ships_on_the_rules():

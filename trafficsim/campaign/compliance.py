@@ -6,8 +6,9 @@ sample, the relative bearings ``alpha`` (of the own ship from the other's bow) a
 the other ship from the own bow), as colregs.md defines them; the own ship's largest course
 changes to starboard and port and its speed change so far; the range at its first manoeuvre (a
 course change over 5 degrees or a speed change over 0.2 m/s) if that came before the closest
-sample; whether it crossed the other ship's bow line ahead of her; and the manoeuvres and rule
-nodes its decision network produced towards her.
+sample; whether it crossed the other ship's bow line ahead of her; the manoeuvres and rule
+nodes its decision network produced towards her; and the role and encounter that network first
+gave her.
 
 :func:`grade` turns these into the Woerner-style scores of ``../shared/reference/colregs.md``
 section 2.4 (Woerner 2016; Woerner et al. 2019, Auton. Robots 43:967-991, as implemented in
@@ -37,18 +38,52 @@ applies to the own ship's part in the encounter:
   ``P_down = 0.5 dv / v0`` after a reduction, each over 0.2 m/s.
 
 Scores are clipped to [0, 1].
+
+The part each ship is graded for (:meth:`PairObserver.graded_kinds`): a ship that runs the rules
+(behaviour ``colregs``) is graded towards another under the role and encounter its decision network
+first gave that pair (:data:`KIND_OF_ROLE`): the duty that governed its manoeuvre, held until the
+pair was past and clear (Rule 13(d)), even where the start geometry reads otherwise (the network
+decides from courses and speeds over ground at its decision step, and may first engage a pair later
+in the run); a role the pair takes after it was cleared is not graded. The start geometry
+(:meth:`PairObserver.start_kinds`: the network's sectors, Rules 13-15, applied to the true headings,
+courses and speeds over ground at t = 0, so the kind the network gives a pair it engages at its
+first decision with perfect knowledge) grades the other directed pairs: those of ships that run no
+rules or break them (the keep-course ships of the ``no_avoidance`` baseline, rogue ships; so a
+baseline pair is graded under the kind the rules-following run's network first gives it whenever
+that network engages it at t = 0 without instruments), pairs the network never gave a role (among
+them every pair in restricted visibility, where Rule 19 gives none), and roles outside
+:data:`KIND_OF_ROLE` (a rules file of other roles).
+
+A mutual give-way crossing (``crossing_mutual``: each ship sees the other on the same bow, both
+to port or both to starboard; the network's ``mutual_crossing`` makes both ships
+``mutual_give_way`` and turns both to starboard) is graded as head-on, Rule 14, for both ships:
+Rule 14(c) has a ship in doubt whether a head-on situation exists assume that it does and act
+accordingly, and of the scores of colregs.md section 2.4 only S14 grades what that asks of each
+ship, the starboard alteration (``P_nsb``) and the port-to-port passing (``P_sts``); S15 penalises
+crossing ahead of a stand-on ship, which this encounter does not have, and S16 ignores the side.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from trafficsim.colregs.vocabulary import ENUMS, MANOEUVRES
-from trafficsim.engine import Simulation
+from trafficsim.campaign.generator import classify
+from trafficsim.colregs.features import COURSE_MIN_SPEED_MPS
+from trafficsim.colregs.vocabulary import (
+    ENUMS,
+    GIVE_WAY,
+    MANOEUVRES,
+    MEMORY,
+    MUTUAL_GIVE_WAY,
+    NO_ROLE,
+    STAND_ON,
+)
+from trafficsim.engine import Simulation, earth_velocity
 from trafficsim.jit import kernel
 from trafficsim.ships.base import EAST, NORTH, PSI, U
 
@@ -60,13 +95,27 @@ MANOEUVRE_SPEED_MPS = 0.2
 #: r_detect of the delay penalty: the stage-2 range of NTNU's AutoVerification (AIS version;
 #: 7000 m in the other), colregs.md sections 1 and 2.4
 DETECT_RANGE_M = 5000.0
-#: the rule graded for the own ship's part in each kind of pair
-RULE_OF_KIND = {"head_on": 14, "crossing_give_way": 15, "crossing_stand_on": 17,
-                "overtaking": 13, "overtaken": 17}
-MIRROR = {"head_on": "head_on", "crossing_give_way": "crossing_stand_on",
-          "crossing_stand_on": "crossing_give_way", "overtaking": "overtaken",
-          "overtaken": "overtaking"}
+#: the rule graded for the own ship's part in each kind of pair (a mutual give-way crossing
+#: as head-on, Rule 14(c): module docstring)
+RULE_OF_KIND = {"head_on": 14, "crossing_mutual": 14, "crossing_give_way": 15,
+                "crossing_stand_on": 17, "overtaking": 13, "overtaken": 17}
+MIRROR = {"head_on": "head_on", "crossing_mutual": "crossing_mutual",
+          "crossing_give_way": "crossing_stand_on", "crossing_stand_on": "crossing_give_way",
+          "overtaking": "overtaken", "overtaken": "overtaking"}
+#: the kind graded for the role and encounter a decision network gave a directed pair (the
+#: role nodes of rules/colregs.yaml: give_way_crossing, stand_on_crossing, mutual_crossing,
+#: head_on_role, give_way_overtaking, stand_on_overtaken)
+KIND_OF_ROLE: dict[tuple[float, float], str] = {
+    (GIVE_WAY, ENUMS["crossing"]): "crossing_give_way",
+    (STAND_ON, ENUMS["crossing"]): "crossing_stand_on",
+    (MUTUAL_GIVE_WAY, ENUMS["crossing"]): "crossing_mutual",
+    (MUTUAL_GIVE_WAY, ENUMS["head_on"]): "head_on",
+    (GIVE_WAY, ENUMS["overtaking"]): "overtaking",
+    (STAND_ON, ENUMS["overtaken"]): "overtaken",
+}
+RULES_BEHAVIOUR = "colregs"  # the behaviour of a ship that runs the rules
 RULES = (13, 14, 15, 16, 17)
+_ROLE_ROW, _ENCOUNTER_ROW = MEMORY.index("own_role"), MEMORY.index("encounter")
 
 
 def _wrap_pi(a: np.ndarray) -> np.ndarray:
@@ -103,6 +152,10 @@ class PairObserver:
     fired: np.ndarray  # (2P, max nodes) rule nodes visited
     node_names: list[list[str]]  # per network
     net_of_pair: np.ndarray  # (2P,) network of the own ship, -1 none
+    v0: np.ndarray  # (2, n) true velocity over ground north, east at the start, m/s
+    runs_rules: np.ndarray  # (2P,) bool: the own ship runs the rules (behaviour colregs)
+    first_role: np.ndarray  # (2P,) the role the own ship's network first gave (NaN: none yet)
+    first_encounter: np.ndarray  # the encounter it gave with it (vocabulary constants)
 
     @classmethod
     def start(cls, sim: Simulation) -> PairObserver:
@@ -120,12 +173,14 @@ class PairObserver:
         if d is not None:
             assert np.array_equal(d.obs, own)  # the decider's directed pairs, in this order
             net = d.ship_net[own]
+        behaviours = np.asarray(b.behaviours, dtype=object)
         obs = cls(own, tgt, x.copy(), rng0, np.full(m, np.inf), z.copy(), z.copy(), z.copy(),
                   z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), z.copy(),
                   np.full(m, np.nan), np.full(m, np.nan), np.zeros(m), np.zeros(m),
                   np.zeros(m, dtype=bool),
                   np.zeros((m, len(MANOEUVRES)), dtype=bool), np.zeros((m, width), dtype=bool),
-                  names, net)
+                  names, net, earth_velocity(x, b.env), behaviours[own] == RULES_BEHAVIOUR,
+                  np.full(m, np.nan), np.full(m, np.nan))
         dn = x[NORTH, own] - x[NORTH, tgt]
         de = x[EAST, own] - x[EAST, tgt]
         c, s = np.cos(x[PSI, tgt]), np.sin(x[PSI, tgt])
@@ -147,6 +202,10 @@ class PairObserver:
         d = sim.decider
         if d is None or not d.last_decision:
             return
+        role = d.memory[_ROLE_ROW]  # (the pair memory after the decision just taken)
+        new = np.isnan(self.first_role) & (role != NO_ROLE)
+        self.first_role[new] = role[new]
+        self.first_encounter[new] = d.memory[_ENCOUNTER_ROW, new]
         for k, dec in enumerate(d.last_decision):
             if dec is None:
                 continue
@@ -179,12 +238,45 @@ class PairObserver:
             out["crossed_ahead" + suffix] = self.crossed_ahead[part]
         return out
 
-    def scores(self, pair_kind: list[str]) -> dict[str, np.ndarray]:
-        """Compliance per undirected pair: the score of each ship (``compliance_i``, ``_j``,
-        by the rule of its part) and one column per rule (``score_rule13`` ... ``17``: the
-        ship the rule binds; head-on, where Rules 14 and 16 bind both: the lower of the two)."""
+    def start_kinds(self) -> list[str]:
+        """The kind of every directed pair by its start geometry: the sectors of Rules 13-15
+        as ``rules/colregs.yaml`` reads them (:func:`~.generator.classify` with the mutual
+        give-way crossing), on the true state at t = 0 as the network sees it without
+        instruments: bearings from the own bow, courses and speeds over ground (a course of a
+        ship slower than 0.1 m/s: the own heading, or the own course for the other ship, as
+        :mod:`trafficsim.colregs.features` takes them)."""
+        x, v = self.x0, self.v0
+        sog = np.hypot(v[0], v[1])
+        cog = np.where(sog < COURSE_MIN_SPEED_MPS, x[PSI], np.arctan2(v[1], v[0]))
+        return [classify(x[PSI, o], cog[t] if sog[t] >= COURSE_MIN_SPEED_MPS else cog[o],
+                         x[NORTH, t] - x[NORTH, o], x[EAST, t] - x[EAST, o], sog[o], sog[t],
+                         own_course=cog[o], mutual=True)
+                for o, t in zip(self.own.tolist(), self.tgt.tolist(), strict=True)]
+
+    def graded_kinds(self) -> tuple[list[str], list[str]]:
+        """The kind each directed pair is graded under and where it comes from: ``"network"``,
+        the role and encounter the own ship's decision network first gave the pair
+        (:data:`KIND_OF_ROLE`), where the own ship runs the rules and its network gave the
+        pair such a role; ``"geometry"``, :meth:`start_kinds`, otherwise (module
+        docstring)."""
+        start = self.start_kinds()
+        kinds, source = [], []
+        for k, (role, enc) in enumerate(zip(self.first_role.tolist(),
+                                            self.first_encounter.tolist(), strict=True)):
+            kind = KIND_OF_ROLE.get((role, enc)) if self.runs_rules[k] else None
+            kinds.append(start[k] if kind is None else kind)
+            source.append("geometry" if kind is None else "network")
+        return kinds, source
+
+    def scores(self, kinds: Sequence[str]) -> dict[str, np.ndarray]:
+        """Compliance per undirected pair from the kind of every directed pair (``kinds``,
+        ``(2P,)``, e.g. :meth:`graded_kinds`): the score of each ship (``compliance_i``,
+        ``_j``, by the rule of its part) and one column per rule (``score_rule13`` ... ``17``:
+        the ship the rule binds; where it binds both, as Rules 14 and 16 head-on and in a mutual
+        give-way crossing: the lower of the two)."""
         half = self.own.shape[0] // 2
-        kinds = list(pair_kind) + [MIRROR.get(k, k) for k in pair_kind]
+        if len(kinds) != self.own.shape[0]:
+            raise ValueError(f"{len(kinds)} kinds for {self.own.shape[0]} directed pairs")
         graded = grade(self)
         out: dict[str, np.ndarray] = {}
         rule = np.array([RULE_OF_KIND.get(k, 0) for k in kinds])
@@ -195,7 +287,8 @@ class PairObserver:
         for r in RULES:
             mine = np.where((rule == r) | ((r == 16) & np.isin(rule, (13, 15, 14))),
                             graded[r], np.nan)
-            # the ship the rule binds; where it binds both (head-on: Rules 14 and 16), the lower
+            # the ship the rule binds; where it binds both (head-on and mutual crossings:
+            # Rules 14 and 16; both ships given the same role), the lower
             out[f"score_rule{r}"] = np.fmin(mine[:half], mine[half:])
         return out
 

@@ -82,22 +82,34 @@ def _abaft(bearing: float) -> bool:
 
 
 def classify(own_psi: float, other_psi: float, rel_n: float, rel_e: float, own_speed: float,
-             other_speed: float) -> str:
+             other_speed: float, *, own_course: float | None = None,
+             mutual: bool = False) -> str:
     """Encounter type of the other ship at relative position ``(rel_n, rel_e)`` m, by the
     sectors of Rules 13-15 and the speeds (m/s) as ``rules/colregs.yaml`` reads them (both
-    ships closing is assumed)."""
+    ships closing is assumed).
+
+    ``own_psi`` is the own bow (bearings are taken from it) and ``other_psi`` the other ship's
+    course (her aspect is taken from it); ``own_course`` (default ``own_psi``) is the own course
+    of the reciprocal-course test. With ``mutual``, a crossing in which each ship sees the other
+    on the same side (both to port or both to starboard) is ``"crossing_mutual"``, the
+    network's ``mutual_crossing`` (Rule 14(c): in doubt, both keep out of the way); without it
+    (the draws), such a crossing is give-way or stand-on by the own ship's side alone."""
     bearing = math.atan2(rel_e, rel_n) - own_psi  # of the other ship, from the own bow
     aspect = math.atan2(-rel_e, -rel_n) - other_psi  # of the own ship, from the other's bow
     if _abaft(aspect) and own_speed > other_speed:
         return "overtaking"
     if _abaft(bearing) and other_speed > own_speed:
         return "overtaken"
-    reciprocal = abs(_wrap(other_psi - own_psi) - math.pi) <= math.radians(RECIPROCAL_DEG)
+    own = own_psi if own_course is None else own_course
+    reciprocal = abs(_wrap(other_psi - own) - math.pi) <= math.radians(RECIPROCAL_DEG)
     sector = math.radians(HEAD_ON_BEARING_DEG)
     if (reciprocal and abs(_wrap(bearing + math.pi) - math.pi) <= sector
             and abs(_wrap(aspect + math.pi) - math.pi) <= sector):
         return "head_on"
-    return "crossing_give_way" if _wrap(bearing) < math.pi else "crossing_stand_on"
+    starboard = _wrap(bearing) < math.pi
+    if mutual and starboard == (_wrap(aspect) < math.pi):
+        return "crossing_mutual"
+    return "crossing_give_way" if starboard else "crossing_stand_on"
 
 
 def _course_offset(kind: str, rng: np.random.Generator) -> float:

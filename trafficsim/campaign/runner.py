@@ -38,6 +38,8 @@ COLUMNS: dict[str, str] = {
     **{f"{name}{side}": kind for side in ("_i", "_j") for name, kind in (
         ("manoeuvres", "string"), ("rules_fired", "string"), ("course_change_stbd_deg", "double"),
         ("course_change_port_deg", "double"), ("crossed_ahead", "bool"))},
+    "graded_kind_i": "string", "graded_kind_j": "string",
+    "graded_by_i": "string", "graded_by_j": "string",
     "compliance_i": "double", "compliance_j": "double",
     **{f"score_rule{r}": "double" for r in RULES},
 }
@@ -114,7 +116,9 @@ def _rows(spec: CampaignSpec, encounters: list, sim: Simulation, observer: PairO
         for spot in sim.decider.blind_spots:
             p = index[(min(spot.ship, spot.other), max(spot.ship, spot.other))]
             blind[p] = blind[p] or spot.role
-    scores = observer.scores(pair_kind)
+    graded_kind, graded_by = observer.graded_kinds()
+    scores = observer.scores(graded_kind)
+    half = pi.shape[0]
     names = np.array(b.names, dtype=object)
     behaviours = np.array(b.behaviours, dtype=object)
     types = np.array(b.types, dtype=object)
@@ -141,6 +145,8 @@ def _rows(spec: CampaignSpec, encounters: list, sim: Simulation, observer: PairO
         "diverged_at_s": sim.diverged_at_s[enc_of_pair],
         "diverged": np.isfinite(sim.diverged_at_s[enc_of_pair]),
         **observer.columns(),
+        "graded_kind_i": graded_kind[:half], "graded_kind_j": graded_kind[half:],
+        "graded_by_i": graded_by[:half], "graded_by_j": graded_by[half:],
         **scores,
     }
     rows["_ship_steps"] = b.n_ships * steps
