@@ -470,14 +470,17 @@ def _path_closest_m(own: Ship, other: Ship, course_deg: float, horizon_s: float 
 
 
 def test_overtaking_ship_holds_off_the_line_then_crosses_ahead_rule_13d():
-    """After "past and clear" the overtaking ship is 3600 m to starboard of her line and still
-    1000 m astern of ship 1, heading 030: 2.02 NM off, range opening. Her route course steers
-    straight back onto the line (000 - atan(3600 / 600) = 279.5 deg) and would meet it 2550 m
-    astern of ship 1, then close on her along it: she is not released, but turns back towards
-    it only as far as her path keeps ship 1 at 1 NM x 1.1 (a course 5 deg further does not).
-    4500 m ahead of ship 1 the route meets the line (in 3600 / (V sin 80.54) = 591 s, 600 m
-    further north) 4500 + 600 - 4.32 x 591 = 2545 m ahead of her and opens: released.
-    The next step, on her route course, the risk test does not take her back (no hunting)."""
+    """The overtaking ship has sheered off to 3600 m starboard of her line and is still
+    1000 m astern of ship 1, heading 030: 2.02 NM off, range opening, 15.5 deg abaft ship 1's
+    beam: not past, so she resumes her route but stays the give-way overtaking ship (Rule
+    13(d)). Her route course steers straight back onto the line (000 - atan(3600 / 600) =
+    279.5 deg) and would meet it 2550 m astern of ship 1, then close on her along it: she is
+    not released, but turns back towards it only as far as her path keeps ship 1 at 1 NM x 1.1
+    (a course 5 deg further does not). 4500 m ahead of ship 1 she is finally past and clear
+    (ship 1 abaft her beam, she 38.7 deg off ship 1's bow), and the route meets the line (in
+    3600 / (V sin 80.54) = 591 s, 600 m further north) 4500 + 600 - 4.32 x 591 = 2545 m ahead
+    of her and opens: released. The next step, on her route course, the risk test does not
+    take her back (no hunting)."""
     dec, v1 = _overtaken_ship_ahead()
     los = math.degrees(-math.atan(3600.0 / 600.0))
     assert los == pytest.approx(-80.54, abs=0.01)
@@ -487,7 +490,11 @@ def test_overtaking_ship_holds_off_the_line_then_crosses_ahead_rule_13d():
     own: Ship = (n1 - 1000.0, 3600.0, 30.0, V)
     assert _path_closest_m(own, one, los) < need  # the route: astern of her, then onto her
     decide(dec, 600.0, [own, one], route_deg=[los, 0.0])
-    assert mem(dec, "own_role")[0] == NO_ROLE
+    assert feature(dec, "range_nm")[0] == pytest.approx(math.hypot(1000.0, 3600.0) / NM)
+    assert feature(dec, "aspect_abs_deg")[0] == pytest.approx(
+        math.degrees(math.atan2(3600.0, -1000.0)))
+    assert mem(dec, "own_role")[0] == GIVE_WAY
+    assert mem(dec, "encounter")[0] == ENC["overtaking"]
     assert mem(dec, "own_manoeuvre")[0] == RESUME_ROUTE
     assert dec.candidate[0] >= 0  # resuming, not released
     course = float(wrap_deg(dec.course_order_rad[0]))
@@ -500,6 +507,10 @@ def test_overtaking_ship_holds_off_the_line_then_crosses_ahead_rule_13d():
     assert 4500.0 + 600.0 - v1 * t1 == pytest.approx(2545.0, abs=1.0)
     assert _path_closest_m(own, one, los) == pytest.approx(2545.0, abs=1.0)
     decide(dec, 610.0, [own, one], route_deg=[los, 0.0])
+    assert feature(dec, "bearing_abs_deg")[0] > 112.5
+    assert feature(dec, "aspect_abs_deg")[0] == pytest.approx(
+        math.degrees(math.atan2(3600.0, 4500.0)))
+    assert mem(dec, "own_role")[0] == NO_ROLE  # past and clear
     assert dec.candidate[0] == -1 and np.isnan(dec.course_order_rad[0])  # released
     assert dec.speed_factor[0] == 1.0
     c = math.radians(los)

@@ -1121,6 +1121,12 @@ def test_around_the_clock_encounters_by_the_rules_sectors() -> None:
 
 _GW = {"bearing_deg": 45.0, "aspect_deg": -45.0, "course_diff_deg": 90.0, "tcpa_min": 20.0,
        "dcpa_nm": 0.0}
+_OVERTAKING, _OVERTAKEN = 13.0, 14.0  # the encounter constants (docs/rules.md)
+#: an overtaking ship after her alteration: range opening at 1.5 NM
+_OT = {"encounter": _OVERTAKING, "tcpa_min": -0.5, "range_nm": 1.5, "bearing_deg": -150.0,
+       "aspect_deg": 30.0, "dcpa_nm": 1.2}
+_CLEAR = {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
+          "manoeuvre": "resume_route"}
 
 
 @pytest.mark.parametrize(("start", "row", "path", "actions", "cursor"), [
@@ -1134,34 +1140,78 @@ _GW = {"bearing_deg": 45.0, "aspect_deg": -45.0, "course_diff_deg": 90.0, "tcpa_
      "keep_clear"),
     # the risk is gone (dcpa exactly 1 is not < 1): clear, forget the encounter
     ("give_way_still", {**_GW, "dcpa_nm": 1.0},
-     ["give_way_still", "clear"],
-     {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
-      "manoeuvre": "resume_route"}, "assess"),
+     ["give_way_still", "risk_gone", "clear"], _CLEAR, "assess"),
+    # ... but an overtaking ship stays the give-way ship until past and clear (Rule 13(d))
+    ("give_way_still", {**_GW, "dcpa_nm": 1.0, "encounter": _OVERTAKING},
+     ["give_way_still", "risk_gone", "overtaking_watch", "overtaking_risk"], {},
+     "overtaking_watch"),
     # keep_clear: past CPA but range exactly clear_nm: not yet clear; no emergency
     ("keep_clear", {"tcpa_min": -0.5, "range_nm": 1.0, "bearing_deg": 150.0},
-     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+     ["keep_clear", "past_and_clear", "emergency_check"], {}, "keep_clear"),
     # range 1.5 > 1 but the other exactly 112.5 deg off the bow and within 2 NM: not clear
     ("keep_clear", {"tcpa_min": -0.5, "range_nm": 1.5, "bearing_deg": -112.5},
-     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+     ["keep_clear", "past_and_clear", "emergency_check"], {}, "keep_clear"),
     # ... more than 22.5 deg abaft the beam: past and clear
     ("keep_clear", {"tcpa_min": -0.5, "range_nm": 1.5, "bearing_deg": -112.5 - _EPS},
-     ["keep_clear", "clear"],
-     {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
-      "manoeuvre": "resume_route"}, "assess"),
+     ["keep_clear", "past_and_clear", "clear"], _CLEAR, "assess"),
     # ... or beyond far_clear_nm (2 NM) whatever the bearing; exactly 2 is not beyond
     ("keep_clear", {"tcpa_min": -0.5, "range_nm": 2.0, "bearing_deg": 10.0},
-     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+     ["keep_clear", "past_and_clear", "emergency_check"], {}, "keep_clear"),
     ("keep_clear", {"tcpa_min": -0.5, "range_nm": 2.0 + _EPS, "bearing_deg": 10.0},
-     ["keep_clear", "clear"],
-     {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
-      "manoeuvre": "resume_route"}, "assess"),
+     ["keep_clear", "past_and_clear", "clear"], _CLEAR, "assess"),
     # Rule 17(b): domain entry exactly emergency_min (2) ahead, CPA not past: emergency
     ("keep_clear", {"tcpa_min": 0.0, "range_nm": 0.4, "time_to_domain_min": 2.0},
-     ["keep_clear", "emergency_check", "emergency"],
+     ["keep_clear", "past_and_clear", "emergency_check", "emergency"],
      {"manoeuvre": "emergency", "course_change_deg": 60.0, "speed_factor": 0.5,
       "pass_distance_nm": 1.0}, "keep_clear"),
     ("keep_clear", {"tcpa_min": -_EPS, "range_nm": 0.4, "time_to_domain_min": 2.0},
-     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+     ["keep_clear", "past_and_clear", "emergency_check"], {}, "keep_clear"),
+    # Rule 13(d), the overtaking ship: finally past and clear once the range opens beyond
+    # clear_nm with the overtaken ship more than 22.5 deg abaft her beam and herself more than
+    # 22.5 deg forward of the overtaken ship's beam; each limit itself is not beyond it
+    ("keep_clear", {**_OT, "bearing_deg": -112.5 - _EPS, "aspect_deg": 67.5 - _EPS},
+     ["keep_clear", "overtaking_keep_clear", "clear"], _CLEAR, "assess"),
+    *[("keep_clear", {**_OT, **row}, ["keep_clear", "overtaking_keep_clear",
+                                      "overtaking_apart", "emergency_check"], {}, "keep_clear")
+      for row in ({"bearing_deg": -112.5}, {"aspect_deg": 67.5}, {"range_nm": 1.0},
+                  {"tcpa_min": 0.0})],
+    # ... abeam at 1.9 NM, the overtaken ship abaft her beam only because she altered course
+    # (30 deg off the overtaken ship's course): not past
+    ("keep_clear", {**_OT, "range_nm": 1.9, "bearing_deg": -120.0, "aspect_deg": 97.5},
+     ["keep_clear", "overtaking_keep_clear", "overtaking_apart", "emergency_check"], {},
+     "keep_clear"),
+    # ... beyond far_clear_nm abeam (the old release): back to the route, still give-way
+    ("keep_clear", {**_OT, "range_nm": 2.0 + _EPS, "bearing_deg": -90.0, "aspect_deg": 105.0},
+     ["keep_clear", "overtaking_keep_clear", "overtaking_apart", "overtaking_resume"],
+     {"manoeuvre": "resume_route"}, "overtaking_watch"),
+    ("keep_clear", {**_OT, "range_nm": 2.0, "bearing_deg": -90.0, "aspect_deg": 105.0},
+     ["keep_clear", "overtaking_keep_clear", "overtaking_apart", "emergency_check"], {},
+     "keep_clear"),
+    # the overtaken ship after acting (Rule 17): the same geometry seen from her
+    ("keep_clear", {**_OT, "encounter": _OVERTAKEN, "bearing_deg": 67.5 - _EPS,
+                    "aspect_deg": -112.5 - _EPS},
+     ["keep_clear", "overtaking_keep_clear", "clear"], _CLEAR, "assess"),
+    ("keep_clear", {**_OT, "encounter": _OVERTAKEN, "range_nm": 2.0 + _EPS,
+                    "bearing_deg": 75.0, "aspect_deg": -105.0},
+     ["keep_clear", "overtaking_keep_clear", "overtaking_apart", "overtaking_resume"],
+     {"manoeuvre": "resume_route"}, "overtaken_watch"),
+    # overtaking_watch (resuming, still give-way): a new risk of collision with the pair
+    # abeam, which a fresh look would call a crossing (aspect 100 < 112.5): overtaking again
+    ("overtaking_watch", {"encounter": _OVERTAKING, "tcpa_min": 3.0, "range_nm": 0.5,
+                          "dcpa_nm": 0.3, "bearing_deg": -60.0, "aspect_deg": 100.0,
+                          "speed_ratio": 0.6},
+     ["overtaking_watch", "overtaking_risk", "give_way_overtaking", "give_way_wait",
+      "give_way_act"],
+     {"role": "give_way", "encounter": "overtaking", "other_role": "stand_on",
+      "direction": "either", "manoeuvre": "alter_course", "course_change_deg": 30.0,
+      "pass_distance_nm": 1.0}, "keep_clear"),
+    ("overtaking_watch", {"encounter": _OVERTAKING, "tcpa_min": -1.0, "range_nm": 3.0,
+                          "dcpa_nm": 1.5, "bearing_deg": -80.0, "aspect_deg": 100.0},
+     ["overtaking_watch", "overtaking_risk"], {}, "overtaking_watch"),
+    ("overtaking_watch", {"encounter": _OVERTAKING, "tcpa_min": -1.0, "range_nm": 1.0 + _EPS,
+                          "dcpa_nm": 1.5, "bearing_deg": 112.5 + _EPS,
+                          "aspect_deg": -67.5 + _EPS},
+     ["overtaking_watch", "clear"], _CLEAR, "assess"),
     # Rule 17(a)(ii): domain entry within 10 min, other turned < 10 deg, kept > 0.8 speed
     ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0,
                         "other_course_change_deg": 10.0 - _EPS,
@@ -1177,25 +1227,34 @@ _GW = {"bearing_deg": 45.0, "aspect_deg": -45.0, "course_diff_deg": 90.0, "tcpa_
      ["stand_on_watch", "stand_on_check"], {}, "stand_on_watch"),
     ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0 + _EPS},
      ["stand_on_watch", "stand_on_check"], {}, "stand_on_watch"),
-    # overtaken: released only beyond far_clear_nm (Rule 13(d)), whatever the bearing
-    ("overtaken_watch", {"tcpa_min": -1.0, "range_nm": 2.0, "bearing_deg": 170.0},
-     ["overtaken_watch", "overtaken_check"], {}, "overtaken_watch"),
-    ("overtaken_watch", {"tcpa_min": -1.0, "range_nm": 2.0 + _EPS, "bearing_deg": 0.0},
-     ["overtaken_watch", "clear"],
-     {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
-      "manoeuvre": "resume_route"}, "assess"),
+    # overtaken: released once the overtaking ship is finally past and clear (Rule 13(d)):
+    # the overtaken ship more than 22.5 deg abaft her beam, she more than 22.5 deg forward of
+    # the overtaken ship's beam, range opening beyond clear_nm; not far off while abeam or astern
+    ("overtaken_watch", {"tcpa_min": -1.0, "range_nm": 1.0 + _EPS, "bearing_deg": -67.5 + _EPS,
+                         "aspect_deg": 112.5 + _EPS},
+     ["overtaken_watch", "clear"], _CLEAR, "assess"),
+    *[("overtaken_watch", {"tcpa_min": -1.0, "range_nm": 1.5, "bearing_deg": -45.0,
+                           "aspect_deg": 135.0, **row},
+       ["overtaken_watch", "overtaken_check"], {}, "overtaken_watch")
+      for row in ({"bearing_deg": -67.5}, {"aspect_deg": 112.5}, {"range_nm": 1.0},
+                  {"tcpa_min": 0.0}, {"range_nm": 5.0, "bearing_deg": 80.0, "aspect_deg": -100.0},
+                  {"range_nm": 5.0, "bearing_deg": 120.0, "aspect_deg": -60.0})],
     # no track (NaN geometry): every comparison false; the keep_clear ship keeps clear
     ("keep_clear", {k: NAN for k in ("tcpa_min", "range_nm", "bearing_deg",
                                      "time_to_domain_min")},
-     ["keep_clear", "emergency_check"], {}, "keep_clear"),
+     ["keep_clear", "past_and_clear", "emergency_check"], {}, "keep_clear"),
+    ("keep_clear", {**{k: NAN for k in ("tcpa_min", "range_nm", "bearing_deg", "aspect_deg",
+                                        "time_to_domain_min")}, "encounter": _OVERTAKING},
+     ["keep_clear", "overtaking_keep_clear", "overtaking_apart", "emergency_check"], {},
+     "keep_clear"),
 ])
 def test_bundled_later_steps_at_their_thresholds(start: str, row: dict, path: list[str],
                                                  actions: dict, cursor: str) -> None:
     """Steps after the role is set, from the node the previous step left the pair at, at
     and beside each documented threshold (action_time_min 15, cpa_limit_nm 1, clear_nm 1,
-    far_clear_nm 2, abaft_beam_deg 112.5, emergency_min 2, stand_on_act_min 10,
-    not_acting_deg 10, not_slowing_ratio 0.8): path, merged actions (only those set in this
-    step) and the next cursor, worked out from docs/rules.md."""
+    far_clear_nm 2, abaft_beam_deg 112.5, ahead_of_beam_deg 67.5, emergency_min 2,
+    stand_on_act_min 10, not_acting_deg 10, not_slowing_ratio 0.8): path, merged actions (only
+    those set in this step) and the next cursor, worked out from docs/rules.md."""
     ((got_path, got_actions, got_cursor),) = _step(_colregs_net(), [row], start)
     assert (got_path, got_actions, got_cursor) == (path, actions, cursor)
 
@@ -1298,6 +1357,7 @@ def test_bundled_kernel_matches_a_plain_reading_of_the_yaml_from_every_node() ->
     m = 40 * len(names)
     x_all = rng.choice(pool, size=(len(VOCABULARY.features), m))
     x_all[VOCABULARY.features.index("own_role")] = rng.choice([0.0, 1.0, 2.0, 3.0], m)
+    x_all[VOCABULARY.features.index("encounter")] = rng.choice(np.arange(10.0, 16.0), m)
     cursor = np.repeat(np.arange(len(names)), 40)
     net = _colregs_net()
     assert list(net.node_names) == names

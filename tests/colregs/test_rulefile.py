@@ -807,8 +807,9 @@ def test_override_breaking_the_bundled_look_ahead_names_every_use(tmp_path: Path
     with pytest.raises(ScenarioError) as info:
         parse_file(child, VOCABULARY)
     uses = _line_of(parent, "[tcpa_min, between, [0, look_ahead_min]]")
-    assert len(uses) == 2
-    keys = ["nodes.risk.test.all[1][2]", "nodes.rv_risk.test.all[1][2]"]
+    assert len(uses) == 3
+    keys = ["nodes.risk.test.all[1][2]", "nodes.overtaking_risk.test.all[1][2]",
+            "nodes.rv_risk.test.all[1][2]"]
     assert [str(e) for e in info.value.errors] == [
         f"{child}:5: parameters.look_ahead_min: between needs lo <= hi, got "
         f"[0, look_ahead_min] = [0, -3]; the value of 'look_ahead_min' set here is used at "
