@@ -200,6 +200,8 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
         top = -math.inf
         if stuck:  # nothing safe on the requested side: its largest worst-case margin
             for k in range(n_cand):
+                if _wrong_side(side[i], off_deg[k]):  # never eligible: no margin needed
+                    continue
                 worst[k] = math.inf
                 vn, ve = _own_velocity(cb, sb, speed[i], factor[i], reduced[k], cos_off[k],
                                        sin_off[k])
@@ -208,8 +210,7 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
                                        horizon_s) - required[p]
                     if margin < worst[k]:
                         worst[k] = margin
-                if not _wrong_side(side[i], off_deg[k]):
-                    top = max(top, worst[k])
+                top = max(top, worst[k])
         best_k, best_c = 0, math.inf  # the cheapest eligible candidate
         for k in range(n_cand):
             if _wrong_side(side[i], off_deg[k]):
