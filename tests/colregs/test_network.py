@@ -1121,7 +1121,8 @@ def test_around_the_clock_encounters_by_the_rules_sectors() -> None:
 
 _GW = {"bearing_deg": 45.0, "aspect_deg": -45.0, "course_diff_deg": 90.0, "tcpa_min": 20.0,
        "dcpa_nm": 0.0}
-_OVERTAKING, _OVERTAKEN = 13.0, 14.0  # the encounter constants (docs/rules.md)
+_HEAD_ON, _OVERTAKING, _OVERTAKEN = 11.0, 13.0, 14.0  # the encounter constants (docs/rules.md)
+_MUTUAL = 3.0  # the mutual_give_way role
 #: an overtaking ship after her alteration: range opening at 1.5 NM
 _OT = {"encounter": _OVERTAKING, "tcpa_min": -0.5, "range_nm": 1.5, "bearing_deg": -150.0,
        "aspect_deg": 30.0, "dcpa_nm": 1.2}
@@ -1140,7 +1141,16 @@ _CLEAR = {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role
      "keep_clear"),
     # the risk is gone (dcpa exactly 1 is not < 1): clear, forget the encounter
     ("give_way_still", {**_GW, "dcpa_nm": 1.0},
-     ["give_way_still", "risk_gone", "clear"], _CLEAR, "assess"),
+     ["give_way_still", "risk_gone", "mutual_still", "clear"], _CLEAR, "assess"),
+    # ... but in a head-on or mutual crossing (Rule 14) the own ship still alters in her turn
+    # while the CPA is ahead and under far_clear_nm (2), whatever the other ship did
+    ("give_way_still", {**_GW, "dcpa_nm": 2.0 - _EPS, "own_role": _MUTUAL,
+                        "encounter": _HEAD_ON},
+     ["give_way_still", "risk_gone", "mutual_still"], {}, "give_way_wait"),
+    *[("give_way_still", {**_GW, "dcpa_nm": 1.5, "own_role": _MUTUAL, "encounter": _HEAD_ON,
+                          **row},
+       ["give_way_still", "risk_gone", "mutual_still", "clear"], _CLEAR, "assess")
+      for row in ({"dcpa_nm": 2.0}, {"tcpa_min": -_EPS})],
     # ... but an overtaking ship stays the give-way ship until past and clear (Rule 13(d))
     ("give_way_still", {**_GW, "dcpa_nm": 1.0, "encounter": _OVERTAKING},
      ["give_way_still", "risk_gone", "overtaking_watch", "overtaking_risk"], {},
