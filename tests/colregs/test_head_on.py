@@ -7,6 +7,13 @@ one to port and one to starboard, so the Coldwell domain's starboard offset make
 her action time first. Her 30 deg alteration alone opens the CPA beyond ``cpa_limit_nm`` before
 the other's action time; the other must still alter to starboard in her turn (``mutual_still``)
 rather than be released and pass on her course (shared/reference/colregs.md, section 2.1).
+
+On exactly reciprocal courses along one route line both ships alter 30 deg at 6.5 NM and are
+released abeam of each other at 3 NM (``past_and_clear`` beyond ``far_clear_nm``). Both resume
+at once, each back towards the one line: each must check her way back against the other doing
+the same (``Decider._resume``'s mirror hypothesis) and come no nearer to her; steering back
+with the other ship's velocity held, both turned in steeply, met again as a mutual crossing
+(CPA 0.93 NM) and altered a second time (Rule 8(d): no new close-quarters situation).
 """
 
 from __future__ import annotations
@@ -95,3 +102,24 @@ def test_each_ship_alters_to_starboard(course: int, out_root: str) -> None:
     assert summary["blind_spots"] == []
     pair = summary["pairs"][0]
     assert not pair["collision"] and pair["min_range_m"] > 1.5 * NM
+
+
+def test_ships_released_abeam_go_back_to_their_line_without_meeting_again(out_root: str
+                                                                         ) -> None:
+    summary, dec = _run(180, out_root)
+    pair = summary["pairs"][0]
+    for ship in ("A", "B"):
+        rows = np.flatnonzero(dec["ship"] == ship)
+        engaged = dec["decided_own_role"][rows] != "no_role"
+        starts = np.flatnonzero(engaged[1:] & ~engaged[:-1]) + 1
+        assert engaged[0] and starts.size == 0, ship  # one engagement, from the start
+        released = dec["t_s"][rows][np.flatnonzero(~engaged)[0]]
+        # released abeam beyond far_clear_nm, the range still that of the passage
+        k = rows[np.flatnonzero(~engaged)[0]]
+        assert 80.0 < dec["bearing_abs_deg"][k] < 112.5 and dec["range_nm"][k] > 2.0
+        # the closest approach is the passage itself: the ways back close nothing
+        assert pair["t_min_range_s"] <= released
+        # ... and both ships are back on the route by the end (resuming, then released)
+        assert dec["decided_own_manoeuvre"][rows][-1] in ("resume_route", "no_action")
+        assert np.isnan(dec["course_order_deg"][rows[-1]])
+    assert pair["min_range_m"] > 1.5 * NM

@@ -47,6 +47,7 @@ from trafficsim.colregs.vocabulary import (
     FEATURES,
     GIVE_WAY,
     MEMORY,
+    MUTUAL_GIVE_WAY,
     NO_ACTION,
     NO_ROLE,
     PORT,
@@ -72,6 +73,10 @@ DEFAULT_LOST_TRACK_MIN = 3.0  # used when the rules file has no ``lost_track_min
 #: resuming keeps every ship this fraction beyond the distance the manoeuvre kept, so that the
 #: risk test (a CPA closer than that distance) does not take a released ship back at once
 RESUME_MARGIN = 0.1
+#: for this long after a pair of mutual give-way ships (head-on, Rule 14) is released, a ship
+#: resuming her route checks her way back also against the other ship turning back as she
+#: does (by the same course change): both resume at once, each towards her own route line
+MIRROR_S = 600.0
 _RESUME_STEPS_RAD = np.radians(np.arange(0.0, 180.0 + 1e-9, 5.0))  # turns back to the route
 _AWAY = math.sin(math.radians(5.0))  # a course more than this off the line's leads away
 _LINE_TOL_RAD = math.radians(1.0)  # a route course off the line model by more: a new leg
@@ -165,6 +170,7 @@ class Decider:
     line_course_rad: np.ndarray
     cross_track_m: np.ndarray
     last_known_s: np.ndarray
+    mutual_released_s: np.ndarray
     lost_track_s: np.ndarray
     start_cursor: np.ndarray
     blind_spots: list[BlindSpot] = field(default_factory=list)
@@ -224,7 +230,7 @@ class Decider:
             kept_distance_m=np.zeros(n), line_north_m=np.full(n, np.nan),
             line_east_m=np.full(n, np.nan), line_course_rad=np.full(n, np.nan),
             cross_track_m=np.full(n, np.nan),
-            last_known_s=np.full(m, np.nan),
+            last_known_s=np.full(m, np.nan), mutual_released_s=np.full(m, np.nan),
             lost_track_s=lost[ship_net[obs]], start_cursor=cursor.copy())
 
     def decide(self, t_s: float, own_state: np.ndarray, own_vel: np.ndarray,
@@ -254,6 +260,7 @@ class Decider:
         self.last_features = feats
         self.last_decision = []
         pair_net = self.ship_net[o]
+        was_mutual = self._mem("own_role") == MUTUAL_GIVE_WAY
         for k, net in enumerate(self.networks):
             idx = np.flatnonzero(pair_net == k)
             if idx.size == 0:
@@ -265,8 +272,9 @@ class Decider:
             self.cursor[idx] = dec.cursor
             self._merge(idx, dec, t_s, other)
             self.last_decision.append(dec)
+        self.mutual_released_s[was_mutual & (self._mem("own_role") == NO_ROLE)] = t_s
         self._blind_spots(t_s)
-        self._orders(own_state, own_vel, other, route_course_rad, route_speed_mps)
+        self._orders(t_s, own_state, own_vel, other, route_course_rad, route_speed_mps)
         if self.record:
             depth = max((n.max_depth for n in self.networks), default=1)
             path = np.full((o.shape[0], depth), -1, dtype=np.int32)
@@ -344,8 +352,8 @@ class Decider:
                           self.line_north_m, self.line_east_m, self.line_course_rad,
                           self.cross_track_m)
 
-    def _resume(self, ships_mask: np.ndarray, own_state: np.ndarray, own_vel: np.ndarray,
-                other: np.ndarray, route_course_rad: np.ndarray,
+    def _resume(self, t_s: float, ships_mask: np.ndarray, own_state: np.ndarray,
+                own_vel: np.ndarray, other: np.ndarray, route_course_rad: np.ndarray,
                 route_speed_mps: np.ndarray) -> np.ndarray:
         """Turn the masked ships (no pair asks any more) back towards their route as far as is
         safe; return which are released to route guidance at route speed.
@@ -370,9 +378,12 @@ class Decider:
 
         So a ship does not steer back onto its line behind a slower ship on it: it holds a
         course parallel to the line, passes her, and crosses ahead of her once the range is
-        safe (Rule 13(d)). It never turns away from its route while resuming, and the margin
-        keeps a released ship out of the risk test of the same pair: it does not hunt between
-        avoiding and resuming.
+        safe (Rule 13(d)). Two mutual give-way ships (head-on) released at the same step both
+        resume at once, each back towards her own line: for :data:`MIRROR_S` after the
+        release a candidate must also keep the distance with the other ship turned by the
+        same course change as the candidate's (her return as seen from her). It never turns
+        away from its route while resuming, and the margin keeps a released ship out of the
+        risk test of the same pair: it does not hunt between avoiding and resuming.
         """
         o = self.obs
         n = ships_mask.shape[0]
@@ -391,10 +402,12 @@ class Decider:
         found, home, row, course = (np.zeros(s, dtype=bool), np.zeros(s, dtype=bool),
                                     np.zeros(s, dtype=np.int64), np.zeros(s))
         _resume_plan(c(ordered), c(route), c(chi), c(e), c(slow), c(route_speed_mps[r]),
-                     c(np.hypot(own_vel[0, r], own_vel[1, r])), c(ps),
+                     c(np.hypot(own_vel[0, r], own_vel[1, r])), c(own_vel[0, r]),
+                     c(own_vel[1, r]), c(ps),
                      c(other[0, pairs] - own_state[0, o[pairs]]),
                      c(other[1, pairs] - own_state[1, o[pairs]]), c(other[2, pairs]),
                      c(other[3, pairs]), c(self.kept_distance_m[o[pairs]]),
+                     c(t_s - self.mutual_released_s[pairs] <= MIRROR_S),
                      float(self.horizon_s), found, home, row, course)
         on_route = found & home
         factor = np.where(row < 2, 1.0, slow)
@@ -406,8 +419,9 @@ class Decider:
         self.speed_factor[r[found]] = factor[found]
         return released
 
-    def _orders(self, own_state: np.ndarray, own_vel: np.ndarray, other: np.ndarray,
-                route_course_rad: np.ndarray, route_speed_mps: np.ndarray) -> None:
+    def _orders(self, t_s: float, own_state: np.ndarray, own_vel: np.ndarray,
+                other: np.ndarray, route_course_rad: np.ndarray,
+                route_speed_mps: np.ndarray) -> None:
         """One manoeuvre per asking ship (arbitration); back to the route when none asks."""
         o = self.obs
         n = self.ship_net.shape[0]
@@ -425,7 +439,7 @@ class Decider:
         # kept (Rule 8(d): resuming must not make a new close-quarters situation)
         resuming = idle & (self.candidate >= 0)
         if resuming.any():
-            idle &= ~resuming | self._resume(resuming, own_state, own_vel, other,
+            idle &= ~resuming | self._resume(t_s, resuming, own_state, own_vel, other,
                                              route_course_rad, route_speed_mps)
         self.resuming = resuming & ~idle
         self.base_course_rad[idle] = np.nan
@@ -617,14 +631,17 @@ def _route_line_model(north: np.ndarray, east: np.ndarray, length_m: np.ndarray,
 @kernel
 def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.ndarray,
                  slow: np.ndarray, route_speed: np.ndarray, present: np.ndarray,
-                 pair_ship: np.ndarray, pn: np.ndarray, pe: np.ndarray, wn: np.ndarray,
-                 we: np.ndarray, kept: np.ndarray, horizon_s: float, found: np.ndarray,
-                 home: np.ndarray, chosen_row: np.ndarray, chosen_course: np.ndarray) -> None:
+                 own_vn: np.ndarray, own_ve: np.ndarray, pair_ship: np.ndarray,
+                 pn: np.ndarray, pe: np.ndarray, wn: np.ndarray,
+                 we: np.ndarray, kept: np.ndarray, mirror: np.ndarray, horizon_s: float,
+                 found: np.ndarray, home: np.ndarray, chosen_row: np.ndarray,
+                 chosen_course: np.ndarray) -> None:
     """The candidates of :meth:`Decider._resume` and the choice among them, per resuming ship.
 
     Per ship (``ordered`` present course order, ``route`` route course, ``chi`` the route
     line's course, ``e`` cross-track error, ``slow`` reduced-speed factor) and its pairs (as
-    :func:`_resume_margins`): rows (route speed, reduced speed) x (towards the line's course,
+    :func:`_resume_margins`; ``mirror``: also with the other ship turned by each candidate's
+    course change): rows (route speed, reduced speed) x (towards the line's course,
     towards the route course), steps :data:`_RESUME_STEPS_RAD`; out per ship whether a
     candidate was ``found``, whether it is the route itself (``home``), its row and course.
     One ship at a time in scratch arrays of its candidates, which stay in the first-level
@@ -684,11 +701,20 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
                 across[row, step] = a
                 meet[row, step] = -e[i] / a if e[i] * a < -1e-9 else math.inf
         keeps[:], clears[:], alongside[:] = True, True, False
+        # the own ship's course over ground now: the other ship, resuming at the same time,
+        # has turned as far as she has (mirror hypothesis)
+        v = math.sqrt(own_vn[i] * own_vn[i] + own_ve[i] * own_ve[i])
+        co, so = (own_vn[i] / v, own_ve[i] / v) if v > 1e-9 else cos_sin(ordered[i])
         for j in range(first[i], first[i + 1]):
             p = by_ship[j]
             _resume_margins(c1, s1, c2, s2, meet, speed, end, present[i], pn[p], pe[p],
                             wn[p], we[p], kept[p], horizon_s, keeps, clears, alongside,
-                            present_short, present_close)
+                            present_short, present_close, math.nan, math.nan)
+            if mirror[p]:  # ... and no nearer than she is now (no new close quarters)
+                now = math.sqrt(pn[p] * pn[p] + pe[p] * pe[p]) / (1.0 + RESUME_MARGIN)
+                _resume_margins(c1, s1, c2, s2, meet, speed, end, present[i], pn[p], pe[p],
+                                wn[p], we[p], max(kept[p], now), horizon_s, keeps, clears,
+                                alongside, present_short, present_close, co, so)
         # a course further off the line comes after a reduced speed; there, where a safe
         # course nearer the route lies beyond courses not to be turned through at route speed,
         # a reduced speed first (the ship in the way draws clear sooner)
@@ -727,7 +753,7 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
                     speed: np.ndarray, end: np.ndarray, present: float, pn: float, pe: float,
                     wn: float, we: float, kept: float, horizon_s: float, keeps: np.ndarray,
                     clears: np.ndarray, alongside: np.ndarray, present_short: np.ndarray,
-                    present_close: np.ndarray) -> None:
+                    present_close: np.ndarray, co: float, so: float) -> None:
     """The safety of one ship's :meth:`Decider._resume` candidates against one pair, in place.
 
     The other ship is at ``pn, pe`` relative, velocity ``wn, we``; candidate ``(row, step)``
@@ -744,13 +770,22 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
     and 1 at the reduced speed, so at the present speed they take the verdicts of those rows
     (``present_short``, ``present_close``: scratch). Row ``row`` is looked at up to step
     ``end[row]``: the turns beyond are clipped at the target course and repeat the last.
+    With ``co, so`` (cos, sin of the own ship's course over ground; NaN: not) the other ship's
+    velocity is turned by each candidate's course change from it (the mirror hypothesis of
+    :meth:`Decider._resume`; no running alongside is marked then).
     """
     n_rows = c1.shape[0]
+    mirror = not math.isnan(co)
     keep = kept * (1.0 + RESUME_MARGIN)
     near = hypot_below(pn, pe,
                        arbitration.ALONGSIDE_RANGE_FACTOR * kept * (1.0 + RESUME_MARGIN))
+    vn, ve = wn, we
     for row in range(n_rows):
         for step in range(end[row]):
+            if mirror:  # turned by the change from the present order to this course
+                cd = c1[row, step] * co + s1[row, step] * so
+                sd = s1[row, step] * co - c1[row, step] * so
+                vn, ve = wn * cd - we * sd, wn * sd + we * cd
             short = close = False
             for variant in range(2):
                 if variant == 1 and step == 0:
@@ -760,7 +795,7 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
                         row - 2, step]
                 else:
                     too_short, too_close = _too_close(
-                        pn, pe, wn, we, speed[row] if variant == 0 else present,
+                        pn, pe, vn, ve, speed[row] if variant == 0 else present,
                         c1[row, step], s1[row, step], meet_m[row, step], c2, s2, horizon_s,
                         kept, keep)
                     if variant == 1:
@@ -769,7 +804,7 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
                 short, close = short or too_short, close or too_close
             keeps[row, step] &= not short
             clears[row, step] &= not close
-            if near:
+            if near and not mirror:
                 sp = speed[row]
                 dvn = wn - sp * c1[row, step]
                 dve = we - sp * s1[row, step]
