@@ -67,3 +67,38 @@ def test_restricted_visibility_has_no_roles_and_turns_to_starboard(tmp_path: Pat
     first = dec["course_order_deg"][np.flatnonzero(alter)[0]]
     assert 0.0 < first < 180.0  # Rule 19(d)(i): not to port for a ship forward of the beam
     assert summary["pairs"][0]["min_range_m"] >= 0.5 * NM
+
+
+RV_CROSSING = """\
+schema_version: 1
+name: rv_crossing_both
+description: Rule 19 - a 90 deg crossing in 1 NM visibility, both ships running the rules
+duration_s: 3600
+seed: 1
+record_every_s: 10.0
+visibility_nm: 1.0
+ships:
+  - {name: A, type: cargo, north_m: -7408.0, east_m: 0, heading_deg: 0, speed_kn: 12,
+     route: [[32592.0, 0.0]], behaviour: colregs}
+  - {name: B, type: cargo, north_m: 0, east_m: -7408.0, heading_deg: 90, speed_kn: 12,
+     route: [[0.0, 32592.0]], behaviour: colregs}
+"""
+
+
+def test_restricted_visibility_ships_resume_without_meeting_again(tmp_path: Path) -> None:
+    """Both ships alter to starboard and slow down (Rule 19(d)(i), (e)), pass, are released
+    beyond 2 NM with the other abeam or abaft, and both resume at once: each checks her way
+    back against the other turning back as she does, so neither is engaged again (each
+    checking against the other holding her velocity, ship A was engaged three times and
+    turned 95 deg to port towards B abaft her port beam, against Rule 19(d)(ii))."""
+    scenario = tmp_path / "rv_crossing_both.yaml"
+    scenario.write_text(RV_CROSSING)
+    summary = run_scenario(scenario, tmp_path / "out")
+    table = pq.read_table(tmp_path / "out" / "decisions.parquet")
+    dec = {c: np.asarray(table.column(c).to_pylist()) for c in table.column_names}
+    for ship in ("A", "B"):
+        rows = np.flatnonzero(dec["ship"] == ship)
+        engaged = dec["decided_encounter"][rows] == "restricted_visibility"
+        assert engaged[0] and not (engaged[1:] & ~engaged[:-1]).any(), ship  # engaged once
+        assert set(dec["decided_own_role"][rows]) == {"no_role"}
+    assert summary["pairs"][0]["min_range_m"] > 1.5 * NM

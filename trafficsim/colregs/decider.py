@@ -73,10 +73,13 @@ DEFAULT_LOST_TRACK_MIN = 3.0  # used when the rules file has no ``lost_track_min
 #: resuming keeps every ship this fraction beyond the distance the manoeuvre kept, so that the
 #: risk test (a CPA closer than that distance) does not take a released ship back at once
 RESUME_MARGIN = 0.1
-#: for this long after a pair of mutual give-way ships (head-on, Rule 14) is released, a ship
-#: resuming her route checks her way back also against the other ship turning back as she
-#: does (by the same course change): both resume at once, each towards her own route line
+#: for this long after a pair in which both ships keep out of the way (head-on and mutual
+#: crossings, Rule 14; restricted visibility, Rule 19) is released, a ship resuming her route
+#: checks her way back also against the other ship turning back as she does (by the same
+#: course change): both resume at once, each towards her own route line
 MIRROR_S = 600.0
+_RESTRICTED_VISIBILITY = VOCABULARY.enums["restricted_visibility"]
+_NO_ENCOUNTER = VOCABULARY.enums["no_encounter"]
 _RESUME_STEPS_RAD = np.radians(np.arange(0.0, 180.0 + 1e-9, 5.0))  # turns back to the route
 _AWAY = math.sin(math.radians(5.0))  # a course more than this off the line's leads away
 _LINE_TOL_RAD = math.radians(1.0)  # a route course off the line model by more: a new leg
@@ -260,7 +263,10 @@ class Decider:
         self.last_features = feats
         self.last_decision = []
         pair_net = self.ship_net[o]
-        was_mutual = self._mem("own_role") == MUTUAL_GIVE_WAY
+        # pairs in which both ships keep out of the way: head-on and mutual crossings (Rule 14)
+        # and restricted visibility (Rule 19: no stand-on ship)
+        both_act = ((self._mem("own_role") == MUTUAL_GIVE_WAY)
+                    | (self._mem("encounter") == _RESTRICTED_VISIBILITY))
         for k, net in enumerate(self.networks):
             idx = np.flatnonzero(pair_net == k)
             if idx.size == 0:
@@ -272,7 +278,7 @@ class Decider:
             self.cursor[idx] = dec.cursor
             self._merge(idx, dec, t_s, other)
             self.last_decision.append(dec)
-        self.mutual_released_s[was_mutual & (self._mem("own_role") == NO_ROLE)] = t_s
+        self.mutual_released_s[both_act & (self._mem("encounter") == _NO_ENCOUNTER)] = t_s
         self._blind_spots(t_s)
         self._orders(t_s, own_state, own_vel, other, route_course_rad, route_speed_mps)
         if self.record:
@@ -378,12 +384,14 @@ class Decider:
 
         So a ship does not steer back onto its line behind a slower ship on it: it holds a
         course parallel to the line, passes her, and crosses ahead of her once the range is
-        safe (Rule 13(d)). Two mutual give-way ships (head-on) released at the same step both
-        resume at once, each back towards her own line: for :data:`MIRROR_S` after the
-        release a candidate must also keep the distance with the other ship turned by the
-        same course change as the candidate's (her return as seen from her). It never turns
-        away from its route while resuming, and the margin keeps a released ship out of the
-        risk test of the same pair: it does not hunt between avoiding and resuming.
+        safe (Rule 13(d)). Two ships that both kept out of the way (head-on and mutual
+        crossings, restricted visibility), released at the same step, both resume at once,
+        each back towards her own line: for :data:`MIRROR_S` after the release a candidate
+        must also keep the other ship no nearer than she is now with her velocity turned by
+        the candidate's change of course over ground (her return as seen from her; Rule 8(d),
+        no new close-quarters situation). It never turns away from its route while resuming,
+        and the margin keeps a released ship out of the risk test of the same pair: it does
+        not hunt between avoiding and resuming.
         """
         o = self.obs
         n = ships_mask.shape[0]
@@ -782,7 +790,7 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
     vn, ve = wn, we
     for row in range(n_rows):
         for step in range(end[row]):
-            if mirror:  # turned by the change from the present order to this course
+            if mirror:  # turned by the change from the own course over ground to this one
                 cd = c1[row, step] * co + s1[row, step] * so
                 sd = s1[row, step] * co - c1[row, step] * so
                 vn, ve = wn * cd - we * sd, wn * sd + we * cd
