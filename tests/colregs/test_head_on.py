@@ -67,7 +67,8 @@ def _run(course: int, out_root: str) -> tuple[dict, dict[str, np.ndarray]]:
                                         end_east=b_east + 40000.0 * math.sin(c)))
     summary = run_scenario(scenario, Path(out_root) / f"head_on_{course}")
     table = pq.read_table(Path(out_root) / f"head_on_{course}" / "decisions.parquet")
-    return summary, {c: np.asarray(table.column(c).to_pylist()) for c in table.column_names}
+    return summary, {name: np.asarray(table.column(name).to_pylist())
+                     for name in table.column_names}
 
 
 @pytest.fixture(scope="module")
