@@ -193,10 +193,13 @@ def _choose(base: np.ndarray, speed: np.ndarray, factor: np.ndarray, side: np.nd
                     continue
         stuck = True  # nothing safe on the requested side
         for k in range(n_cand):
+            if _wrong_side(side[i], off_deg[k]):  # never eligible: no verdict needed
+                safe[k], alongside[k] = False, False
+                continue
             safe[k], alongside[k] = _verdict(cb, sb, speed[i], factor[i], reduced[k],
                                              cos_off[k], sin_off[k], pairs, pn, pe, ovn, ove,
                                              required, horizon_s)
-            stuck = stuck and (not safe[k] or _wrong_side(side[i], off_deg[k]))
+            stuck = stuck and not safe[k]
         top = -math.inf
         if stuck:  # nothing safe on the requested side: its largest worst-case margin
             for k in range(n_cand):

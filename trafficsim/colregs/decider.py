@@ -785,8 +785,7 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
     n_rows = c1.shape[0]
     mirror = not math.isnan(co)
     keep = kept * (1.0 + RESUME_MARGIN)
-    near = hypot_below(pn, pe,
-                       arbitration.ALONGSIDE_RANGE_FACTOR * kept * (1.0 + RESUME_MARGIN))
+    near = not mirror and hypot_below(pn, pe, arbitration.ALONGSIDE_RANGE_FACTOR * keep)
     vn, ve = wn, we
     for row in range(n_rows):
         for step in range(end[row]):
@@ -812,7 +811,7 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
                 short, close = short or too_short, close or too_close
             keeps[row, step] &= not short
             clears[row, step] &= not close
-            if near and not mirror:
+            if near:
                 sp = speed[row]
                 dvn = wn - sp * c1[row, step]
                 dve = we - sp * s1[row, step]
