@@ -239,6 +239,80 @@ def test_floor_is_half_the_weighted_noise_per_scored_sample() -> None:
     assert res.floor() == pytest.approx(expected)
 
 
+def test_costs_and_floors_by_window_add_up_to_the_whole() -> None:
+    """The per-window parts that the selection check scores on: the total is the cost itself
+    (to the bit) and the parts add up to it; the windows' floors add up to the floor."""
+    train, hold = trio({"compass_bias": {"bias_deg": 2.0}})
+    res = fit.EffectResiduals(fit.EffectSet.of(SPEC, ("compass_bias",)), hold,
+                              fit.scales(train, LENGTH))
+    theta = np.array([1.0] + [0.0] * (res.param.p - 1))
+    total, parts = res.cost_by_window(theta)
+    assert total == res.cost(theta) and parts.shape == (hold.windows.w,)
+    assert parts.sum() == pytest.approx(total, rel=1e-12) and (parts > 0).all()
+    assert res.window_floors().sum() == pytest.approx(res.floor(), rel=1e-12)
+
+
+def test_parameter_count_is_the_candidates_penalty_p() -> None:
+    train = exact(current(0.1, 0.25), ZIGZAG, "a", 0.0)
+    hold = exact(current(0.15, -0.05), TURN, "b", 1.0)
+    cand = fit.fit_set(SPEC, ("current", "compass_bias"), train, hold,
+                       fit.scales(train, LENGTH), max_nfev=2)
+    n_bias = len(effects.REGISTRY["compass_bias"].keys)
+    assert cand.p == fit.parameter_count(cand.effects, 1) == 2 + n_bias
+    assert fit.parameter_count(("current", "compass_bias"), 3) == 6 + n_bias
+    assert fit.parameter_count((), 5) == 0
+    assert cand.hold_windows.sum() == pytest.approx(cand.cost_hold, rel=1e-12)
+
+
+def test_check_groups_are_the_held_out_runs_or_a_single_runs_halves_in_time() -> None:
+    win = SimpleNamespace(run=np.array([1, 0, 1, 0, 1]), run_names=("x", "y"), w=5,
+                          t0_s=np.array([0.0, 0.0, 30.0, 30.0, 60.0]))
+    groups = fit.check_groups(SimpleNamespace(windows=win))
+    assert [g[0] for g in groups] == ["x", "y"]
+    assert groups[0][1].tolist() == [False, True, False, True, False]
+    one = SimpleNamespace(run=np.zeros(5, dtype=int), run_names=("x",), w=5,
+                          t0_s=np.array([90.0, 0.0, 60.0, 120.0, 30.0]))
+    halves = fit.check_groups(SimpleNamespace(windows=one))
+    assert [g[0] for g in halves] == ["x, first half", "x, second half"]
+    assert halves[0][1].tolist() == [False, True, False, False, True]  # t0 0 and 30 s
+    assert (halves[0][1] ^ halves[1][1]).all()
+    lone = SimpleNamespace(run=np.zeros(1, dtype=int), run_names=("x",), w=1,
+                           t0_s=np.zeros(1))
+    assert fit.check_groups(SimpleNamespace(windows=lone)) == []
+
+
+def test_selection_check_scores_each_choice_on_the_run_it_did_not_see() -> None:
+    """Two held-out runs of two windows. Effect A removes 90 % of run x's gap and nothing of
+    run y's, B half of run y's and nothing of x's: on both runs A wins (45 % against 25 %),
+    but chosen on y alone B wins and does nothing on x, and chosen on x alone A does nothing
+    on y, so a choice made without the run it is scored on shrinks the gap by nothing."""
+    win = SimpleNamespace(run=np.array([0, 0, 1, 1]), run_names=("x", "y"), w=4,
+                          t0_s=np.array([0.0, 30.0, 0.0, 30.0]))
+    hold = SimpleNamespace(windows=win)
+
+    def cand(names: tuple[str, ...], parts: list[float]) -> fit.Candidate:
+        return fit.Candidate(names, {}, {}, 0.0, float(sum(parts)), 0,
+                             hold_windows=np.array(parts))
+
+    base = cand((), [10.0, 10.0, 10.0, 10.0])
+    a = cand(("compass_bias",), [1.0, 1.0, 10.0, 10.0])
+    b = cand(("resistance",), [10.0, 10.0, 5.0, 5.0])
+    scoring = fit.Scoring(None, 4000, 2, 1.0)
+    sel = fit.select(base, [b, a], scoring, None, forward_steps=1)
+    assert sel.chosen is a and sel.attributable and [c.effects for c in sel.ranked] == [
+        a.effects, b.effects]
+    assert 1.0 - a.cost_hold / base.cost_hold == pytest.approx(0.45)
+    check = fit.selection_check(base, [a, b], a, hold, 1000, np.ones(4), None, 1)
+    assert [(p["left_out"], p["chosen"]) for p in check["parts"]] == [
+        ("x", ["resistance"]), ("y", ["compass_bias"])]
+    assert [p["shrinkage"] for p in check["parts"]] == [0.0, 0.0]
+    assert check["same_choice"] == 1 and check["shrinkage_holdout"] == 0.0
+    # the parts' choices are not held to the noise floor (a part alone may be too short)
+    assert fit.select(base, [a, b], fit.Scoring(None, 4000, 2, 1e9), None, 1).chosen is base
+    assert fit.selection_check(base, [a, b], a, hold, 1000, np.full(4, 1e9), None,
+                               1)["same_choice"] == 1
+
+
 def test_delayed_replays_on_the_inputs_logged_the_latency_earlier() -> None:
     """Report latency: a window's measured start is the truth ``latency`` earlier, so the
     replay keeps that start and runs on the inputs logged ``latency`` before each sample (the
@@ -471,8 +545,15 @@ def test_a_near_tie_is_named_in_the_verdict() -> None:
     first, second = diag.singles[0].effects[0], diag.singles[1].effects[0]
     assert {first, second} == {"steering_lag", "ais_latency"} and diag.attributable
     assert f"; nearly as good alone: {second} (" in diag.verdict
-    assert diag.verdict.endswith("(the data hardly tell them apart)")
+    assert "(the data hardly tell them apart); chosen without each held-out run" in diag.verdict
     assert "resistance" not in diag.verdict
+    # each held-out run alone prefers the other rival: the check sees the tie too
+    check = diag.check
+    assert {tuple(part["chosen"]) for part in check["parts"]} == {(first,), (second,)}
+    assert check["same_choice"] == 1
+    assert diag.verdict.endswith(f"the same 1 of 2 times, and the gap "
+                                 f"{100 * check['shrinkage_holdout']:.0f} % smaller on the runs "
+                                 "left out")
 
 
 @pytest.mark.parametrize(("hidden", "noise", "tol"), [

@@ -144,6 +144,22 @@ def test_markdown_where_which_and_how_far() -> None:
     assert not any(ln.startswith(("## Confirmation", "## Notes")) for ln in lines)
 
 
+def test_markdown_states_the_selection_check() -> None:
+    rep = _rep()
+    rep["selection_check"] = {
+        "parts": [{"left_out": "x", "windows": 3, "chosen": ["compass_bias"],
+                   "shrinkage": 0.804},
+                  {"left_out": "y", "windows": 2, "chosen": [], "shrinkage": 0.0}],
+        "same_choice": 1, "shrinkage_holdout": 0.5}
+    lines = report.markdown(rep).splitlines()
+    assert ("Selection check (the choice made on the other held-out data, scored on the part "
+            "left out): the same choice 1 of 2 times; gap 50 % smaller on the parts left out, "
+            "the held-out shrinkage a choice makes on data it has not seen.") in lines
+    assert "| x | 3 | compass_bias | 80 % |" in lines and "| y | 2 | nothing | 0 % |" in lines
+    rep["selection_check"] = {}
+    assert "Selection check: needs two or more held-out windows." in report.markdown(rep)
+
+
 def test_markdown_with_nothing_chosen_confirmation_and_notes() -> None:
     rep = _rep(chosen=())
     rep["notes"] = "ignored entries: x"
@@ -308,6 +324,23 @@ def test_real_markdown_states_the_report_numbers(real) -> None:
             and ln.split(" | ")[0][2:].isdigit()]
     assert rows == [c.effects[0] for c in diag.singles]
     assert "one value per run (3 runs, report.json)" in text  # a, c fitted, b cross-fitted
+
+
+def test_real_selection_check_scores_the_halves_of_the_held_out_run(real) -> None:
+    """One held-out run of four windows: the check leaves out its first and second half in
+    turn; each half's cost before is the base's on those windows replayed one at a time."""
+    rep, diag, _, hold, sc = real
+    check = rep["selection_check"]
+    assert check == diag.check and [p["left_out"] for p in check["parts"]] == [
+        "b, first half", "b, second half"]
+    per_window = _windows_cost(diag.base, hold, sc).sum(axis=(1, 2)) / 2.0
+    order = np.argsort(hold.windows.t0_s)
+    for part, idx in zip(check["parts"], (order[:2], order[2:]), strict=True):
+        assert part["windows"] == 2
+        assert part["cost_before"] == pytest.approx(per_window[idx].sum(), rel=1e-9)
+        assert part["shrinkage"] == pytest.approx(1 - part["cost_after"] / part["cost_before"])
+    after = sum(p["cost_after"] for p in check["parts"])
+    assert check["shrinkage_holdout"] == pytest.approx(1 - after / diag.base.cost_hold)
 
 
 def test_real_summary_without_an_effect_keeps_the_gap() -> None:

@@ -37,6 +37,14 @@ every parameter the held-out prediction uses; and adjacent windows of a run shar
 varying conditions (gusts, the smoothed start states), so the alternating folds are not fully
 independent and part of the fit's optimism remains.
 
+Selection check (:func:`selection_check`): the held-out shrinkage of the chosen set is
+measured on the windows it was chosen on, and choosing the best of several noisy scores favours
+the winner. So the choice is made again without each held-out run in turn (without each half of
+a single held-out run), on the other held-out windows alone, and scored on the part left out:
+``1 - sum(J_after) / sum(J_before)`` over the parts is the shrinkage the procedure achieves on
+data its choice has not seen, and how often the parts' choices agree with the verdict's tells
+how firm it is. Joint fits are fitted once per set of effects and shared with the check.
+
 Noise floor: ``J_floor = 1/2 sum_channels m_c (sigma_c / s_c)^2`` with ``sigma_c`` each measured
 channel's white noise; a gap below ``FLOOR_FACTOR`` (3) times its floor is "not attributable"
 (a perfect model also carries the smoothed start state's error through each window, which is why
@@ -378,11 +386,24 @@ class EffectResiduals:
         r = self(np.atleast_2d(theta))[0]
         return 0.5 * float(r @ r)
 
+    def cost_by_window(self, theta: np.ndarray) -> tuple[float, np.ndarray]:
+        """The cost of one vector (as :meth:`cost`, to the bit) and ``(W,)`` its part on
+        each window, from one replay."""
+        err = self.errors(np.atleast_2d(theta))[0] * self._weights
+        r = err[self._mask]
+        return 0.5 * float(r @ r), 0.5 * np.sum(err * err, axis=(1, 2))
+
     def floor(self) -> float:
         """Noise-floor cost of this dataset (module doc)."""
         sig = self.data.sigma[self._cols]
         counts = self._mask.sum(axis=(0, 1))
         return 0.5 * float(np.nansum(counts * (sig * self._weights) ** 2))
+
+    def window_floors(self) -> np.ndarray:
+        """``(W,)`` the noise-floor cost of each window (their sum is :meth:`floor`)."""
+        sig = self.data.sigma[self._cols]
+        counts = self._mask.sum(axis=1)
+        return 0.5 * np.nansum(counts * (sig * self._weights) ** 2, axis=1)
 
     def by_phase(self, theta: np.ndarray) -> dict[str, dict[str, float]]:
         """RMS error per phase and channel (channel units; angles in degrees) and the share of
@@ -435,7 +456,8 @@ class Candidate:
     cross-fitted for the environments of held-out runs (module doc); ``cost_hold_insample``:
     with each held-out run's environment fitted on all its windows (``None``: no such fit, the
     same as ``cost_hold``); ``fold_run_values``: the environments fitted on the first and on
-    the second fold of :func:`alternate` (empty without such a fit).
+    the second fold of :func:`alternate` (empty without such a fit); ``hold_windows``: ``(W,)``
+    the part of ``cost_hold`` on each held-out window (for :func:`selection_check`).
     """
 
     effects: tuple[str, ...]
@@ -449,6 +471,7 @@ class Candidate:
     run_values: dict[str, dict[str, dict[str, float]]] = field(default_factory=dict)
     cost_hold_insample: float | None = None
     fold_run_values: tuple[dict[str, dict[str, dict[str, float]]], ...] = ()
+    hold_windows: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def shrinkage(self, base: Candidate) -> tuple[float, float]:
         return (1.0 - self.cost_train / max(base.cost_train, 1e-300),
@@ -594,8 +617,9 @@ def fit_set(spec: Mapping[str, Any], names: Sequence[str], train: Dataset, hold:
                          run_start=run_start)
     res_t = EffectResiduals(param, train, sc)
     if param.p == 0:
-        res_h = EffectResiduals(param, hold, sc)
-        return Candidate((), {}, {}, res_t.cost(np.zeros(0)), res_h.cost(np.zeros(0)), 0)
+        cost_hold, hold_windows = EffectResiduals(param, hold, sc).cost_by_window(np.zeros(0))
+        return Candidate((), {}, {}, res_t.cost(np.zeros(0)), cost_hold, 0,
+                         hold_windows=hold_windows)
     x_start = param.initial()
     if len(names) == 1 and start is None and run_start is None:
         x_start = _grid_start(param, res_t, names[0], x_start)
@@ -616,17 +640,26 @@ def fit_set(spec: Mapping[str, Any], names: Sequence[str], train: Dataset, hold:
                       for k, sel in enumerate((first, ~first)))
         cross = CrossFitted(tuple(EffectSet.of(ship, names, fixed=glob, run_fixed=f)
                                   for f in folds), hold, sc, first)
-        cost_hold = cross.cost(np.zeros(0))
+        cost_hold, hold_windows = cross.cost_by_window(np.zeros(0))
         runs_fit, table_h, cost_in = _fit_environments(ship, names, glob, runs_fit, hold, sc,
                                                        max_nfev, _mean_start(folds, new_runs))
         table.update(table_h)
     else:
-        cost_hold = EffectResiduals(EffectSet.of(ship, names, fixed=glob, run_fixed=runs_fit),
-                                    hold, sc).cost(np.zeros(0))
-    p = sum(len(effects.REGISTRY[n].keys) for n in param.global_effects)
-    p += len(hold_runs) * sum(len(effects.REGISTRY[n].keys) for n in param.per_run)
-    return Candidate(tuple(names), glob, table, result.cost, cost_hold, int(p), result,
-                     coeffs, runs_fit, cost_in, folds)
+        cost_hold, hold_windows = EffectResiduals(
+            EffectSet.of(ship, names, fixed=glob, run_fixed=runs_fit), hold, sc
+        ).cost_by_window(np.zeros(0))
+    return Candidate(tuple(names), glob, table, result.cost, cost_hold,
+                     parameter_count(names, len(hold_runs)), result, coeffs, runs_fit, cost_in,
+                     folds, hold_windows)
+
+
+def parameter_count(names: Sequence[str], n_runs: int) -> int:
+    """The ``p`` of the penalty: the effects' global parameters plus their per-run ones on
+    ``n_runs`` held-out runs (refitted base coefficients are not counted: the base has them
+    too)."""
+    keys = [len(effects.REGISTRY[n].keys) for n in names]
+    per_run = sum(k for n, k in zip(names, keys, strict=True) if n in effects.PER_RUN)
+    return int(sum(keys) - per_run + n_runs * per_run)
 
 
 def penalised(cost: float, p: int, n_eff: int) -> float:
@@ -639,7 +672,8 @@ class Diagnosis:
 
     ``steps`` is the forward selection's trace (each effect added while it shrank the
     penalised held-out cost enough); ``chosen`` is the verdict's model, the base where the gap
-    is below the noise floor whatever the trace added.
+    is below the noise floor whatever the trace added. ``check``: the
+    :func:`selection_check` (empty with a single held-out window).
     """
 
     base: Candidate
@@ -654,12 +688,129 @@ class Diagnosis:
     elapsed_s: float
     residuals: dict[str, Any]
     refit: tuple[str, ...] = ()
+    check: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Scoring:
+    """Held-out scores on a set of held-out windows: ``windows`` a ``(W,)`` mask, or None
+    for all of them (then each candidate's ``cost_hold`` itself); ``n_eff`` the windows times
+    channels, ``n_runs`` the held-out runs they belong to, ``floor`` their noise floor."""
+
+    windows: np.ndarray | None
+    n_eff: int
+    n_runs: int
+    floor: float
+
+    def cost(self, c: Candidate) -> float:
+        if self.windows is None:
+            return c.cost_hold
+        return float(np.sum(c.hold_windows[self.windows]))
+
+    def penalised(self, c: Candidate) -> float:
+        return penalised(self.cost(c), parameter_count(c.effects, self.n_runs), self.n_eff)
+
+
+@dataclass
+class Selection:
+    """What the ranking, forward selection and noise-floor gate choose on one
+    :class:`Scoring`: ``ranked`` singles best first with their penalised ``score``s."""
+
+    ranked: list[Candidate]
+    score: dict[str, float]
+    chosen: Candidate
+    steps: list[dict[str, Any]]
+    gap_ratio: float
+    attributable: bool
+
+
+def select(base: Candidate, singles: Sequence[Candidate], scoring: Scoring,
+           joint: Any, forward_steps: int, gate: bool = True) -> Selection:
+    """Rank the singles by penalised held-out shrinkage, add effects by forward selection
+    while the penalised held-out cost drops by ``MIN_GAIN`` or more, then (``gate``) the
+    noise-floor gate (module doc). ``joint(chosen, single)``: the set ``chosen`` plus the
+    effect of ``single`` fitted jointly on the training runs."""
+    before = scoring.cost(base)
+    score = {c.effects[0]: 1.0 - scoring.penalised(c) / before for c in singles}
+    ranked = sorted(singles, key=lambda c: -score[c.effects[0]])
+    chosen, steps = base, []
+    pool = [c for c in ranked if score[c.effects[0]] > MIN_GAIN][:4]
+    current_pen = before
+    for _ in range(forward_steps):
+        best, best_pen = None, current_pen
+        for single in pool:
+            if single.effects[0] in chosen.effects:
+                continue
+            cand = single if not chosen.effects else joint(chosen, single)
+            pen = scoring.penalised(cand)
+            if pen < best_pen:
+                best, best_pen = cand, pen
+        if best is None or best_pen > (1.0 - MIN_GAIN) * current_pen:
+            break
+        steps.append({"added": best.effects[-1], "effects": list(best.effects),
+                      "cost_holdout": scoring.cost(best), "penalised_cost_holdout": best_pen})
+        chosen, current_pen = best, best_pen
+    gap_ratio = before / max(scoring.floor, 1e-300)
+    above = gap_ratio >= FLOOR_FACTOR or not gate
+    return Selection(ranked, score, chosen if above else base, steps, gap_ratio,
+                     above and bool(chosen.effects))
+
+
+def check_groups(hold: Dataset) -> list[tuple[str, np.ndarray]]:
+    """The parts of the held-out data that :func:`selection_check` leaves out in turn: each
+    held-out run; a single held-out run's first and second half of its windows in time (none
+    with fewer than two windows)."""
+    win = hold.windows
+    runs = np.unique(win.run)
+    if runs.size > 1:
+        return [(str(win.run_names[r]), win.run == r) for r in runs]
+    if win.w < 2:
+        return []
+    order = np.argsort(win.t0_s, kind="stable")
+    first = np.zeros(win.w, dtype=bool)
+    first[order[: win.w // 2]] = True
+    name = str(win.run_names[runs[0]])
+    return [(f"{name}, first half", first), (f"{name}, second half", ~first)]
+
+
+def selection_check(base: Candidate, singles: Sequence[Candidate], chosen: Candidate,
+                    hold: Dataset, n_channels: int, floors: np.ndarray, joint: Any,
+                    forward_steps: int) -> dict[str, Any]:
+    """Selection left out of its own score: for each part of :func:`check_groups`, choose
+    (:func:`select`) on the other held-out windows only and score that choice on the part
+    left out. ``shrinkage_holdout`` is ``1 - sum(after) / sum(before)`` over the parts: the
+    gap shrinkage of choosing by this procedure on data the choice has not seen (the held-out
+    shrinkage of the verdict is measured on the windows it was chosen on, which favours it:
+    the best of several noisy scores). The noise-floor gate is not applied to the parts'
+    choices: whether the gap stands above the noise is asked of all the held-out data, once,
+    by the verdict (a part alone may be too short to pass it). ``same_choice`` counts the
+    parts whose choice is the verdict's (the same set of effects, or nothing for both)."""
+    groups = check_groups(hold)
+    parts, before, after, same = [], 0.0, 0.0, 0
+    for label, part in groups:
+        rest = ~part
+        scoring = Scoring(rest, int(rest.sum()) * n_channels,
+                          int(np.unique(hold.windows.run[rest]).size), float(floors[rest].sum()))
+        pick = select(base, singles, scoring, joint, forward_steps, gate=False)
+        on_part = Scoring(part, int(part.sum()) * n_channels, 1, float(floors[part].sum()))
+        b, a = on_part.cost(base), on_part.cost(pick.chosen)
+        before, after = before + b, after + a
+        same += int(set(pick.chosen.effects) == set(chosen.effects))
+        parts.append({"left_out": label, "windows": int(part.sum()),
+                      "chosen": list(pick.chosen.effects),
+                      "cost_before": b, "cost_after": a,
+                      "shrinkage": 1.0 - a / max(b, 1e-300)})
+    if not parts:
+        return {}
+    return {"parts": parts, "same_choice": same,
+            "shrinkage_holdout": 1.0 - after / max(before, 1e-300)}
 
 
 def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
              candidates: Sequence[str] = effects.NAMES, forward_steps: int = 3,
              max_nfev: int = 30, refit: Sequence[str] = ()) -> Diagnosis:
-    """Single-effect fits, ranking, forward selection and the noise-floor verdict.
+    """Single-effect fits, ranking, forward selection, the noise-floor verdict and its
+    :func:`selection_check`.
 
     ``refit``: base coefficients fitted jointly with every candidate set, the base included
     (the base without effects is then the base refitted on the training runs)."""
@@ -675,60 +826,54 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
     floor_h = res_h.floor()
     singles = [fit_set(spec, (name,), train, hold, sc, max_nfev=max_nfev, refit=refit,
                        coefficients=start_coeffs) for name in candidates]
-    score = {c.effects[0]: 1.0 - penalised(c.cost_hold, c.p, n_eff) / base.cost_hold
-             for c in singles}
-    singles.sort(key=lambda c: -score[c.effects[0]])
-    chosen, steps = base, []
-    pool = [c for c in singles if score[c.effects[0]] > MIN_GAIN][:4]
-    current_pen = base.cost_hold
-    for _ in range(forward_steps):
-        best, best_pen = None, current_pen
-        for single in pool:
-            name = single.effects[0]
-            if name in chosen.effects:
-                continue
-            names = (*chosen.effects, name)
-            start = {**chosen.values, **single.values}
-            run_start = {r: {**chosen.run_values.get(r, {}), **single.run_values.get(r, {})}
-                         for r in {*chosen.run_values, *single.run_values}}
-            folds = tuple({r: {**a.get(r, {}), **b.get(r, {})} for r in {*a, *b}}
-                          for a, b in zip(chosen.fold_run_values or ({}, {}),
-                                          single.fold_run_values or ({}, {}), strict=True)
-                          ) if chosen.fold_run_values or single.fold_run_values else ()
-            cand = single if not chosen.effects else fit_set(
-                spec, names, train, hold, sc, start, max_nfev, refit, run_start or None,
-                chosen.coefficients or start_coeffs, folds)
-            pen = penalised(cand.cost_hold, cand.p, n_eff)
-            if pen < best_pen:
-                best, best_pen = cand, pen
-        if best is None or best_pen > (1.0 - MIN_GAIN) * current_pen:
-            break
-        steps.append({"added": best.effects[-1], "effects": list(best.effects),
-                      "cost_holdout": best.cost_hold, "penalised_cost_holdout": best_pen})
-        chosen, current_pen = best, best_pen
-    gap_ratio = base.cost_hold / max(floor_h, 1e-300)
+    fitted: dict[frozenset[str], Candidate] = {}
+
+    def joint(chosen: Candidate, single: Candidate) -> Candidate:
+        """The two fitted jointly, once per set of effects (the checks reuse the fits)."""
+        names = (*chosen.effects, single.effects[0])
+        if frozenset(names) in fitted:
+            return fitted[frozenset(names)]
+        start = {**chosen.values, **single.values}
+        run_start = {r: {**chosen.run_values.get(r, {}), **single.run_values.get(r, {})}
+                     for r in {*chosen.run_values, *single.run_values}}
+        folds = tuple({r: {**a.get(r, {}), **b.get(r, {})} for r in {*a, *b}}
+                      for a, b in zip(chosen.fold_run_values or ({}, {}),
+                                      single.fold_run_values or ({}, {}), strict=True)
+                      ) if chosen.fold_run_values or single.fold_run_values else ()
+        fitted[frozenset(names)] = fit_set(
+            spec, names, train, hold, sc, start, max_nfev, refit, run_start or None,
+            chosen.coefficients or start_coeffs, folds)
+        return fitted[frozenset(names)]
+
+    sel = select(base, singles, Scoring(None, n_eff, len(_runs(hold)), floor_h), joint,
+                 forward_steps)
+    chosen, score, gap_ratio = sel.chosen, sel.score, sel.gap_ratio
     if gap_ratio < FLOOR_FACTOR:
-        attributable = False
         verdict = (f"not attributable: the held-out gap is {gap_ratio:.1f} times the data's "
                    f"noise floor (below {FLOOR_FACTOR:g})")
-        chosen = base
     elif not chosen.effects:
-        attributable = False
         verdict = ("not attributable: no effect in the library shrinks the held-out gap by "
                    f"{100 * MIN_GAIN:.0f} % or more after the parameter penalty")
     else:
-        attributable = True
         sh = chosen.shrinkage(base)[1]
         verdict = (f"{' + '.join(chosen.effects)}: held-out gap {100 * sh:.0f} % smaller "
                    f"({gap_ratio:.1f} times the noise floor before)")
-        rivals = [c for c in singles if c.effects[0] not in chosen.effects
+        rivals = [c for c in sel.ranked if c.effects[0] not in chosen.effects
                   and score[chosen.effects[0]] - score[c.effects[0]] <= NEAR_TIE]
         if rivals:
             verdict += ("; nearly as good alone: " + ", ".join(
                 f"{c.effects[0]} ({100 * c.shrinkage(base)[1]:.0f} %)" for c in rivals)
                 + " (the data hardly tell them apart)")
-    diag = Diagnosis(base, singles, chosen, steps, floor_t, floor_h, n_eff, attributable,
-                     verdict, 0.0, {}, refit)
+    check = selection_check(base, sel.ranked, chosen, hold, len(res_h.channels),
+                            res_h.window_floors(), joint, forward_steps)
+    if check and sel.attributable:
+        n, same = len(check["parts"]), check["same_choice"]
+        word = "half" if check["parts"][0]["left_out"].endswith("half") else "run"
+        verdict += (f"; chosen without each held-out {word} in turn: the same {same} of {n} "
+                    f"times, and the gap {100 * check['shrinkage_holdout']:.0f} % smaller on "
+                    f"the {word}s left out")
+    diag = Diagnosis(base, sel.ranked, chosen, sel.steps, floor_t, floor_h, n_eff,
+                     sel.attributable, verdict, 0.0, {}, refit, check)
     diag.residuals = residual_summary(spec, diag, train, hold, sc)
     diag.elapsed_s = time.perf_counter() - t0
     return diag

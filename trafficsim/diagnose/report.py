@@ -5,7 +5,8 @@ intervals, ``shrinkage_train``, ``shrinkage_holdout`` (cross-fitted for per-run 
 :mod:`trafficsim.diagnose.fit`), ``shrinkage_holdout_insample`` (the held-out runs'
 environments fitted on all their windows), ``per_phase`` held-out shrinkage (cross-fitted),
 ``penalised_score``), ``chosen`` (forward selection), ``verdict``, ``gap`` (costs before and
-after, noise floors) and ``residuals`` (RMS per phase and channel, before and after, on training
+after, noise floors), ``selection_check`` (:func:`trafficsim.diagnose.fit.selection_check`)
+and ``residuals`` (RMS per phase and channel, before and after, on training
 and held-out data). ``residuals_by_phase.png``: held-out RMS per phase and channel before and
 after the chosen effects.
 """
@@ -62,6 +63,7 @@ def summary(spec: Mapping[str, Any], diag: Diagnosis, train: Dataset, hold: Data
                 "noise_floor_holdout": diag.floor_hold,
                 "holdout_gap_over_floor": diag.base.cost_hold / max(diag.floor_hold, 1e-300),
                 "phases_by_share": carriers},
+        "selection_check": diag.check,
         "residuals": diag.residuals,
         "channels": list(train.channels), "channel_scales": sc,
         "windows": {"train": train.windows.w, "holdout": hold.windows.w,
@@ -142,12 +144,31 @@ def markdown(rep: Mapping[str, Any]) -> str:
     if ch["per_phase"]:
         lines.append("Held-out shrinkage per phase: " + ", ".join(
             f"{p} {100 * v:.0f} %" for p, v in ch["per_phase"].items()) + ".")
+    lines += check_lines(rep.get("selection_check") or {})
     lines += ["", "![residuals by phase](residuals_by_phase.png)", ""]
     if "confirmation" in rep:
         lines += confirmation_lines(rep["confirmation"])
     if "notes" in rep:
         lines += ["## Notes", "", str(rep["notes"]), ""]
     return "\n".join(lines)
+
+
+def check_lines(check: Mapping[str, Any]) -> list[str]:
+    """The selection check: the choice made without each part of the held-out data and its
+    shrinkage on that part."""
+    if not check:
+        return ["", "Selection check: needs two or more held-out windows."]
+    lines = ["", "Selection check (the choice made on the other held-out data, scored on the "
+             f"part left out): the same choice {check['same_choice']} of "
+             f"{len(check['parts'])} times; gap {100 * check['shrinkage_holdout']:.0f} % "
+             "smaller on the parts left out, the held-out shrinkage a choice makes on data it "
+             "has not seen.", "",
+             "| left out | windows | chosen without it | shrinkage there |", "|---|---|---|---|"]
+    for part in check["parts"]:
+        lines.append(f"| {part['left_out']} | {part['windows']} | "
+                     f"{' + '.join(part['chosen']) or 'nothing'} | "
+                     f"{100 * part['shrinkage']:.0f} % |")
+    return lines
 
 
 def parameter_text(table: Mapping[str, Mapping[str, float]]) -> str:
