@@ -452,6 +452,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
 
     from trafficsim.identify.command import identify
     from trafficsim.identify.preprocess import SmootherSettings
+    from trafficsim.identify.report import interval_text
 
     for flag, value, most in (("--sigma-pos-m", args.sigma_pos_m, MAX_SIGMA_POS_M),
                               ("--sigma-heading-deg", args.sigma_heading_deg,
@@ -479,8 +480,7 @@ def _cmd_identify(args: argparse.Namespace) -> int:
               f"{fit['cost_final']:.4g} in {fit['evaluations']} evaluations "
               f"({fit['elapsed_s']:.1f} s)")
         for name, c in fit["coefficients"].items():
-            print(f"  {name}: {c['value']:.5g} (95 % {c['ci95_low']:.4g} .. "
-                  f"{c['ci95_high']:.4g})")
+            print(f"  {name}: {c['value']:.5g} (95 % {interval_text(c)})")
     elif rep["ekf"] is not None:
         for name, c in rep["ekf"]["coefficients"].items():
             print(f"  {name}: {c['value']:.5g} (std {c['std']:.3g})")

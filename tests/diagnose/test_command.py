@@ -171,11 +171,11 @@ def test_self_test_writes_its_result_and_reports_progress(tmp_path, monkeypatch,
     """``self_test`` passes N and the seed through, prints one progress line per trial and
     writes ``selftest.json`` (NaN as null) into a folder it creates."""
     seen = {}
+    trial = {"hidden": "wind", "first_ranked": "current", "magnitude_fitted": 0.5,
+             "magnitude_true": 0.4, "seconds": 1.25}
 
     def fake_run(n, seed, progress=None):
         seen.update(n=n, seed=seed)
-        trial = {"hidden": "wind", "first_ranked": "current", "magnitude_fitted": 0.5,
-                 "magnitude_true": 0.4, "seconds": 1.25}
         for i in range(n):
             progress(i, trial)
         return {"n": n, "accuracy": float("nan"), "trials": [trial] * n}
@@ -189,7 +189,11 @@ def test_self_test_writes_its_result_and_reports_progress(tmp_path, monkeypatch,
                    "(true 0.4), 1.2 s"]
     saved = json.loads((tmp_path / "a" / "b" / "selftest.json").read_text())
     assert saved["n"] == 2 and saved["accuracy"] is None
+    trial.clear()  # a trial that hides nothing has no magnitude
+    trial.update(hidden="none", first_ranked="not attributable", seconds=3.0)
     assert command.self_test(1, None)["n"] == 1
+    assert capsys.readouterr().err == ("  trial 1/1: hidden none, first-ranked not attributable, "
+                                       "3.0 s\n")
     assert not (tmp_path / "selftest.json").exists()
 
 

@@ -552,8 +552,10 @@ def test_a_near_tie_is_named_in_the_verdict() -> None:
     assert {tuple(part["chosen"]) for part in check["parts"]} == {(first,), (second,)}
     assert check["same_choice"] == 1
     assert diag.verdict.endswith(f"the same 1 of 2 times, and the gap "
-                                 f"{100 * check['shrinkage_holdout']:.0f} % smaller on the runs "
+                                 f"{fit.gap_change(check['shrinkage_holdout'])} on the runs "
                                  "left out")
+    assert fit.gap_change(0.77) == "77 % smaller" and fit.gap_change(-0.104) == "10 % larger"
+    assert fit.gap_change(-0.004) == "0 % smaller"
 
 
 @pytest.mark.parametrize(("hidden", "noise", "tol"), [

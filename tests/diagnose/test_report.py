@@ -85,6 +85,17 @@ def test_parameter_text_global_with_half_width_and_runs_counted() -> None:
     assert report.parameter_text(_table(resistance__scale=(1.23456, 0.0456))) == \
         "scale 1.235 +- 0.046"
     assert report.parameter_text({}) == ""
+    # an interval the data do not bound (JSON null or inf), a value on its bound
+    loose = {"steering_lag.tau_s": {"value": 1.15, "ci95_low": 1.0, "ci95_high": 1.3},
+             "steering_lag.rate_degps": {"value": 49.97, "ci95_low": -np.inf,
+                                         "ci95_high": np.inf},
+             "compass_bias.deviation_c_deg": {"value": 20.0, "ci95_low": 19.0,
+                                              "ci95_high": None, "at_bound": True}}
+    assert report.parameter_text(loose) == (
+        "tau_s 1.15 +- 0.15; rate_degps 49.97 (not determined by the data); "
+        "deviation_c_deg 20 (not determined by the data) (on its bound)")
+    assert report.parameter_text({"a.b": {"value": 20.0, "ci95_high": 21.0,
+                                          "at_bound": True}}) == "b 20 +- 1 (on its bound)"
 
 
 def test_confirmation_lines() -> None:
@@ -153,9 +164,11 @@ def test_markdown_states_the_selection_check() -> None:
         "same_choice": 1, "shrinkage_holdout": 0.5}
     lines = report.markdown(rep).splitlines()
     assert ("Selection check (the choice made on the other held-out data, scored on the part "
-            "left out): the same choice 1 of 2 times; gap 50 % smaller on the parts left out, "
-            "the held-out shrinkage a choice makes on data it has not seen.") in lines
+            "left out): the same choice 1 of 2 times; gap 50 % smaller on the parts left out: "
+            "what a choice does on held-out data it has not seen.") in lines
     assert "| x | 3 | compass_bias | 80 % |" in lines and "| y | 2 | nothing | 0 % |" in lines
+    rep["selection_check"]["shrinkage_holdout"] = -0.104
+    assert "; gap 10 % larger on the parts left out" in report.markdown(rep)
     rep["selection_check"] = {}
     assert "Selection check: needs two or more held-out windows." in report.markdown(rep)
 

@@ -182,39 +182,54 @@ def test_simulated_trial_runs_and_windows(kvlcc2) -> None:
 
 
 def test_small_run_bookkeeping() -> None:
-    """Two trials over two candidates: each hidden once (balanced order); the confusion
-    matrix, accuracy and the magnitude count agree with the trials; progress per trial."""
+    """Three trials over two candidates: each hidden once and one with nothing hidden
+    (balanced order); the confusion matrix, accuracy, false attributions and the magnitude
+    counts agree with the trials; progress per trial."""
     calls = []
-    res = selftest.run(2, seed=4, candidates=("current", "resistance"),
+    res = selftest.run(3, seed=4, candidates=("current", "resistance"),
                        progress=lambda i, t: calls.append((i, t["hidden"])))
     assert res["labels"] == ["current", "resistance", "not attributable"]
-    assert sorted(t["hidden"] for t in res["trials"]) == ["current", "resistance"]
-    assert [c[0] for c in calls] == [0, 1]
+    assert res["hidden_labels"] == ["current", "resistance", "none"]
+    assert sorted(t["hidden"] for t in res["trials"]) == ["current", "none", "resistance"]
+    assert [c[0] for c in calls] == [0, 1, 2]
     conf = np.array(res["confusion"])
-    assert conf.shape == (2, 3) and conf.sum() == 2
+    assert conf.shape == (3, 3) and conf.sum() == 3
     for t in res["trials"]:
         i = res["hidden_labels"].index(t["hidden"])
-        assert conf[i, res["labels"].index(t["first_ranked"])] >= 1
+        assert conf[i, res["labels"].index(t["first_ranked"])] == 1
+        if t["hidden"] == "none":
+            assert "magnitude_true" not in t and t["hidden_values"] is None
+            continue
         assert t["magnitude_rel_error"] == pytest.approx(
             (t["magnitude_fitted"] - t["magnitude_true"]) / t["magnitude_true"])
-    correct = sum(t["hidden"] == t["first_ranked"] for t in res["trials"])
-    assert res["correct"] == correct == int(np.trace(conf[:, :2]))
-    assert res["accuracy"] == correct / 2
-    assert res["magnitude_within_20pct"] == sum(abs(t["magnitude_rel_error"]) <= 0.2
-                                                for t in res["trials"])
-    assert res["ship"] == "kvlcc2" and res["seed"] == 4 and res["n"] == 2
+    correct = sum(t["correct"] for t in res["trials"])
+    assert res["correct"] == correct == int(np.trace(conf))
+    assert res["accuracy"] == correct / 3
+    null = next(t for t in res["trials"] if t["hidden"] == "none")
+    assert res["n_none"] == 1 and res["false_attributions"] == int(not null["correct"])
+    sized = [t for t in res["trials"] if t["hidden"] != "none"]
+    assert res["n_hidden"] == 2 and res["magnitude_within_20pct"] == sum(
+        abs(t["magnitude_rel_error"]) <= 0.2 for t in sized)
+    assert res["n_ranked"] == sum(t["correct"] for t in sized)
+    assert res["ship"] == "kvlcc2" and res["seed"] == 4 and res["n"] == 3
 
 
 def test_confusion_text() -> None:
     res = {"labels": ["current", "propeller_asymmetry", "not attributable"],
-           "hidden_labels": ["current", "propeller_asymmetry"],
-           "confusion": [[3, 0, 1], [1, 2, 0]], "correct": 5, "n": 7, "accuracy": 5 / 7,
-           "magnitude_within_20pct": 4}
+           "hidden_labels": ["current", "propeller_asymmetry", "none"],
+           "confusion": [[3, 0, 1], [1, 2, 0], [1, 0, 1]], "correct": 6, "n": 9,
+           "accuracy": 6 / 9, "magnitude_within_20pct": 4, "n_hidden": 7,
+           "magnitude_within_20pct_ranked": 3, "n_ranked": 5, "n_none": 2,
+           "false_attributions": 1}
     lines = selftest.confusion_text(res).splitlines()
     assert lines[0] == f"{'hidden / ranked':<20}{'current':>9}{'propelle':>9}{'not attr':>9}"
     assert lines[1] == f"{'current':<20}{3:>9d}{0:>9d}{1:>9d}"
     assert lines[2] == f"{'propeller_asymmetry':<20}{1:>9d}{2:>9d}{0:>9d}"
-    assert lines[3] == "first-ranked correct: 5/7 (71 %); magnitude within 20 %: 4/7"
+    assert lines[3] == f"{'none':<20}{1:>9d}{0:>9d}{1:>9d}"
+    assert lines[4] == ("correct: 6/9 (67 %; with nothing hidden, 'not attributable' is "
+                        "correct); attributed with nothing hidden: 1/2")
+    assert lines[5] == ("magnitude within 20 %: 3/5 of the hidden effects found, 4/7 of all "
+                        "hidden effects fitted alone")
 
 
 # --- the hidden conditions reach the track and the instruments --------------------------------
@@ -322,7 +337,7 @@ def test_run_bookkeeping_on_a_stand_in_diagnosis(monkeypatch) -> None:
         "c": {"current": {"north_mps": 0.5, "east_mps": 0.0}},
         "b": {"current": {"north_mps": 9.0, "east_mps": 9.0}}})
     res = fit.Candidate(("resistance",), {"resistance": {"scale": 1.2}}, {}, 1.0, 5.0, 1)
-    verdicts = iter([True, False])
+    verdicts = iter([True, False, True])
     seen = []
 
     def diagnose(spec, dtrain, dhold, candidates, forward_steps):
@@ -334,13 +349,18 @@ def test_run_bookkeeping_on_a_stand_in_diagnosis(monkeypatch) -> None:
     monkeypatch.setattr(selftest, "prepare", lambda spec, train, hold: (
         SimpleNamespace(windows=SimpleNamespace(run_names=("a", "c"))), "hold"))
     monkeypatch.setattr(selftest.fit, "diagnose", diagnose)
-    out = selftest.run(2, seed=3, candidates=("current", "resistance"))
-    assert [s[:2] for s in seen] == [(("current", "resistance"), 1)] * 2
+    out = selftest.run(3, seed=3, candidates=("current", "resistance"))
+    assert [s[:2] for s in seen] == [(("current", "resistance"), 1)] * 3
     by_name = {t["hidden"]: t for t in out["trials"]}
-    assert set(by_name) == {"current", "resistance"}
+    assert set(by_name) == {"current", "resistance", "none"}
     first = out["trials"][0]
     assert first["first_ranked"] == "current"
     assert out["trials"][1]["first_ranked"] == "not attributable"
+    # nothing hidden but an effect attributed: a false attribution, with what it claims
+    null = by_name["none"]
+    assert null["first_ranked"] == "current" and not null["correct"]
+    assert null["shrinkage_holdout"] == pytest.approx(0.75)
+    assert out["n_none"] == 1 and out["false_attributions"] == 1
     t = by_name["current"]
     assert t["magnitude_fitted"] == pytest.approx(0.4)
     assert t["fitted_values"] == {"north_mps": pytest.approx(0.4), "east_mps": 0.0}
@@ -353,7 +373,7 @@ def test_run_bookkeeping_on_a_stand_in_diagnosis(monkeypatch) -> None:
     assert all(x["gap_over_floor"] == pytest.approx(2.5) for x in out["trials"])
     conf = np.array(out["confusion"])
     row = out["hidden_labels"].index(out["trials"][1]["hidden"])
-    assert conf[row, 2] == 1 and conf.sum() == 2
+    assert conf[row, 2] == 1 and conf[2, 0] == 1 and conf.sum() == 3
 
 
 def test_self_test_pipeline_recovers_a_hidden_compass_bias(kvlcc2) -> None:

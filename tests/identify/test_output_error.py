@@ -367,3 +367,36 @@ def test_position_channels_use_the_replayed_track() -> None:
     assert np.abs(r[..., 1]).max() < 1e-9
     velocity = output_error.Residuals(param, shifted)
     assert np.abs(velocity(param.initial()[None])).max() < 1e-9
+
+
+def test_a_coefficient_the_data_do_not_move_has_no_interval() -> None:
+    """A column of zeros (a rate limit never reached) or two columns that move the residuals
+    alike: the data do not determine those coefficients, and their interval is infinite (the
+    pseudo-inverse gave 0 for the column of zeros); the determined one keeps its textbook
+    interval."""
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(40, 1))
+    b = a[:, 0] * 1.5 + rng.normal(0.0, 0.1, 40)
+    param = Parametrisation.of(load_ship("cargo"), ["K_prime", "T_prime"],
+                               {"K_prime": (-np.inf, np.inf), "T_prime": (0.0, 10.0)})
+    zero = np.hstack([a, np.zeros((40, 1))])
+    fit = output_error.fit(param, None, x0=np.array([0.3, 2.0]), residuals=_Linear(zero, b, True))
+    assert fit.std[1] == np.inf and fit.ci95[1] == np.inf and np.isfinite(fit.std[0])
+    r = a[:, 0] * fit.x[0] - b
+    assert fit.std[0] == pytest.approx(np.sqrt(r @ r / 38 / (a[:, 0] @ a[:, 0])), rel=1e-6)
+    table = fit.table()
+    assert table["T_prime"]["ci95_high"] == np.inf and not table["T_prime"]["at_bound"]
+    twins = np.hstack([a, 2.0 * a])
+    fit = output_error.fit(param, None, x0=np.array([0.3, 2.0]), residuals=_Linear(twins, b, True))
+    assert np.isinf(fit.std).all()
+    jac = np.hstack([a, rng.normal(size=(40, 1)), np.zeros((40, 1))])
+    assert output_error.undetermined(jac).tolist() == [False, False, True]
+    assert output_error.undetermined(jac[:1]).tolist() == [True, True, True]  # one residual
+
+
+def test_a_value_on_its_bound_is_flagged() -> None:
+    assert output_error.on_bound(10.0, 0.0, 10.0) and output_error.on_bound(0.0, 0.0, 10.0)
+    assert not output_error.on_bound(9.99, 0.0, 10.0)
+    assert output_error.on_bound(-1.0, -1.0, np.inf) and not output_error.on_bound(
+        5.0, -1.0, np.inf)
+    assert not output_error.on_bound(3.0, -np.inf, np.inf)

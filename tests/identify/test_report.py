@@ -282,3 +282,13 @@ def test_markdown_numbers_are_the_validation_results_recomputed() -> None:
     zz = man["zigzag_10_10"]["indices"]
     assert float(cells[("zigzag_10_10", "first_overshoot_deg")][0]) == pytest.approx(
         zz["first_overshoot_deg"], rel=5e-4)
+
+
+def test_interval_text() -> None:
+    assert report.interval_text({"ci95_low": 1.0, "ci95_high": 2.5}) == "1 .. 2.5"
+    assert report.interval_text({"ci95_low": -np.inf, "ci95_high": np.inf}) == (
+        "not determined by the data")
+    assert report.interval_text({"ci95_low": None, "ci95_high": None}) == (
+        "not determined by the data")
+    assert report.interval_text({"ci95_low": 1.0, "ci95_high": 2.0, "at_bound": True}) == (
+        "1 .. 2, on its bound")

@@ -97,6 +97,8 @@ def test_fitted_coefficients_are_marked_with_their_interval(tmp_path: Path) -> N
     assert lines["K_prime"] == "  K_prime: 2.5   # identified, nominal 95 % interval +-0.0123"
     assert "identified" in lines["T_prime"] and "+-0.5" in lines["T_prime"]
     assert "#" not in lines["n3_prime"]
+    body = render(spec, "c", "d", "s", {"K_prime": (2.5, float("inf"))})
+    assert "  K_prime: 2.5   # identified, not determined by the data" in body.splitlines()
     # the value written is the fitted one, not the spec's
     assert parse_yaml(body).data["coefficients"]["K_prime"] == 2.5
     assert render(spec, "c", "d", "s", {}).count("identified") == 0

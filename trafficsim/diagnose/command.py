@@ -229,9 +229,10 @@ def self_test(n: int, out: Path | None, seed: int = 0) -> dict[str, Any]:
     if out is not None:
         refuse_other_results(out, "diagnose", "a self-test")
     def progress(i: int, t: dict[str, Any]) -> None:
+        size = (f"magnitude {t['magnitude_fitted']:.3g} (true {t['magnitude_true']:.3g}), "
+                if "magnitude_true" in t else "")
         print(f"  trial {i + 1}/{n}: hidden {t['hidden']}, first-ranked {t['first_ranked']}, "
-              f"magnitude {t['magnitude_fitted']:.3g} (true {t['magnitude_true']:.3g}), "
-              f"{t['seconds']:.1f} s", file=sys.stderr, flush=True)
+              f"{size}{t['seconds']:.1f} s", file=sys.stderr, flush=True)
 
     res = selftest.run(n, seed, progress=progress)
     if out is not None:

@@ -806,6 +806,12 @@ def selection_check(base: Candidate, singles: Sequence[Candidate], chosen: Candi
             "shrinkage_holdout": 1.0 - after / max(before, 1e-300)}
 
 
+def gap_change(shrinkage: float) -> str:
+    """``'25 % smaller'`` for a shrinkage of 0.25, ``'10 % larger'`` for -0.1."""
+    pct = round(100 * shrinkage)
+    return f"{pct} % smaller" if pct >= 0 else f"{-pct} % larger"
+
+
 def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
              candidates: Sequence[str] = effects.NAMES, forward_steps: int = 3,
              max_nfev: int = 30, refit: Sequence[str] = ()) -> Diagnosis:
@@ -870,8 +876,8 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
         n, same = len(check["parts"]), check["same_choice"]
         word = "half" if check["parts"][0]["left_out"].endswith("half") else "run"
         verdict += (f"; chosen without each held-out {word} in turn: the same {same} of {n} "
-                    f"times, and the gap {100 * check['shrinkage_holdout']:.0f} % smaller on "
-                    f"the {word}s left out")
+                    f"times, and the gap {gap_change(check['shrinkage_holdout'])} on the "
+                    f"{word}s left out")
     diag = Diagnosis(base, sel.ranked, chosen, sel.steps, floor_t, floor_h, n_eff,
                      sel.attributable, verdict, 0.0, {}, refit, check)
     diag.residuals = residual_summary(spec, diag, train, hold, sc)

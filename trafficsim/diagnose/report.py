@@ -14,6 +14,7 @@ after the chosen effects.
 from __future__ import annotations
 
 import io
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from trafficsim.diagnose.data import PHASES, Dataset
-from trafficsim.diagnose.fit import Diagnosis, penalised, phase_shrinkage, scales
+from trafficsim.diagnose.fit import Diagnosis, gap_change, penalised, phase_shrinkage, scales
 from trafficsim.io.results import atomic_write, write_json
 
 _UNITS = {"north": "m", "east": "m", "psi": "deg", "u": "m/s", "v": "m/s", "r": "deg/s",
@@ -160,9 +161,8 @@ def check_lines(check: Mapping[str, Any]) -> list[str]:
         return ["", "Selection check: needs two or more held-out windows."]
     lines = ["", "Selection check (the choice made on the other held-out data, scored on the "
              f"part left out): the same choice {check['same_choice']} of "
-             f"{len(check['parts'])} times; gap {100 * check['shrinkage_holdout']:.0f} % "
-             "smaller on the parts left out, the held-out shrinkage a choice makes on data it "
-             "has not seen.", "",
+             f"{len(check['parts'])} times; gap {gap_change(check['shrinkage_holdout'])} on "
+             "the parts left out: what a choice does on held-out data it has not seen.", "",
              "| left out | windows | chosen without it | shrinkage there |", "|---|---|---|---|"]
     for part in check["parts"]:
         lines.append(f"| {part['left_out']} | {part['windows']} | "
@@ -174,12 +174,20 @@ def check_lines(check: Mapping[str, Any]) -> list[str]:
 def parameter_text(table: Mapping[str, Mapping[str, float]]) -> str:
     """Fitted parameters in one line: global ones with their 95 % half-width; per-run ones
     (``effect.key@run``) and refitted base coefficients (``base.*``) counted only."""
-    glob = [f"{k.split('.', 1)[1]} {v['value']:.4g} +- {v['ci95_high'] - v['value']:.2g}"
+    glob = [f"{k.split('.', 1)[1]} {v['value']:.4g} {_half_width(v)}"
             for k, v in table.items() if "@" not in k and not k.startswith("base.")]
     runs = {k.split("@", 1)[1] for k in table if "@" in k}
     if runs:
         glob.append(f"one value per run ({len(runs)} runs, report.json)")
     return "; ".join(glob)
+
+
+def _half_width(v: Mapping[str, Any]) -> str:
+    """``'+- 0.1'``, or ``'(not determined by the data)'``; ``' (on its bound)'`` added."""
+    high = v.get("ci95_high")
+    half = high - v["value"] if high is not None else math.inf
+    text = f"+- {half:.2g}" if math.isfinite(half) else "(not determined by the data)"
+    return text + (" (on its bound)" if v.get("at_bound") else "")
 
 
 def confirmation_lines(conf: Mapping[str, Any]) -> list[str]:

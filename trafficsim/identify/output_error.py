@@ -138,11 +138,12 @@ class FitResult:
     history_cost: list[float] = field(default_factory=list)
     history_x: list[np.ndarray] = field(default_factory=list)
 
-    def table(self) -> dict[str, dict[str, float]]:
-        """Per coefficient: initial, value, std, 95 % interval, bounds."""
+    def table(self) -> dict[str, dict[str, Any]]:
+        """Per coefficient: initial, value, std, 95 % interval (infinite where the data do
+        not determine it, :func:`undetermined`), bounds and whether the value is on one."""
         return {n: {"initial": float(a), "value": float(b), "std": float(s),
                     "ci95_low": float(b - c), "ci95_high": float(b + c),
-                    "lower": float(lo), "upper": float(hi)}
+                    "lower": float(lo), "upper": float(hi), "at_bound": on_bound(b, lo, hi)}
                 for n, a, b, s, c, lo, hi in zip(self.names, self.x0, self.x, self.std,
                                                  self.ci95, self.lower, self.upper, strict=True)}
 
@@ -156,6 +157,30 @@ class FitResult:
                 "diverged_windows": self.diverged_windows,
                 "correlation": {a: {b: float(self.corr[i, j]) for j, b in enumerate(self.names)}
                                 for i, a in enumerate(self.names)}}
+
+
+def on_bound(value: float, lower: float, upper: float) -> bool:
+    """Whether a fitted value sits on a finite bound (within 1e-6 of the bounds' width, or
+    of the value's size where the other bound is infinite): its interval then means little."""
+    width = upper - lower if np.isfinite(upper - lower) else max(abs(value), 1.0)
+    return bool(value - lower <= 1e-6 * width or upper - value <= 1e-6 * width)
+
+
+def undetermined(jmat: np.ndarray, rcond: float = 1e-10) -> np.ndarray:
+    """``(p,)`` the coefficients the data do not determine: those with a share in a direction
+    of the column-scaled Jacobian whose singular value is below ``rcond`` times the largest (a
+    column of zeros, or columns that move the residuals alike). Their variance is unbounded;
+    the pseudo-inverse would report a finite one (zero for a column of zeros)."""
+    norms = np.linalg.norm(jmat, axis=0)
+    out = ~(norms > 0.0)
+    live = np.flatnonzero(~out)
+    if live.size:  # singular values of R (QR of the scaled columns) are those of the columns
+        _, sv, vt = np.linalg.svd(np.linalg.qr(jmat[:, live] / norms[live], mode="r"))
+        weak = np.ones(live.size, dtype=bool)
+        weak[: sv.size] = sv <= rcond * sv[0]
+        if weak.any():
+            out[live[np.abs(vt[weak]).max(axis=0) > 1e-6]] = True
+    return out
 
 
 def fd_steps(x: np.ndarray, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray,
@@ -241,6 +266,7 @@ def fit(param: Parametrisation, windows: Windows, x0: np.ndarray | None = None,
     s2 = float(r @ r) / dof
     cov = s2 * np.linalg.pinv(jmat.T @ jmat)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    std[undetermined(jmat)] = np.inf
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
     corr = np.nan_to_num(corr)

@@ -64,6 +64,18 @@ def convergence_plot(path: Path, fit: FitResult | None, ekf: EKFResult | None) -
     atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
 
+def interval_text(c: Mapping[str, Any]) -> str:
+    """A coefficient's nominal 95 % interval ``'low .. high'``; ``'not determined by the
+    data'`` where it is unbounded (written as null in JSON); ``', on its bound'`` added where
+    the value sits on one."""
+    low, high = c.get("ci95_low"), c.get("ci95_high")
+    if low is None or high is None or not (np.isfinite(low) and np.isfinite(high)):
+        text = "not determined by the data"
+    else:
+        text = f"{_fmt(low)} .. {_fmt(high)}"
+    return text + (", on its bound" if c.get("at_bound") else "")
+
+
 def _fmt(value: Any, digits: int = 4) -> str:
     if value is None:
         return "-"
@@ -112,8 +124,7 @@ def markdown(report: Mapping[str, Any]) -> str:
                   "|---|---|---|---|---|"]
         for name, c in fit["coefficients"].items():
             lines.append(f"| {name} | {_fmt(c['initial'])} | {_fmt(c['value'])} | "
-                         f"{_fmt(c['ci95_low'])} .. {_fmt(c['ci95_high'])} | "
-                         f"{_fmt(c['lower'])} .. {_fmt(c['upper'])} |")
+                         f"{interval_text(c)} | {_fmt(c['lower'])} .. {_fmt(c['upper'])} |")
         lines.append("")
     val = report["validation"]
     lines += ["## Prediction error", "",

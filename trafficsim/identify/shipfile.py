@@ -83,8 +83,9 @@ def render(spec: Mapping[str, Any], name: str, description: str, source: str,
     for key, value in spec["coefficients"].items():
         if key in fitted:
             v, ci = fitted[key]
-            lines.append(f"  {key}: {number(v)}   # identified, nominal 95 % interval "
-                         f"+-{abs(ci):.3g}")
+            note = (f"nominal 95 % interval +-{abs(ci):.3g}" if math.isfinite(ci)
+                    else "not determined by the data")
+            lines.append(f"  {key}: {number(v)}   # identified, {note}")
         else:
             lines.append(f"  {key}: {number(value)}")
     for key in ("autopilot", "integration"):
