@@ -332,5 +332,13 @@ def test_end_to_end_finds_the_wind_and_confirms_it(windy_runs, tmp_path, capsys)
         assert abs(row["direction_error_deg"]) < 15.0
         assert row["logged_towards_deg"] == pytest.approx(200.0)
         assert row["role"] == "training and holdout"
-    assert (out / "report.md").stat().st_size > 0
+    md = (out / "report.md").read_text()
+    assert rep["data"]["ship"] == "kvlcc2" and "- Ship: kvlcc2" in md
+    assert f"- Training runs: {paths[0].name}, {paths[1].name}" in md
+    assert "- Held out: alternate windows of the same runs (no --holdout given)" in md
+    assert (f"- Windows: {rep['windows']['train']} training, {rep['windows']['holdout']} held "
+            "out,") in md
+    assert "- Candidates: wind, current" in md and "Give `--holdout` runs for that." in md
+    assert rep["attributable"] and rep["verdict"].endswith(  # says what was held out
+        "(held out: alternate windows of the same runs, not runs the fit has not seen)")
     assert (out / "residuals_by_phase.png").read_bytes()[:4] == b"\x89PNG"

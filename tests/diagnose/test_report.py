@@ -173,6 +173,29 @@ def test_markdown_states_the_selection_check() -> None:
     assert "Selection check: needs two or more held-out windows." in report.markdown(rep)
 
 
+def test_markdown_setup_names_ship_runs_split_windows_and_candidates() -> None:
+    rep = _rep()
+    assert "## Setup" not in report.markdown(rep)  # (no data: a report of the Python API)
+    rep.update(data={"ship": "ships/x.yaml", "train": ["/d/a.csv", "/d/b.csv"],
+                     "holdout": ["/d/c.csv"], "holdout_split": "held-out runs",
+                     "working_dt_s": 0.5, "horizon_s": 22.5,
+                     "wind_columns": "withheld (not used by the diagnosis)"},
+               windows={"train": 40, "holdout": 12}, candidates=["wind", "current"],
+               refit=["R0"])
+    lines = report.markdown(rep).splitlines()
+    at = lines.index("## Setup")
+    assert lines[at + 2: at + 8] == [
+        "- Ship: ships/x.yaml; base coefficients refitted with every candidate: R0",
+        "- Training runs: a.csv, b.csv", "- Held out: c.csv",
+        "- Windows: 40 training, 12 held out, 22.5 s each, replayed at 0.5 s; wind columns "
+        "withheld (not used by the diagnosis)", "- Candidates: wind, current", ""]
+    assert at < lines.index("## Where")
+    rep["data"].update(holdout=[], holdout_split="alternate windows of the same runs")
+    text = report.markdown(rep)
+    assert "- Held out: alternate windows of the same runs\n" in text
+    assert "not on runs it has not seen. Give `--holdout` runs for that." in text
+
+
 def test_markdown_with_nothing_chosen_confirmation_and_notes() -> None:
     rep = _rep(chosen=())
     rep["notes"] = "ignored entries: x"

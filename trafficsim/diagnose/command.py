@@ -128,8 +128,12 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
         train, hold = every.subset(~odd), every.subset(odd)
         split = "alternate windows of the same runs (no --holdout given)"
     diag = fit.diagnose(spec, train, hold, names, refit=refit_names)
+    if not hold_files and diag.attributable:
+        diag.verdict += (" (held out: alternate windows of the same runs, not runs the fit has "
+                         "not seen)")
     extra: dict[str, Any] = {
-        "data": {"train": [str(p) for p in train_files], "holdout": [str(p) for p in hold_files],
+        "data": {"ship": ship, "train": [str(p) for p in train_files],
+                 "holdout": [str(p) for p in hold_files],
                  "holdout_split": split, "working_dt_s": work_dt, "horizon_s": horizon,
                  "wind_columns": "withheld (not used by the diagnosis)"},
         "refit": list(refit_names),

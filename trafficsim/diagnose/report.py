@@ -108,7 +108,7 @@ def markdown(rep: Mapping[str, Any]) -> str:
     g = rep["gap"]
     hold = rep["residuals"]["holdout"]
     lines = [f"# Sim-to-real gap diagnosis: {rep.get('ship')}", "",
-             f"**Verdict:** {rep['verdict']}", "",
+             f"**Verdict:** {rep['verdict']}", "", *setup_lines(rep),
              "## Where", "",
              f"Held-out gap {g['holdout_gap_over_floor']:.1f} times the data's noise floor. "
              f"Phases by share of the held-out gap: "
@@ -152,6 +152,31 @@ def markdown(rep: Mapping[str, Any]) -> str:
     if "notes" in rep:
         lines += ["## Notes", "", str(rep["notes"]), ""]
     return "\n".join(lines)
+
+
+def setup_lines(rep: Mapping[str, Any]) -> list[str]:
+    """What was diagnosed and how: ship, runs, split, windows, candidates (nothing without
+    ``data``, e.g. a report made by the Python API alone)."""
+    data = rep.get("data")
+    if not data:
+        return []
+    win = rep.get("windows", {})
+    hold = ", ".join(Path(f).name for f in data["holdout"]) or data["holdout_split"]
+    lines = ["## Setup", "",
+             f"- Ship: {data.get('ship', rep.get('ship'))}"
+             + (f"; base coefficients refitted with every candidate: {', '.join(rep['refit'])}"
+                if rep.get("refit") else ""),
+             f"- Training runs: {', '.join(Path(f).name for f in data['train'])}",
+             f"- Held out: {hold}",
+             f"- Windows: {win.get('train', '?')} training, {win.get('holdout', '?')} held out, "
+             f"{data['horizon_s']:.3g} s each, replayed at {data['working_dt_s']:.3g} s; wind "
+             f"columns {data['wind_columns']}",
+             f"- Candidates: {', '.join(rep.get('candidates', []))}"]
+    if not data["holdout"]:
+        lines.append("- The held-out windows come from the training runs themselves, in the "
+                     "same conditions: they test the fit on data it has not seen, not on runs "
+                     "it has not seen. Give `--holdout` runs for that.")
+    return [*lines, ""]
 
 
 def check_lines(check: Mapping[str, Any]) -> list[str]:
