@@ -200,6 +200,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="N trials with a random hidden effect; prints the confusion matrix")
     diag.add_argument("--seed", type=_non_negative_int, default=None,
                       help="self-test seed (default 0)")
+    diag.add_argument("--no-progress", action="store_true",
+                      help="no progress lines on stderr")
     diag.set_defaults(func=_cmd_diagnose)
 
     val = sub.add_parser("validate", help="check scenario, ship, rules or campaign files "
@@ -516,7 +518,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     if testing:
         from trafficsim.diagnose.selftest import confusion_text
 
-        res = command.self_test(args.self_test, args.out, 0 if args.seed is None else args.seed)
+        res = command.self_test(args.self_test, args.out, 0 if args.seed is None else args.seed,
+                                progress=not args.no_progress)
         print(confusion_text(res))
         print(f"{res['n']} trials in {res['elapsed_s']:.1f} s")
         return 0
@@ -524,7 +527,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         raise InputError("diagnose needs --ship, --data and --out (or --self-test N)",
                          key="--ship")
     rep = command.diagnose(args.ship, args.data, args.out, args.holdout, args.horizon_s,
-                           args.dt_s, args.effects, args.refit)
+                           args.dt_s, args.effects, args.refit, progress=not args.no_progress)
     print(rep["verdict"])
     for i, r in enumerate(rep["ranking"][:5], 1):
         par = parameter_text(r["parameters"])

@@ -175,14 +175,14 @@ def test_self_test_writes_its_result_and_reports_progress(tmp_path, monkeypatch,
              "magnitude_true": 0.4, "seconds": 1.25}
 
     def fake_run(n, seed, progress=None):
-        seen.update(n=n, seed=seed)
+        seen.update(n=n, seed=seed, progress=progress)
         for i in range(n):
             progress(i, trial)
         return {"n": n, "accuracy": float("nan"), "trials": [trial] * n}
 
     monkeypatch.setattr(selftest, "run", fake_run)
     res = command.self_test(2, tmp_path / "a" / "b", seed=7)
-    assert seen == {"n": 2, "seed": 7} and res["n"] == 2
+    assert seen["n"] == 2 and seen["seed"] == 7 and res["n"] == 2
     err = capsys.readouterr().err.splitlines()
     assert err == ["  trial 1/2: hidden wind, first-ranked current, magnitude 0.5 (true 0.4), "
                    "1.2 s", "  trial 2/2: hidden wind, first-ranked current, magnitude 0.5 "
@@ -194,6 +194,9 @@ def test_self_test_writes_its_result_and_reports_progress(tmp_path, monkeypatch,
     assert command.self_test(1, None)["n"] == 1
     assert capsys.readouterr().err == ("  trial 1/1: hidden none, first-ranked not attributable, "
                                        "3.0 s\n")
+    seen.clear()
+    command.self_test(0, None, progress=False)
+    assert seen["progress"] is None and capsys.readouterr().err == ""
     assert not (tmp_path / "selftest.json").exists()
 
 
@@ -322,6 +325,7 @@ def test_end_to_end_finds_the_wind_and_confirms_it(windy_runs, tmp_path, capsys)
     printed = capsys.readouterr()
     assert rc == 0, printed.err
     assert "1. wind" in printed.out and f"results: {out / 'report.md'}" in printed.out
+    assert "  wind (1/2): held-out gap " in printed.err  # progress as each fit ends
     rep = json.loads((out / "report.json").read_text())
     assert rep["ranking"][0]["effect"] == "wind"
     assert rep["candidates"] == ["wind", "current"] and rep["refit"] == []

@@ -617,6 +617,16 @@ def test_noise_free_base_runs_are_not_attributable() -> None:
     assert "held-out gap is 0.0 times" in diag.verdict
 
 
+def test_progress_names_each_fit_as_it_ends() -> None:
+    train, hold = trio(None, seed=None)
+    lines: list[str] = []
+    fit.diagnose(SPEC, train, hold, ("resistance", "compass_bias"), forward_steps=1,
+                 progress=lines.append)
+    assert len(lines) == 3 and lines[0].startswith("base: held-out cost ")
+    assert lines[1].startswith("resistance (1/2): held-out gap ") and lines[1].endswith(" s)")
+    assert lines[2].startswith("compass_bias (2/2): held-out gap ")
+
+
 def test_below_the_floor_the_base_is_chosen_and_the_trace_kept() -> None:
     """A rudder offset of 3 deg under full noise: the effect shrinks the held-out cost by
     more than 5 % and the selection adds it, but the gap is below 3 times the floor, so the

@@ -130,7 +130,8 @@ def test_markdown_ekf_and_fit_tables() -> None:
     assert ("12 evaluations, 5 Jacobians, 3.2 s; cost 1234 -> 0.5; "
             "`ftol` condition satisfied.") in lines
     assert "| K_prime | 2 | 2.5 | 2.4 .. 2.6 | 0.01 .. 50 |" in lines
-    assert "| T_prime | 3 | 3.5 | - .. - | - .. - |" in lines  # unknown interval, unbounded
+    # an interval the data do not bound (null in JSON), no bounds
+    assert "| T_prime | 3 | 3.5 | not determined by the data | - .. - |" in lines
 
 
 def test_markdown_prediction_rows_training_first_then_holdout() -> None:

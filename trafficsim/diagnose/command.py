@@ -13,6 +13,7 @@ afterwards (``confirmation``).
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -95,12 +96,14 @@ def _refit(spec: dict[str, Any], refit: str | Sequence[str] | None) -> tuple[str
 def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path] = (),
              horizon_s: float | None = None, dt_s: float | None = None,
              candidates: Sequence[str] | None = None,
-             refit: str | Sequence[str] | None = None) -> dict[str, Any]:
+             refit: str | Sequence[str] | None = None, progress: bool = False
+             ) -> dict[str, Any]:
     """Diagnose the runs ``data`` (held-out ``holdout``) against ``ship``; write the reports.
 
     ``refit``: base coefficients fitted jointly with every candidate (``"default"``: the
     family's subset of ``trafficsim identify``, :data:`trafficsim.identify.parameters.
-    DEFAULT_FIT`; a comma-separated string or a sequence of names)."""
+    DEFAULT_FIT`; a comma-separated string or a sequence of names). ``progress``: a line on
+    stderr as each fit ends."""
     start = time.perf_counter()
     refuse_other_results(out, "diagnose", "a diagnosis")
     spec = load_base(ship)
@@ -127,7 +130,8 @@ def diagnose(ship: str, data: Sequence[Path], out: Path, holdout: Sequence[Path]
                              "longer runs", key="--data")
         train, hold = every.subset(~odd), every.subset(odd)
         split = "alternate windows of the same runs (no --holdout given)"
-    diag = fit.diagnose(spec, train, hold, names, refit=refit_names)
+    diag = fit.diagnose(spec, train, hold, names, refit=refit_names,
+                        progress=_stderr_line if progress else None)
     if not hold_files and diag.attributable:
         diag.verdict += (" (held out: alternate windows of the same runs, not runs the fit has "
                          "not seen)")
@@ -224,21 +228,25 @@ def confirmation(diag: fit.Diagnosis, runs: Sequence[preprocess.Kinematics],
     return {"text": " ".join(text), **out}
 
 
-def self_test(n: int, out: Path | None, seed: int = 0) -> dict[str, Any]:
-    """``--self-test N``: injection and recovery; writes ``selftest.json`` if ``out``."""
-    import sys
+def _stderr_line(text: str) -> None:
+    print(f"  {text}", file=sys.stderr, flush=True)
 
+
+def self_test(n: int, out: Path | None, seed: int = 0, progress: bool = True
+              ) -> dict[str, Any]:
+    """``--self-test N``: injection and recovery; writes ``selftest.json`` if ``out``;
+    ``progress``: a line per trial on stderr."""
     from trafficsim.diagnose import selftest
 
     if out is not None:
         refuse_other_results(out, "diagnose", "a self-test")
-    def progress(i: int, t: dict[str, Any]) -> None:
+    def trial_line(i: int, t: dict[str, Any]) -> None:
         size = (f"magnitude {t['magnitude_fitted']:.3g} (true {t['magnitude_true']:.3g}), "
                 if "magnitude_true" in t else "")
-        print(f"  trial {i + 1}/{n}: hidden {t['hidden']}, first-ranked {t['first_ranked']}, "
-              f"{size}{t['seconds']:.1f} s", file=sys.stderr, flush=True)
+        _stderr_line(f"trial {i + 1}/{n}: hidden {t['hidden']}, first-ranked "
+                     f"{t['first_ranked']}, {size}{t['seconds']:.1f} s")
 
-    res = selftest.run(n, seed, progress=progress)
+    res = selftest.run(n, seed, progress=trial_line if progress else None)
     if out is not None:
         from trafficsim.io.results import write_json
 

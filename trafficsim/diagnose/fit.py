@@ -55,7 +55,7 @@ from __future__ import annotations
 
 import functools
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -814,24 +814,34 @@ def gap_change(shrinkage: float) -> str:
 
 def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
              candidates: Sequence[str] = effects.NAMES, forward_steps: int = 3,
-             max_nfev: int = 30, refit: Sequence[str] = ()) -> Diagnosis:
+             max_nfev: int = 30, refit: Sequence[str] = (),
+             progress: Callable[[str], None] | None = None) -> Diagnosis:
     """Single-effect fits, ranking, forward selection, the noise-floor verdict and its
     :func:`selection_check`.
 
     ``refit``: base coefficients fitted jointly with every candidate set, the base included
-    (the base without effects is then the base refitted on the training runs)."""
+    (the base without effects is then the base refitted on the training runs).
+    ``progress``: called with a line of text as each fit ends."""
     t0 = time.perf_counter()
+    say = progress or (lambda text: None)
     length = float(spec["particulars"]["length_m"])
     sc = scales(train, length)
     refit = tuple(refit)
     base = fit_set(spec, (), train, hold, sc, refit=refit, max_nfev=max_nfev)
+    say(f"base{' refitted' if refit else ''}: held-out cost {base.cost_hold:.4g} "
+        f"({time.perf_counter() - t0:.1f} s)")
     start_coeffs = base.coefficients or None
     res_h = EffectResiduals(EffectSet.of(spec, ()), hold, sc)
     n_eff = hold.windows.w * len(res_h.channels)
     floor_t = EffectResiduals(EffectSet.of(spec, ()), train, sc).floor()
     floor_h = res_h.floor()
-    singles = [fit_set(spec, (name,), train, hold, sc, max_nfev=max_nfev, refit=refit,
-                       coefficients=start_coeffs) for name in candidates]
+    singles = []
+    for k, name in enumerate(candidates, 1):
+        t1 = time.perf_counter()
+        singles.append(fit_set(spec, (name,), train, hold, sc, max_nfev=max_nfev, refit=refit,
+                               coefficients=start_coeffs))
+        say(f"{name} ({k}/{len(candidates)}): held-out gap "
+            f"{gap_change(singles[-1].shrinkage(base)[1])} ({time.perf_counter() - t1:.1f} s)")
     fitted: dict[frozenset[str], Candidate] = {}
 
     def joint(chosen: Candidate, single: Candidate) -> Candidate:
@@ -846,10 +856,13 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
                       for a, b in zip(chosen.fold_run_values or ({}, {}),
                                       single.fold_run_values or ({}, {}), strict=True)
                       ) if chosen.fold_run_values or single.fold_run_values else ()
-        fitted[frozenset(names)] = fit_set(
+        t1 = time.perf_counter()
+        got = fitted[frozenset(names)] = fit_set(
             spec, names, train, hold, sc, start, max_nfev, refit, run_start or None,
             chosen.coefficients or start_coeffs, folds)
-        return fitted[frozenset(names)]
+        say(f"{' + '.join(names)} jointly: held-out gap {gap_change(got.shrinkage(base)[1])} "
+            f"({time.perf_counter() - t1:.1f} s)")
+        return got
 
     sel = select(base, singles, Scoring(None, n_eff, len(_runs(hold)), floor_h), joint,
                  forward_steps)
