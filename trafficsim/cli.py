@@ -482,7 +482,8 @@ def _cmd_identify(args: argparse.Namespace) -> int:
               f"{fit['cost_final']:.4g} in {fit['evaluations']} evaluations "
               f"({fit['elapsed_s']:.1f} s)")
         for name, c in fit["coefficients"].items():
-            print(f"  {name}: {c['value']:.5g} (95 % {interval_text(c)})")
+            print(f"  {name}: {c['value']:.5g} (95 % {interval_text(c)}; windows clustered "
+                  f"{interval_text(c, 'ci95_clustered')})")
     elif rep["ekf"] is not None:
         for name, c in rep["ekf"]["coefficients"].items():
             print(f"  {name}: {c['value']:.5g} (std {c['std']:.3g})")

@@ -96,6 +96,9 @@ def test_parameter_text_global_with_half_width_and_runs_counted() -> None:
         "deviation_c_deg 20 (not determined by the data) (on its bound)")
     assert report.parameter_text({"a.b": {"value": 20.0, "ci95_high": 21.0,
                                           "at_bound": True}}) == "b 20 +- 1 (on its bound)"
+    assert report.parameter_text({"a.b": {"value": 2.0, "ci95_high": 2.1,
+                                          "ci95_clustered_high": 2.5}}) == (
+        "b 2 +- 0.1 (0.5 windows clustered)")
 
 
 def test_confirmation_lines() -> None:

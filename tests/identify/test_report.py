@@ -43,7 +43,8 @@ def _report(ekf: bool = False, fit: bool = True, reference: bool = False) -> dic
         "fit": ({"evaluations": 12, "jacobians": 5, "elapsed_s": 3.21, "cost_initial": 1234.5,
                  "cost_final": 0.5, "message": "`ftol` condition satisfied.",
                  "coefficients": {"K_prime": {"initial": 2.0, "value": 2.5, "ci95_low": 2.4,
-                                              "ci95_high": 2.6, "lower": 0.01,
+                                              "ci95_high": 2.6, "ci95_clustered_low": 2.1,
+                                              "ci95_clustered_high": 2.9, "lower": 0.01,
                                               "upper": 50.0},
                                   "T_prime": {"initial": 3.0, "value": 3.5, "ci95_low": NAN,
                                               "ci95_high": NAN, "lower": -math.inf,
@@ -129,9 +130,10 @@ def test_markdown_ekf_and_fit_tables() -> None:
     assert "| a1 | -0.00123 | 4.6e-05 |" in lines
     assert ("12 evaluations, 5 Jacobians, 3.2 s; cost 1234 -> 0.5; "
             "`ftol` condition satisfied.") in lines
-    assert "| K_prime | 2 | 2.5 | 2.4 .. 2.6 | 0.01 .. 50 |" in lines
+    assert "| K_prime | 2 | 2.5 | 2.4 .. 2.6 | 2.1 .. 2.9 | 0.01 .. 50 |" in lines
     # an interval the data do not bound (null in JSON), no bounds
-    assert "| T_prime | 3 | 3.5 | not determined by the data | - .. - |" in lines
+    assert ("| T_prime | 3 | 3.5 | not determined by the data | not determined by the data "
+            "| - .. - |") in lines
 
 
 def test_markdown_prediction_rows_training_first_then_holdout() -> None:
@@ -293,3 +295,9 @@ def test_interval_text() -> None:
         "not determined by the data")
     assert report.interval_text({"ci95_low": 1.0, "ci95_high": 2.0, "at_bound": True}) == (
         "1 .. 2, on its bound")
+    both = {"ci95_low": 1.0, "ci95_high": 2.0, "ci95_clustered_low": 0.5,
+            "ci95_clustered_high": 2.5}
+    assert report.interval_text(both, "ci95_clustered") == "0.5 .. 2.5"
+    assert report.interval_text({**both, "ci95_clustered_high": None}, "ci95_clustered") == "-"
+    assert report.interval_text({**both, "ci95_high": np.inf}, "ci95_clustered") == (
+        "not determined by the data")

@@ -233,6 +233,12 @@ class EffectResiduals:
         names = np.array(data.windows.run_names, dtype=object)
         self._row_run = names[data.windows.run[np.nonzero(mask)[0]]]
 
+    @property
+    def row_window(self) -> np.ndarray:
+        """``(m,)`` the window of each residual (the clusters of
+        :func:`trafficsim.identify.output_error.clustered_std`)."""
+        return np.nonzero(self._mask)[0]
+
     def gear_start(self, steer: np.ndarray) -> np.ndarray:
         """``(k, W)`` rudder angle of each model's steering gear at each window's start: the
         gear (lag and rate limit, :func:`trafficsim.effects.steering`) run over the logged

@@ -208,10 +208,17 @@ def parameter_text(table: Mapping[str, Mapping[str, float]]) -> str:
 
 
 def _half_width(v: Mapping[str, Any]) -> str:
-    """``'+- 0.1'``, or ``'(not determined by the data)'``; ``' (on its bound)'`` added."""
-    high = v.get("ci95_high")
-    half = high - v["value"] if high is not None else math.inf
-    text = f"+- {half:.2g}" if math.isfinite(half) else "(not determined by the data)"
+    """``'+- 0.1'`` (nominal) with ``' (0.4 windows clustered)'`` where known, or
+    ``'(not determined by the data)'``; ``' (on its bound)'`` added."""
+    def half(key: str) -> float:
+        high = v.get(key)
+        return high - v["value"] if high is not None else math.inf
+
+    text = f"+- {half('ci95_high'):.2g}"
+    if not math.isfinite(half("ci95_high")):
+        text = "(not determined by the data)"
+    elif math.isfinite(half("ci95_clustered_high")):
+        text += f" ({half('ci95_clustered_high'):.2g} windows clustered)"
     return text + (" (on its bound)" if v.get("at_bound") else "")
 
 

@@ -85,6 +85,11 @@ class Residuals:
     def m(self) -> int:
         return int(self._mask.sum())
 
+    @property
+    def row_window(self) -> np.ndarray:
+        """``(m,)`` the window of each residual (the clusters of :func:`clustered_std`)."""
+        return np.nonzero(self._mask)[0]
+
     def errors(self, out: np.ndarray) -> np.ndarray:
         """``(k, W, N, c)`` unweighted output errors of replay outputs ``out`` (0 where masked)."""
         sim = out[..., self._cols]
@@ -104,6 +109,8 @@ class FitResult:
     Attributes:
         names, x0, x, lower, upper: fitted coefficients, start, solution, bounds ``(p,)``.
         std, ci95: standard deviation and half-width of the nominal 95 % interval ``(p,)``.
+        std_clustered: ``(p,)`` standard deviation with the residuals of each window taken
+            as correlated (:func:`clustered_std`; NaN where not available).
         corr: ``(p, p)`` correlation matrix of the estimate.
         cost0, cost: objective at the start and at the solution.
         rms0, rms: RMS of the weighted residuals at the start and at the solution.
@@ -137,15 +144,20 @@ class FitResult:
     diverged_windows: int = 0
     history_cost: list[float] = field(default_factory=list)
     history_x: list[np.ndarray] = field(default_factory=list)
+    std_clustered: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def table(self) -> dict[str, dict[str, Any]]:
         """Per coefficient: initial, value, std, 95 % interval (infinite where the data do
         not determine it, :func:`undetermined`), bounds and whether the value is on one."""
+        cl = self.std_clustered if self.std_clustered.size else np.full(len(self.names), np.nan)
         return {n: {"initial": float(a), "value": float(b), "std": float(s),
                     "ci95_low": float(b - c), "ci95_high": float(b + c),
+                    "std_clustered": float(k), "ci95_clustered_low": float(b - Z95 * k),
+                    "ci95_clustered_high": float(b + Z95 * k),
                     "lower": float(lo), "upper": float(hi), "at_bound": on_bound(b, lo, hi)}
-                for n, a, b, s, c, lo, hi in zip(self.names, self.x0, self.x, self.std,
-                                                 self.ci95, self.lower, self.upper, strict=True)}
+                for n, a, b, s, c, k, lo, hi in zip(self.names, self.x0, self.x, self.std,
+                                                    self.ci95, cl, self.lower, self.upper,
+                                                    strict=True)}
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary (no histories)."""
@@ -157,6 +169,31 @@ class FitResult:
                 "diverged_windows": self.diverged_windows,
                 "correlation": {a: {b: float(self.corr[i, j]) for j, b in enumerate(self.names)}
                                 for i, a in enumerate(self.names)}}
+
+
+#: fewest windows for a clustered standard deviation (a sandwich on fewer clusters is
+#: itself too uncertain to quote)
+MIN_CLUSTERS = 10
+
+
+def clustered_std(jmat: np.ndarray, r: np.ndarray, cluster: np.ndarray) -> np.ndarray:
+    """``(p,)`` standard deviations of a least-squares estimate whose residuals are correlated
+    within clusters (here the windows: a trajectory's errors persist along a window) and
+    independent between them: the cluster-robust sandwich ``B M B`` with ``B = (J^T J)^+``,
+    ``M = sum_g (J_g^T r_g)(J_g^T r_g)^T`` and the small-sample factor
+    ``G / (G - 1) (m - 1) / (m - p)`` (the CR1 estimator of Cameron & Miller, "A
+    practitioner's guide to cluster-robust inference", J. Human Resources 50(2), 2015). NaN
+    with fewer than :data:`MIN_CLUSTERS` clusters."""
+    m, p = jmat.shape
+    ids, cluster = np.unique(cluster, return_inverse=True)
+    g = ids.size
+    if g < MIN_CLUSTERS or m <= p:
+        return np.full(p, np.nan)
+    scores = np.stack([np.bincount(cluster, weights=jmat[:, j] * r, minlength=g)
+                       for j in range(p)], axis=1)
+    bread = np.linalg.pinv(jmat.T @ jmat)
+    cov = bread @ (scores.T @ scores) @ bread * (g / (g - 1) * (m - 1) / (m - p))
+    return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
 
 def on_bound(value: float, lower: float, upper: float) -> bool:
@@ -266,12 +303,17 @@ def fit(param: Parametrisation, windows: Windows, x0: np.ndarray | None = None,
     s2 = float(r @ r) / dof
     cov = s2 * np.linalg.pinv(jmat.T @ jmat)
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    std[undetermined(jmat)] = np.inf
+    loose = undetermined(jmat)
+    std[loose] = np.inf
+    rows = getattr(res, "row_window", None)
+    std_cl = clustered_std(jmat, r, rows) if rows is not None else np.full(p, np.nan)
+    std_cl[loose] = np.inf
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
     corr = np.nan_to_num(corr)
     return FitResult(
         names=param.names, x0=x_start, x=x, lower=lo, upper=hi, std=std, ci95=Z95 * std,
+        std_clustered=std_cl,
         corr=corr, cost0=0.5 * float(r_start @ r_start), cost=0.5 * float(r @ r),
         rms0=float(np.sqrt(np.mean(r_start**2))), rms=float(np.sqrt(np.mean(r**2))),
         nfev=int(sol.nfev), njev=njev, message=str(sol.message), success=bool(sol.status > 0),

@@ -64,15 +64,22 @@ def convergence_plot(path: Path, fit: FitResult | None, ekf: EKFResult | None) -
     atomic_write(path, lambda fh: fh.write(buf.getvalue()))
 
 
-def interval_text(c: Mapping[str, Any]) -> str:
-    """A coefficient's nominal 95 % interval ``'low .. high'``; ``'not determined by the
-    data'`` where it is unbounded (written as null in JSON); ``', on its bound'`` added where
-    the value sits on one."""
-    low, high = c.get("ci95_low"), c.get("ci95_high")
-    if low is None or high is None or not (np.isfinite(low) and np.isfinite(high)):
+def interval_text(c: Mapping[str, Any], key: str = "ci95") -> str:
+    """A coefficient's 95 % interval ``'low .. high'`` (``key``: ``ci95`` the nominal one,
+    ``ci95_clustered`` the windows-clustered one, ``'-'`` where there are too few windows for
+    it); ``'not determined by the data'`` where the nominal one is unbounded (written as null
+    in JSON); ``', on its bound'`` added where the value sits on one."""
+    def finite(k: str) -> bool:
+        low, high = c.get(f"{k}_low"), c.get(f"{k}_high")
+        return low is not None and high is not None and bool(
+            np.isfinite(low) and np.isfinite(high))
+
+    if not finite("ci95"):
         text = "not determined by the data"
+    elif not finite(key):
+        text = "-"
     else:
-        text = f"{_fmt(low)} .. {_fmt(high)}"
+        text = f"{_fmt(c[f'{key}_low'])} .. {_fmt(c[f'{key}_high'])}"
     return text + (", on its bound" if c.get("at_bound") else "")
 
 
@@ -120,11 +127,13 @@ def markdown(report: Mapping[str, Any]) -> str:
                   f"{fit['evaluations']} evaluations, {fit['jacobians']} Jacobians, "
                   f"{fit['elapsed_s']:.1f} s; cost {_fmt(fit['cost_initial'])} -> "
                   f"{_fmt(fit['cost_final'])}; {fit['message']}", "",
-                  "| coefficient | start | identified | 95 % interval (nominal) | bounds |",
-                  "|---|---|---|---|---|"]
+                  "| coefficient | start | identified | 95 % interval (nominal) | 95 % interval "
+                  "(windows clustered) | bounds |",
+                  "|---|---|---|---|---|---|"]
         for name, c in fit["coefficients"].items():
             lines.append(f"| {name} | {_fmt(c['initial'])} | {_fmt(c['value'])} | "
-                         f"{interval_text(c)} | {_fmt(c['lower'])} .. {_fmt(c['upper'])} |")
+                         f"{interval_text(c)} | {interval_text(c, 'ci95_clustered')} | "
+                         f"{_fmt(c['lower'])} .. {_fmt(c['upper'])} |")
         lines.append("")
     val = report["validation"]
     lines += ["## Prediction error", "",
