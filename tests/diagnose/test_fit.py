@@ -636,6 +636,10 @@ def test_below_the_floor_the_base_is_chosen_and_the_trace_kept() -> None:
     assert not diag.attributable and diag.chosen.effects == ()
     assert "not attributable: the held-out gap is" in diag.verdict
     assert [s["effects"] for s in diag.steps] == [["propeller_asymmetry"]]
+    # the check's parts choose without the gate, and are compared with what the selection
+    # found before it (each half of held-out run b alone finds the offset too)
+    assert [p["chosen"] for p in diag.check["parts"]] == [["propeller_asymmetry"]] * 2
+    assert diag.check["same_choice"] == 2
 
 
 def test_refitted_base_absorbs_a_resistance_change() -> None:

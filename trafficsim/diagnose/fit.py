@@ -720,7 +720,8 @@ class Scoring:
 @dataclass
 class Selection:
     """What the ranking, forward selection and noise-floor gate choose on one
-    :class:`Scoring`: ``ranked`` singles best first with their penalised ``score``s."""
+    :class:`Scoring`: ``ranked`` singles best first with their penalised ``score``s; ``found``
+    the forward selection's set, ``chosen`` the same or the base below the noise floor."""
 
     ranked: list[Candidate]
     score: dict[str, float]
@@ -728,6 +729,7 @@ class Selection:
     steps: list[dict[str, Any]]
     gap_ratio: float
     attributable: bool
+    found: Candidate
 
 
 def select(base: Candidate, singles: Sequence[Candidate], scoring: Scoring,
@@ -759,7 +761,7 @@ def select(base: Candidate, singles: Sequence[Candidate], scoring: Scoring,
     gap_ratio = before / max(scoring.floor, 1e-300)
     above = gap_ratio >= FLOOR_FACTOR or not gate
     return Selection(ranked, score, chosen if above else base, steps, gap_ratio,
-                     above and bool(chosen.effects))
+                     above and bool(chosen.effects), chosen)
 
 
 def check_groups(hold: Dataset) -> list[tuple[str, np.ndarray]]:
@@ -790,7 +792,8 @@ def selection_check(base: Candidate, singles: Sequence[Candidate], chosen: Candi
     the best of several noisy scores). The noise-floor gate is not applied to the parts'
     choices: whether the gap stands above the noise is asked of all the held-out data, once,
     by the verdict (a part alone may be too short to pass it). ``same_choice`` counts the
-    parts whose choice is the verdict's (the same set of effects, or nothing for both)."""
+    parts whose choice is ``chosen``, the one forward selection makes on all the held-out
+    data before that gate (the same set of effects, or nothing for both)."""
     groups = check_groups(hold)
     parts, before, after, same = [], 0.0, 0.0, 0
     for label, part in groups:
@@ -889,7 +892,7 @@ def diagnose(spec: Mapping[str, Any], train: Dataset, hold: Dataset,
             verdict += ("; nearly as good alone: " + ", ".join(
                 f"{c.effects[0]} ({100 * c.shrinkage(base)[1]:.0f} %)" for c in rivals)
                 + " (the data hardly tell them apart)")
-    check = selection_check(base, sel.ranked, chosen, hold, len(res_h.channels),
+    check = selection_check(base, sel.ranked, sel.found, hold, len(res_h.channels),
                             res_h.window_floors(), joint, forward_steps)
     if check and sel.attributable:
         n, same = len(check["parts"]), check["same_choice"]
