@@ -213,15 +213,21 @@ class _Linear:
         return thetas @ self.a.T - self.b
 
 
+def _linear_case(seed: int, m: int) -> tuple[np.ndarray, np.ndarray, Parametrisation]:
+    """``A`` ``(m, 2)``, ``b = A [1.5, -0.5] + noise`` and two unbounded coefficients."""
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(m, 2))
+    b = a @ [1.5, -0.5] + rng.normal(0.0, 0.1, m)
+    param = Parametrisation.of(load_ship("cargo"), ["K_prime", "T_prime"],
+                               {"K_prime": (-np.inf, np.inf), "T_prime": (-np.inf, np.inf)})
+    return a, b, param
+
+
 @pytest.mark.parametrize("analytic", [False, True])
 def test_linear_problem_gives_least_squares_and_its_covariance(analytic: bool) -> None:
     """On ``r = A theta - b`` the fit is the least-squares solution and the reported std is the
     textbook ``s^2 (A^T A)^-1`` with ``s^2 = |r|^2 / (m - p)`` (module doc)."""
-    rng = np.random.default_rng(3)
-    a = rng.normal(size=(40, 2))
-    b = a @ [1.5, -0.5] + rng.normal(0.0, 0.1, 40)
-    param = Parametrisation.of(load_ship("cargo"), ["K_prime", "T_prime"],
-                               {"K_prime": (-np.inf, np.inf), "T_prime": (-np.inf, np.inf)})
+    a, b, param = _linear_case(3, 40)
     lin = _Linear(a, b, jac=analytic)
     fit = output_error.fit(param, None, x0=np.array([0.3, 0.2]), residuals=lin)
     sol = np.linalg.lstsq(a, b, rcond=None)[0]
@@ -431,11 +437,7 @@ def test_clustered_std_follows_errors_that_persist_along_a_window() -> None:
 
 
 def test_fit_reports_the_clustered_std_of_its_windows() -> None:
-    rng = np.random.default_rng(12)
-    a = rng.normal(size=(60, 2))
-    b = a @ [1.5, -0.5] + rng.normal(0.0, 0.1, 60)
-    param = Parametrisation.of(load_ship("cargo"), ["K_prime", "T_prime"],
-                               {"K_prime": (-np.inf, np.inf), "T_prime": (-np.inf, np.inf)})
+    a, b, param = _linear_case(12, 60)
     lin = _Linear(a, b, jac=True)
     assert np.isnan(output_error.fit(param, None, residuals=lin).std_clustered).all()
     lin.row_window = np.repeat(np.arange(12), 5)

@@ -147,8 +147,10 @@ class FitResult:
     std_clustered: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def table(self) -> dict[str, dict[str, Any]]:
-        """Per coefficient: initial, value, std, 95 % interval (infinite where the data do
-        not determine it, :func:`undetermined`), bounds and whether the value is on one."""
+        """Per coefficient: initial, value, std and nominal 95 % interval (infinite where
+        the data do not determine it, :func:`undetermined`), the windows-clustered std and
+        interval (:func:`clustered_std`; NaN with too few windows), bounds and whether the
+        value is on one."""
         cl = self.std_clustered if self.std_clustered.size else np.full(len(self.names), np.nan)
         return {n: {"initial": float(a), "value": float(b), "std": float(s),
                     "ci95_low": float(b - c), "ci95_high": float(b + c),
