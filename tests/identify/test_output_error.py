@@ -439,7 +439,9 @@ def test_clustered_std_follows_errors_that_persist_along_a_window() -> None:
 def test_fit_reports_the_clustered_std_of_its_windows() -> None:
     a, b, param = _linear_case(12, 60)
     lin = _Linear(a, b, jac=True)
-    assert np.isnan(output_error.fit(param, None, residuals=lin).std_clustered).all()
+    plain = output_error.fit(param, None, residuals=lin)
+    assert np.isnan(plain.std_clustered).all()
+    assert "ci95_clustered_high" not in plain.table()["K_prime"]  # (no NaN in the table)
     lin.row_window = np.repeat(np.arange(12), 5)
     fit = output_error.fit(param, None, residuals=lin)
     r = a @ fit.x - b

@@ -149,17 +149,20 @@ class FitResult:
     def table(self) -> dict[str, dict[str, Any]]:
         """Per coefficient: initial, value, std and nominal 95 % interval (infinite where
         the data do not determine it, :func:`undetermined`), the windows-clustered std and
-        interval (:func:`clustered_std`; NaN with too few windows), bounds and whether the
-        value is on one."""
+        interval where there are enough windows (:func:`clustered_std`), bounds and whether
+        the value is on one."""
         cl = self.std_clustered if self.std_clustered.size else np.full(len(self.names), np.nan)
-        return {n: {"initial": float(a), "value": float(b), "std": float(s),
-                    "ci95_low": float(b - c), "ci95_high": float(b + c),
-                    "std_clustered": float(k), "ci95_clustered_low": float(b - Z95 * k),
-                    "ci95_clustered_high": float(b + Z95 * k),
-                    "lower": float(lo), "upper": float(hi), "at_bound": on_bound(b, lo, hi)}
-                for n, a, b, s, c, k, lo, hi in zip(self.names, self.x0, self.x, self.std,
-                                                    self.ci95, cl, self.lower, self.upper,
-                                                    strict=True)}
+        out = {}
+        for n, a, b, s, c, k, lo, hi in zip(self.names, self.x0, self.x, self.std, self.ci95,
+                                            cl, self.lower, self.upper, strict=True):
+            row = {"initial": float(a), "value": float(b), "std": float(s),
+                   "ci95_low": float(b - c), "ci95_high": float(b + c)}
+            if not np.isnan(k):
+                row.update(std_clustered=float(k), ci95_clustered_low=float(b - Z95 * k),
+                           ci95_clustered_high=float(b + Z95 * k))
+            out[n] = {**row, "lower": float(lo), "upper": float(hi),
+                      "at_bound": on_bound(b, lo, hi)}
+        return out
 
     def summary(self) -> dict[str, Any]:
         """JSON-ready summary (no histories)."""
