@@ -231,7 +231,7 @@ class EffectResiduals:
         self._weights = 1.0 / np.array([self.scales[c] for c in self.channels])
         self.last_diverged = np.zeros(0, dtype=bool)
         names = np.array(data.windows.run_names, dtype=object)
-        self._row_run = names[data.windows.run[np.nonzero(mask)[0]]]
+        self._row_run = names[data.windows.run[self.row_window]]
 
     @property
     def row_window(self) -> np.ndarray:
@@ -801,8 +801,8 @@ def selection_check(base: Candidate, singles: Sequence[Candidate], chosen: Candi
         scoring = Scoring(rest, int(rest.sum()) * n_channels,
                           int(np.unique(hold.windows.run[rest]).size), float(floors[rest].sum()))
         pick = select(base, singles, scoring, joint, forward_steps, gate=False)
-        on_part = Scoring(part, int(part.sum()) * n_channels, 1, float(floors[part].sum()))
-        b, a = on_part.cost(base), on_part.cost(pick.chosen)
+        b = float(np.sum(base.hold_windows[part]))
+        a = float(np.sum(pick.chosen.hold_windows[part]))
         before, after = before + b, after + a
         same += int(set(pick.chosen.effects) == set(chosen.effects))
         parts.append({"left_out": label, "windows": int(part.sum()),

@@ -181,14 +181,15 @@ class FitResult:
 MIN_CLUSTERS = 10
 
 
-def clustered_std(jmat: np.ndarray, r: np.ndarray, cluster: np.ndarray) -> np.ndarray:
+def clustered_std(jmat: np.ndarray, r: np.ndarray, cluster: np.ndarray,
+                  bread: np.ndarray | None = None) -> np.ndarray:
     """``(p,)`` standard deviations of a least-squares estimate whose residuals are correlated
     within clusters (here the windows: a trajectory's errors persist along a window) and
     independent between them: the cluster-robust sandwich ``B M B`` with ``B = (J^T J)^+``,
     ``M = sum_g (J_g^T r_g)(J_g^T r_g)^T`` and the small-sample factor
     ``G / (G - 1) (m - 1) / (m - p)`` (the CR1 estimator of Cameron & Miller, "A
     practitioner's guide to cluster-robust inference", J. Human Resources 50(2), 2015). NaN
-    with fewer than :data:`MIN_CLUSTERS` clusters."""
+    with fewer than :data:`MIN_CLUSTERS` clusters. ``bread``: ``B`` if already worked out."""
     m, p = jmat.shape
     ids, cluster = np.unique(cluster, return_inverse=True)
     g = ids.size
@@ -196,7 +197,8 @@ def clustered_std(jmat: np.ndarray, r: np.ndarray, cluster: np.ndarray) -> np.nd
         return np.full(p, np.nan)
     scores = np.stack([np.bincount(cluster, weights=jmat[:, j] * r, minlength=g)
                        for j in range(p)], axis=1)
-    bread = np.linalg.pinv(jmat.T @ jmat)
+    if bread is None:
+        bread = np.linalg.pinv(jmat.T @ jmat)
     cov = bread @ (scores.T @ scores) @ bread * (g / (g - 1) * (m - 1) / (m - p))
     return np.sqrt(np.clip(np.diag(cov), 0.0, None))
 
@@ -306,12 +308,13 @@ def fit(param: Parametrisation, windows: Windows, x0: np.ndarray | None = None,
     m, p = r.size, x.size
     dof = max(m - p, 1)
     s2 = float(r @ r) / dof
-    cov = s2 * np.linalg.pinv(jmat.T @ jmat)
+    bread = np.linalg.pinv(jmat.T @ jmat)
+    cov = s2 * bread
     std = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     loose = undetermined(jmat)
     std[loose] = np.inf
     rows = getattr(res, "row_window", None)
-    std_cl = clustered_std(jmat, r, rows) if rows is not None else np.full(p, np.nan)
+    std_cl = clustered_std(jmat, r, rows, bread) if rows is not None else np.full(p, np.nan)
     std_cl[loose] = np.inf
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(std, std)
