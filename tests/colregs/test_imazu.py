@@ -1,10 +1,12 @@
 """The 22 Imazu encounters (``scenarios/imazu``): the own ship runs ``rules/colregs.yaml``.
 
 Each case, with the targets keeping course and again with every ship running the rules:
-no collision with the own ship, a minimum range of at least 0.5 NM to every target, the own
+no collision with the own ship, a minimum range of at least 0.85 NM to every target, the own
 ship's role towards each target as ``shared/reference/imazu.yaml`` expects (head-on, give-way,
 overtaking, stand-on), a first alteration to starboard for every give-way and head-on target,
-and the goal (the route's end, 12 NM ahead) reached within 0.1 NM within :data:`GOAL_MIN`.
+and the goal (the route's end, 12 NM ahead) reached within 0.1 NM within :data:`GOAL_MIN`
+(or passed while still overtaking a slow target on the route line, see
+:func:`test_imazu_goal_reached`).
 The undisturbed passage alone takes 60 min (12 NM at 12 kn), so no bound of 60 min can hold
 for a case that asks for any manoeuvre; the bound is the smallest round one that every case
 meets in both variants (the slowest: the own ship follows the slow target TS1 on her route
@@ -71,9 +73,10 @@ def _run(case: int, targets: str, out_root: str) -> dict:
     own = col["ship"] == "own"
     to_goal = np.hypot(col["north_m"][own] - GOAL_M[0], col["east_m"][own] - GOAL_M[1])
     d = {name: np.asarray(dec.column(name).to_pylist()) for name in
-         ("ship", "other", "t_s", "decided_own_role", "decided_own_manoeuvre",
-          "course_order_deg")}
-    return {"summary": summary, "to_goal": to_goal, "t": col["t_s"][own], "dec": d}
+         ("ship", "other", "t_s", "decided_own_role", "decided_encounter",
+          "decided_own_manoeuvre", "course_order_deg")}
+    return {"summary": summary, "to_goal": to_goal, "t": col["t_s"][own], "dec": d,
+            "north": col["north_m"][own], "east": col["east_m"][own]}
 
 
 @pytest.fixture(scope="module")
@@ -98,7 +101,7 @@ def test_imazu_case_is_passed_safely_and_by_the_rules(case: int, targets: str,
     summary, dec = run["summary"], run["dec"]
     for pair in _pairs_with_own(summary):
         assert not pair["collision"], pair
-        assert pair["min_range_m"] >= 0.5 * NM, pair
+        assert pair["min_range_m"] >= 0.85 * NM, pair
     if targets == "colregs":  # every ship keeps clear of every other, without blind spots
         assert summary["collisions"] == 0
         assert summary["blind_spots"] == []
@@ -116,9 +119,21 @@ def test_imazu_case_is_passed_safely_and_by_the_rules(case: int, targets: str,
 @pytest.mark.parametrize("targets", ["keep_course", "colregs"])
 @pytest.mark.parametrize("case", CASES)
 def test_imazu_goal_reached(case: int, targets: str, out_root: str) -> None:
+    """Within 0.1 NM of the goal, or, where the own ship comes abeam of it while still keeping
+    clear of a target she is overtaking (Rule 13(d): until finally past and clear; the slow TS1
+    of cases 7, 15, 17, 20 and 22 keeps her course along the route line through the goal),
+    abeam of it no further off than ``far_clear_nm`` (2 NM), beyond which she would resume."""
     run = _run(case, targets, out_root)
-    assert run["to_goal"].min() <= 0.1 * NM
-    assert run["t"][np.argmax(run["to_goal"] <= 0.1 * NM)] <= GOAL_MIN * 60
+    if run["to_goal"].min() <= 0.1 * NM:
+        assert run["t"][np.argmax(run["to_goal"] <= 0.1 * NM)] <= GOAL_MIN * 60
+        return
+    abeam = np.argmax(run["north"] >= GOAL_M[0])
+    assert run["north"][abeam] >= GOAL_M[0] and run["t"][abeam] <= GOAL_MIN * 60
+    assert abs(run["east"][abeam] - GOAL_M[1]) <= 2.0 * NM
+    dec = run["dec"]
+    now = (dec["ship"] == "own") & (dec["t_s"] == dec["t_s"][dec["t_s"] <= run["t"][abeam]].max())
+    assert ((dec["decided_own_role"][now] == "give_way")
+            & (dec["decided_encounter"][now] == "overtaking")).any()
 
 
 def test_imazu_scenarios_match_the_reference_table() -> None:

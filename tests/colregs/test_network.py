@@ -886,6 +886,7 @@ def _step(net, rows: list[dict[str, float]], start: str | list[str] = "assess"):
 # documented defaults (docs/rules.md, table of rules/colregs.yaml parameters)
 _LOOK, _CPA, _ACT, _TURN, _HEAD, _RECIP, _ABAFT, _RV, _SLOW = (
     30.0, 1.0, 15.0, 30.0, 10.0, 165.0, 112.5, 2.0, 0.5)
+_ACT_NM = 2.7  # give_way_act_nm
 
 
 def _hand_first_step(f: dict[str, float]) -> tuple[list[str], dict, str]:
@@ -897,9 +898,11 @@ def _hand_first_step(f: dict[str, float]) -> tuple[list[str], dict, str]:
     def risk() -> bool:
         return f["dcpa_nm"] < _CPA and 0.0 <= f["tcpa_min"] <= _LOOK
 
-    def give_way_wait() -> str:
-        path.append("give_way_wait")
-        if f["tcpa_min"] <= _ACT or f["time_to_domain_min"] <= _ACT:
+    def give_way_wait(node: str = "give_way_wait") -> str:
+        path.append(node)
+        # the range test is not the overtaking ship's (overtaking_wait)
+        close = node == "give_way_wait" and f["range_nm"] <= _ACT_NM and f["tcpa_min"] <= _LOOK
+        if f["tcpa_min"] <= _ACT or f["time_to_domain_min"] <= _ACT or close:
             path.append("give_way_act")
             act.update(manoeuvre="alter_course", course_change_deg=_TURN, pass_distance_nm=1.0)
             return "keep_clear"
@@ -931,7 +934,7 @@ def _hand_first_step(f: dict[str, float]) -> tuple[list[str], dict, str]:
     path.append("overtaking")
     if abs(a) > _ABAFT and sr < 1.0:
         role("give_way_overtaking", "give_way", "overtaking", "stand_on", "either")
-        return path, act, give_way_wait()
+        return path, act, give_way_wait("overtaking_wait")
     path.append("overtaken")
     if abs(b) > _ABAFT and sr > 1.0:
         role("stand_on_overtaken", "stand_on", "overtaken", "give_way", "either")
@@ -1056,7 +1059,8 @@ def test_bundled_rules_give_the_reference_roles_of_the_imazu_cases() -> None:
     """Every target of the 22 Imazu cases at t = 0 (TCPA exactly 30 min, the inclusive end of
     the look-ahead): the own ship's role, encounter, expected role of the other and side are
     those of the reference's ``expected_os_role`` (and its DNV class agrees); give-way ships
-    wait for the action time, the stand-on ship keeps course and watches."""
+    wait for the action time (those starting within give_way_act_nm act at once, but for an
+    overtaking ship), the stand-on ship keeps course and watches."""
     targets = _imazu_targets()
     assert len(targets) == 50
     got = _step(_colregs_net(), _imazu_rows(own_view=True))
@@ -1068,6 +1072,9 @@ def test_bundled_rules_give_the_reference_roles_of_the_imazu_cases() -> None:
                 act.get("direction")) == (role, encounter, other, side), (case, t["name"], path)
         if role == "stand_on":
             assert act["manoeuvre"] == "keep" and cursor == "stand_on_watch"
+        elif t["derived"]["range_nm"] <= 2.7 and encounter != "overtaking":
+            # a target starting at close quarters (give_way_act_nm): act at once
+            assert act["manoeuvre"] == "alter_course" and cursor == "keep_clear"
         else:
             assert "manoeuvre" not in act and cursor == "give_way_still"
 
@@ -1128,6 +1135,11 @@ _OT = {"encounter": _OVERTAKING, "tcpa_min": -0.5, "range_nm": 1.5, "bearing_deg
        "aspect_deg": 30.0, "dcpa_nm": 1.2}
 _CLEAR = {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role",
           "manoeuvre": "resume_route"}
+#: a stand-on ship closing slowly with a give-way ship that has not acted (Rule 17(a)(ii))
+_SLOW_CLOSE = {"tcpa_min": 25.0, "range_nm": 1.62, "dcpa_nm": 1.0 - _EPS,
+               "time_to_domain_min": 20.0, "time_in_role_min": 3.0, "bearing_deg": -85.0,
+               "aspect_deg": 75.0, "other_course_change_deg": 10.0 - _EPS,
+               "other_speed_change_ratio": 0.8 + _EPS}
 
 
 @pytest.mark.parametrize(("start", "row", "path", "actions", "cursor"), [
@@ -1210,7 +1222,7 @@ _CLEAR = {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role
     ("overtaking_watch", {"encounter": _OVERTAKING, "tcpa_min": 3.0, "range_nm": 0.5,
                           "dcpa_nm": 0.3, "bearing_deg": -60.0, "aspect_deg": 100.0,
                           "speed_ratio": 0.6},
-     ["overtaking_watch", "overtaking_risk", "give_way_overtaking", "give_way_wait",
+     ["overtaking_watch", "overtaking_risk", "give_way_overtaking", "overtaking_wait",
       "give_way_act"],
      {"role": "give_way", "encounter": "overtaking", "other_role": "stand_on",
       "direction": "either", "manoeuvre": "alter_course", "course_change_deg": 30.0,
@@ -1231,12 +1243,38 @@ _CLEAR = {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role
      "keep_clear"),
     ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0,
                         "other_course_change_deg": 10.0},
-     ["stand_on_watch", "stand_on_check"], {}, "stand_on_watch"),
+     ["stand_on_watch", "stand_on_check", "stand_on_close"], {}, "stand_on_watch"),
     ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0,
                         "other_speed_change_ratio": 0.8},
-     ["stand_on_watch", "stand_on_check"], {}, "stand_on_watch"),
+     ["stand_on_watch", "stand_on_check", "stand_on_close"], {}, "stand_on_watch"),
     ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0 + _EPS},
-     ["stand_on_watch", "stand_on_check"], {}, "stand_on_watch"),
+     ["stand_on_watch", "stand_on_check", "stand_on_close"], {}, "stand_on_watch"),
+    # ... a slow closing: domain entry far off, but within stand_on_act_nm (1.62) with the CPA
+    # closer than cpa_limit_nm, within the look-ahead, the role held not_acting_min (3) and the
+    # other not acting: a substantial alteration, keeping the speed; each limit beside it not
+    ("stand_on_watch", _SLOW_CLOSE,
+     ["stand_on_watch", "stand_on_check", "stand_on_close", "stand_on_turn"],
+     {"manoeuvre": "alter_course", "course_change_deg": 30.0, "pass_distance_nm": 1.0},
+     "keep_clear"),
+    *[("stand_on_watch", {**_SLOW_CLOSE, **row},
+       ["stand_on_watch", "stand_on_check", "stand_on_close"], {}, "stand_on_watch")
+      for row in ({"range_nm": 1.62 + _EPS}, {"dcpa_nm": 1.0}, {"tcpa_min": 30.0 + _EPS},
+                  {"tcpa_min": -_EPS}, {"time_in_role_min": 3.0 - _EPS},
+                  {"other_course_change_deg": 10.0}, {"other_speed_change_ratio": 0.8})],
+    ("overtaken_watch", {**_SLOW_CLOSE, "bearing_deg": -150.0, "aspect_deg": 20.0},
+     ["overtaken_watch", "overtaken_check", "overtaken_close", "stand_on_turn"],
+     {"manoeuvre": "alter_course", "course_change_deg": 30.0, "pass_distance_nm": 1.0},
+     "keep_clear"),
+    # give_way_wait: the other ship within give_way_act_nm (2.7), the CPA within the
+    # look-ahead: act whatever the time to CPA; not beyond either, nor when overtaking
+    ("give_way_still", {**_GW, "tcpa_min": 25.0, "range_nm": 2.7},
+     ["give_way_still", "give_way_wait", "give_way_act"],
+     {"manoeuvre": "alter_course", "course_change_deg": 30.0, "pass_distance_nm": 1.0},
+     "keep_clear"),
+    *[("give_way_still", {**_GW, "tcpa_min": 25.0, "range_nm": 2.7, **row},
+       ["give_way_still", "give_way_wait"], {}, "give_way_still")
+      for row in ({"range_nm": 2.7 + _EPS}, {"tcpa_min": 30.0 + _EPS},
+                  {"encounter": _OVERTAKING})],
     # overtaken: released once the overtaking ship is finally past and clear (Rule 13(d)):
     # the overtaken ship more than 22.5 deg abaft her beam, she more than 22.5 deg forward of
     # the overtaken ship's beam, range opening beyond clear_nm; not far off while abeam or astern
@@ -1245,7 +1283,7 @@ _CLEAR = {"role": "no_role", "encounter": "no_encounter", "other_role": "no_role
      ["overtaken_watch", "clear"], _CLEAR, "assess"),
     *[("overtaken_watch", {"tcpa_min": -1.0, "range_nm": 1.5, "bearing_deg": -45.0,
                            "aspect_deg": 135.0, **row},
-       ["overtaken_watch", "overtaken_check"], {}, "overtaken_watch")
+       ["overtaken_watch", "overtaken_check", "overtaken_close"], {}, "overtaken_watch")
       for row in ({"bearing_deg": -67.5}, {"aspect_deg": 112.5}, {"range_nm": 1.0},
                   {"tcpa_min": 0.0}, {"range_nm": 5.0, "bearing_deg": 80.0, "aspect_deg": -100.0},
                   {"range_nm": 5.0, "bearing_deg": 120.0, "aspect_deg": -60.0})],
@@ -1263,7 +1301,8 @@ def test_bundled_later_steps_at_their_thresholds(start: str, row: dict, path: li
     """Steps after the role is set, from the node the previous step left the pair at, at
     and beside each documented threshold (action_time_min 15, cpa_limit_nm 1, clear_nm 1,
     far_clear_nm 2, abaft_beam_deg 112.5, ahead_of_beam_deg 67.5, emergency_min 2,
-    stand_on_act_min 10, not_acting_deg 10, not_slowing_ratio 0.8): path, merged actions (only
+    stand_on_act_min 10, not_acting_deg 10, not_slowing_ratio 0.8, give_way_act_nm 2.7,
+    stand_on_act_nm 1.62, not_acting_min 3): path, merged actions (only
     those set in this step) and the next cursor, worked out from docs/rules.md."""
     ((got_path, got_actions, got_cursor),) = _step(_colregs_net(), [row], start)
     assert (got_path, got_actions, got_cursor) == (path, actions, cursor)

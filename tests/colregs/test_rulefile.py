@@ -779,7 +779,8 @@ def test_bundled_variants_change_only_what_they_say() -> None:
     assert port.parameters == {**base.parameters,
                                "alteration_side": VOCABULARY.enums["port"]}
     assert late.parameters == {**base.parameters, "action_time_min": 3.0,
-                               "stand_on_act_min": 3.0}
+                               "stand_on_act_min": 3.0, "give_way_act_nm": 0.0,
+                               "stand_on_act_nm": 0.0}
     for rules in (port, late):
         assert [(n.name, n.line, n.path) for n in rules.nodes] == [
             (n.name, n.line, n.path) for n in base.nodes]
@@ -807,8 +808,9 @@ def test_override_breaking_the_bundled_look_ahead_names_every_use(tmp_path: Path
     with pytest.raises(ScenarioError) as info:
         parse_file(child, VOCABULARY)
     uses = _line_of(parent, "[tcpa_min, between, [0, look_ahead_min]]")
-    assert len(uses) == 3
+    assert len(uses) == 5
     keys = ["nodes.risk.test.all[1][2]", "nodes.overtaking_risk.test.all[1][2]",
+            "nodes.overtaken_close.test.all[2][2]", "nodes.stand_on_close.test.all[2][2]",
             "nodes.rv_risk.test.all[1][2]"]
     assert [str(e) for e in info.value.errors] == [
         f"{child}:5: parameters.look_ahead_min: between needs lo <= hi, got "
