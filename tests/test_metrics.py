@@ -277,6 +277,22 @@ def test_first_times_stick_and_ties_keep_the_earliest() -> None:
     assert m.min_range_m[0] == 30.0 and m.t_min_range_s[0] == 2.0
 
 
+def test_a_pair_no_longer_active_keeps_its_figures() -> None:
+    """Two pairs close to collision; the second stops being measured first (its encounter
+    ended): it keeps its range, and no later collision or domain entry counts for it."""
+    pi, pj = np.array([0, 2]), np.array([1, 3])
+    length, beam = np.full(4, 100.0), np.full(4, 20.0)
+    x = np.zeros((8, 4))
+    x[NORTH, [1, 3]] = 3000.0
+    m = PairMetrics.start(x[[NORTH, EAST]], np.zeros((2, 4)), pi, pj)
+    m.active[1] = False
+    x[NORTH, [1, 3]] = 30.0
+    m.accumulate(x, length, beam, pi, pj, 1.0)
+    assert m.collision.tolist() == [True, False]
+    assert m.domain_violation.tolist() == [True, False]
+    assert m.min_range_m.tolist() == [30.0, 3000.0] and m.t_min_range_s.tolist() == [1.0, 0.0]
+
+
 def test_no_pairs_and_unknown_domain() -> None:
     """A batch without pairs accumulates nothing; an unknown domain name is an InputError
     that suggests the near name."""

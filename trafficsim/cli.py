@@ -378,6 +378,9 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     print(f"  CPA P1/P5/P50: {s['cpa_nm']['p1']:.2f} / {s['cpa_nm']['p5']:.2f} / "
           f"{s['cpa_nm']['p50']:.2f} NM"
           + (f"; {rate:,.0f} ship-steps/s" if rate else ""))
+    if s["cpa_not_passed"]:
+        print(f"  {s['cpa_not_passed']} encounters still closing at their end (max_duration_s): "
+              f"their smallest range so far counts as their CPA")
     if s["diverged"]:
         listed = ", ".join(str(i) for i in s["diverged_encounters"][:10])
         print(f"  DIVERGED: {s['diverged']} encounters (a ship's state stopped being finite: "

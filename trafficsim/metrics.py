@@ -37,6 +37,8 @@ class PairMetrics:
     domain: str = "coldwell"
     domain_violation: np.ndarray | None = None  # (P,) bool, either ship inside the other's
     t_domain_violation_s: np.ndarray | None = None  # (P,) first time, NaN if never
+    #: (P,) bool: the pairs still measured; a pair whose run has ended keeps its figures
+    active: np.ndarray | None = None
 
     @classmethod
     def start(cls, pos: np.ndarray, vel: np.ndarray, pi: np.ndarray, pj: np.ndarray,
@@ -49,7 +51,7 @@ class PairMetrics:
         rng = np.sqrt(d[0] * d[0] + d[1] * d[1])  # (as the compiled step: no libm hypot)
         p = pi.shape[0]
         return cls(dcpa, tcpa, rng, np.zeros(p), np.zeros(p, bool), np.full(p, np.nan),
-                   domain, np.zeros(p, bool), np.full(p, np.nan))
+                   domain, np.zeros(p, bool), np.full(p, np.nan), np.ones(p, bool))
 
     def accumulate(self, x: np.ndarray, length_m: np.ndarray, beam_m: np.ndarray,
                    pi: np.ndarray, pj: np.ndarray, t_s: float) -> None:
@@ -60,7 +62,7 @@ class PairMetrics:
         count = _accumulate(x, length_m, beam_m, pi, pj, float(t_s),
                             domains.domain_code(self.domain),
                             self.min_range_m, self.t_min_range_s, self.domain_violation,
-                            self.t_domain_violation_s, self.collision, near)
+                            self.t_domain_violation_s, self.collision, self.active, near)
         if count:
             near = near[:count]
             a, b = pi[near], pj[near]
@@ -90,12 +92,14 @@ def _inside_domain(kind: int, x: np.ndarray, own: int, sign: float, dn: float, d
 def _accumulate(x: np.ndarray, length_m: np.ndarray, beam_m: np.ndarray, pi: np.ndarray,
                 pj: np.ndarray, t_s: float, kind: int, min_range: np.ndarray, t_min: np.ndarray,
                 violation: np.ndarray, t_violation: np.ndarray, collision: np.ndarray,
-                near: np.ndarray) -> int:
-    """Minimum range and first domain violation of every pair, in place; the pairs not yet
-    collided whose centres are close enough for their outlines to touch go to ``near`` (their
-    count is returned)."""
+                active: np.ndarray, near: np.ndarray) -> int:
+    """Minimum range and first domain violation of every active pair, in place; the pairs
+    not yet collided whose centres are close enough for their outlines to touch go to ``near``
+    (their count is returned)."""
     count = 0
     for p in range(pi.shape[0]):
+        if not active[p]:
+            continue
         a, b = pi[p], pj[p]
         dn, de = x[NORTH, b] - x[NORTH, a], x[EAST, b] - x[EAST, a]
         rng = math.sqrt(dn * dn + de * de)

@@ -475,7 +475,7 @@ def test_observe_kernel_is_the_method():
     obs, _, states = _run([own, CROSSER], end_s=800)
     ref = PairObserver.start(_sim(_state([own, CROSSER], 0.0)))
     for x in states:
-        _observe_kernel(x, ref.x0, ref.own, ref.tgt, ref.closest_m, ref.alpha_cpa,
+        _observe_kernel(x, ref.x0, ref.own, ref.tgt, ref.active, ref.closest_m, ref.alpha_cpa,
                         ref.beta_cpa, ref.stbd_rad, ref.port_rad, ref.faster_mps,
                         ref.slower_mps, ref.stbd_cpa, ref.port_cpa, ref.faster_cpa,
                         ref.slower_cpa, ref.range_at_manoeuvre_m, ref.manoeuvre_cpa_m,

@@ -268,3 +268,27 @@ def test_a_spec_gone_or_a_file_given_is_refused(tmp_path):
         replay_encounter(out, 0, tmp_path / "x")
     with pytest.raises(InputError, match="no such folder"):
         replay_encounter(out / "campaign.json", 0, tmp_path / "x")
+
+
+def test_a_replay_runs_to_the_encounters_end_in_the_campaign(tmp_path):
+    """With ``max_duration_s`` encounters end when their pairs have passed: each replay runs
+    to its encounter's ``end_s`` (some past ``duration_s``) and gives its rows exactly."""
+    from tests.campaign.conftest import SMALL
+
+    spec = tmp_path / "on.yaml"
+    spec.write_text(SMALL.format(n=6, chunk=6, duration=720, rogue=0.0, extra=(
+        "max_duration_s: 1800\ntcpa_min: [8, 12]\nencounter_types: {overtaking: 1, "
+        "crossing_give_way: 1, head_on: 1, multi: 1}")))
+    run_campaign(spec, tmp_path / "out", workers=1, progress=False)
+    rows = run_chunk(load_spec(spec), 0, 6)
+    enc = np.asarray(rows["encounter"])
+    end = np.asarray(rows["end_s"])
+    assert (end > 720.0).any()
+    for k in [*np.unique(enc[end > 720.0]).tolist(), int(enc[end == 720.0][0])]:
+        summary = replay_encounter(tmp_path / "out", k, tmp_path / f"r{k}")
+        mine = enc == k
+        assert summary["duration_s"] == end[mine][0]
+        assert [p["min_range_m"] for p in summary["pairs"]] == list(
+            np.asarray(rows["min_range_m"])[mine])
+        assert [p["t_min_range_s"] for p in summary["pairs"]] == list(
+            np.asarray(rows["t_cpa_s"])[mine])

@@ -321,3 +321,97 @@ def test_blind_spot_flags_roles_and_pair_types_agree(tmp_path):
         if kind != "multi":
             assert mine.size == 1 and rows["pair_type"][mine[0]] == kind
     assert np.all(np.asarray(rows["range0_nm"]) >= np.asarray(rows["dcpa0_nm"]) - 1e-12)
+
+
+# --------------------------------------------------------------------------------------------
+# running on past duration_s until every pair has passed its closest point
+# --------------------------------------------------------------------------------------------
+
+RUN_ON = ("tcpa_min: [8, 12]\nencounter_types: {overtaking: 1, crossing_give_way: 1, "
+          "head_on: 1, multi: 1}")
+
+
+@pytest.fixture(scope="module")
+def run_on(tmp_path_factory):
+    """Encounters of 8-12 min TCPA run 12 min (``duration_s``), and the same run on up to
+    30 min (``max_duration_s``)."""
+    folder = tmp_path_factory.mktemp("run_on")
+    specs = []
+    for name, extra in (("plain", RUN_ON), ("longer", RUN_ON + "\nmax_duration_s: 1800")):
+        path = folder / f"{name}.yaml"
+        path.write_text(ROWS_SPEC.format(extra=extra, duration=720).replace("seed: 3", "seed: 7"))
+        specs.append(load_spec(path))
+    return specs[1], run_chunk(specs[0], 0, 8), run_chunk(specs[1], 0, 8)
+
+
+def _per_encounter(rows, name):
+    _, first = np.unique(np.asarray(rows["encounter"]), return_index=True)
+    return np.asarray(rows[name])[first]
+
+
+def test_encounters_still_closing_run_on_until_their_pairs_have_passed(run_on):
+    """At 12 min avoidance has delayed some closest points: their pairs are not passed. Run
+    on, each encounter ends at the first decision step from 12 min at which all its pairs have
+    passed (a whole number of 10 s periods), or at 30 min with the pairs still closing flagged;
+    an encounter that had passed at 12 min ends there with the rows it had."""
+    spec, plain, longer = run_on
+    assert not np.all(plain["cpa_passed"])
+    assert np.all(np.asarray(plain["end_s"]) == 720.0)
+    end = _per_encounter(longer, "end_s")
+    assert np.all((end >= 720.0) & (end <= 1800.0)) and np.all(end % 10.0 == 0.0)
+    assert (end > 720.0).sum() >= 2 and ((end > 720.0) & (end < 1800.0)).any()
+    enc = np.asarray(longer["encounter"])
+    passed = np.asarray(longer["cpa_passed"])
+    for e, t in zip(np.unique(enc), end, strict=True):
+        mine = enc == e
+        assert passed[mine].all() == (t < 1800.0)
+        if t == 720.0:  # passed at duration_s: the same rows as without running on
+            for key, value in plain.items():
+                if not key.startswith("_"):
+                    np.testing.assert_array_equal(np.asarray(value)[mine],
+                                                  np.asarray(longer[key])[mine], err_msg=key)
+    ran_on = np.isin(enc, np.unique(enc)[end > 720.0])
+    assert np.all(np.asarray(longer["min_range_m"])[ran_on]
+                  <= np.asarray(plain["min_range_m"])[ran_on])
+    assert (np.asarray(longer["t_cpa_s"])[ran_on] > 720.0).any()
+    assert np.all(np.asarray(longer["t_cpa_s"]) <= np.asarray(longer["end_s"]))
+    n_ships = [len(draw(spec, i).ships) for i in range(8)]
+    assert longer["_ship_steps"] == sum(n_ships) * round(end.max())
+
+
+def test_an_ended_encounter_keeps_its_rows_while_its_chunk_runs_on(run_on):
+    """Whatever chunk it runs in, with encounters running longer or alone, an encounter's
+    rows are the same: its figures stop at its own end."""
+    spec, _, whole = run_on
+    end = _per_encounter(whole, "end_s")
+    parts = [run_chunk(spec, a, b) for a, b in ((0, 2), (2, 3), (3, 8))]
+    assert len({float(_per_encounter(p, "end_s").max()) for p in parts}) > 1
+    for key, value in whole.items():
+        if not key.startswith("_"):
+            joined = [v for p in parts for v in np.asarray(p[key]).tolist()]
+            np.testing.assert_array_equal(np.asarray(value).tolist(), joined, err_msg=key)
+    assert end.min() < end.max()
+
+
+def test_cpa_passed_is_the_straight_line_test_on_the_true_state(tmp_path):
+    """Without avoidance every pair holds its course: ended at its start TCPA's upper end it
+    has passed its CPA; stopped half-way it has not (closing, bound to pass nearer)."""
+    spec = _rows_spec(tmp_path, extra="policy: no_avoidance\ntcpa_min: [4, 6]", duration=600)
+    assert np.all(run_chunk(spec, 0, 4)["cpa_passed"])
+    early = run_chunk(spec.model_copy(update={"duration_s": 120.0}), 0, 4)
+    own = np.asarray(early["ship_i"]) == "own"
+    assert not np.any(np.asarray(early["cpa_passed"])[own])
+
+
+def test_the_command_line_counts_the_encounters_still_closing(run_on, tmp_path, capsys):
+    """``trafficsim campaign`` says how many encounters ended still closing, as
+    ``summary.json`` counts them."""
+    spec, _, rows = run_on
+    out = tmp_path / "out"
+    assert main(["campaign", str(spec.path), "--out", str(out), "--workers", "1",
+                 "--no-progress"]) == 0
+    closing = len(set(np.asarray(rows["encounter"])[~np.asarray(rows["cpa_passed"])]))
+    assert closing > 0
+    assert json.loads((out / "summary.json").read_text())["cpa_not_passed"] == closing
+    assert (f"{closing} encounters still closing at their end (max_duration_s)"
+            in capsys.readouterr().out)

@@ -117,6 +117,8 @@ def test_a_missing_required_key_is_named(tmp_path, missing):
     "multi_ships: [5, 5]",
     "dcpa_nm: [10, 10]",
     "duration_s: 7200\ntcpa_min: [1, 120]",
+    "max_duration_s: 1800",
+    "max_duration_s: 86400",
     "speed_fraction: [0.2, 1.2]",
     "current_kn: [5, 5]",
     "wind_mps: [0, 40]",
@@ -150,6 +152,9 @@ def test_values_on_the_documented_bounds_are_accepted(tmp_path, extra):
     ("duration_s: 0", "duration_s", "> 0"),
     ("duration_s: fast", "duration_s", "expected a number"),
     ("duration_s: .nan", "duration_s", "finite"),
+    ("max_duration_s: 1799", "max_duration_s", "at least duration_s (1800 s), got 1799"),
+    ("max_duration_s: 3600.5", "max_duration_s", "whole multiple of dt_s (1 s"),
+    ("max_duration_s: 0", "max_duration_s", "> 0"),
     ("dt_s: 61", "dt_s", "<= 60"),
     ("dt_s: 0", "dt_s", "> 0"),
     ("chunk_encounters: 0", "chunk_encounters", ">= 1"),
@@ -414,3 +419,10 @@ def test_a_decision_period_longer_than_the_duration_is_refused(tmp_path):
                            "once, at the start)")
     path.write_text(path.read_text().replace("decision_period_s: 600", "decision_period_s: 60"))
     assert load_spec(path).decision_period_s == 60.0
+
+
+def test_an_encounter_runs_at_most_max_duration_s_and_at_least_duration_s(tmp_path):
+    """Without ``max_duration_s`` an encounter runs ``duration_s``; with it, up to that."""
+    assert load_spec(_minimal(tmp_path)).longest_s == 1800.0
+    spec = load_spec(_minimal(tmp_path, extra="max_duration_s: 3600", name="m.yaml"))
+    assert (spec.duration_s, spec.max_duration_s, spec.longest_s) == (1800.0, 3600.0, 3600.0)

@@ -394,3 +394,18 @@ def test_per_type_split_counts_each_encounter_once():
     t = _random_table(np.random.default_rng(5), 40, diverged=True)
     s = summarise(t)
     assert sum(v["n_encounters"] for v in s["by_type"].values()) == s["n_completed"] == 37
+
+
+def test_encounters_with_a_pair_still_closing_at_their_end_are_counted():
+    """An encounter counts in ``cpa_not_passed`` when any of its pairs had not passed its
+    closest point when the encounter ended, overall and by type; a diverged one does not; a
+    table from before the column counts none."""
+    t = _table([0, 1, 1, 2, 3], ["head_on", "multi", "multi", "head_on", "head_on"],
+               [900.0, 2000.0, 1500.0, 1200.0, 700.0], diverged=[False] * 4 + [True])
+    t["cpa_passed"] = np.array([True, True, False, False, False])
+    s = summarise(t)
+    assert s["cpa_not_passed"] == 2
+    assert s["by_type"]["multi"]["cpa_not_passed"] == 1
+    assert s["by_type"]["head_on"]["cpa_not_passed"] == 1
+    del t["cpa_passed"]
+    assert summarise(t)["cpa_not_passed"] == 0

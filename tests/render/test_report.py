@@ -458,6 +458,24 @@ def test_a_campaign_whose_every_encounter_diverged_gets_a_page_of_dashes(tmp_pat
     assert "3 encounters diverged" in page and "below: 0, 1, 2.</p>" in page
 
 
+def test_encounters_still_closing_at_their_end_are_flagged_on_the_page(tmp_path):
+    """Encounters 3 and 5 ended with a pair not past its closest point: the page says their
+    smallest range bounds the closest approach from above; without such pairs it says
+    nothing (nor for a table from before the column)."""
+    folder = tmp_path / "camp"
+    folder.mkdir()
+    cols = _synthetic_columns()
+    cols["cpa_passed"] = ~np.isin(np.arange(len(SYNTHETIC)), [3, 6, 7])  # rows of enc. 3, 5
+    write_parquet(folder / "encounters.parquet", cols)
+    page = write_report(folder, worst=0).path.read_text()
+    assert "2 encounters ended (at <code>max_duration_s</code>) with a pair still closing" in page
+    cols["cpa_passed"][:] = True
+    write_parquet(folder / "encounters.parquet", cols)
+    assert "still closing" not in write_report(folder, worst=0).path.read_text()
+    assert "still closing" not in write_report(_synthetic_campaign(tmp_path / "old"),
+                                               worst=0).path.read_text()
+
+
 def test_the_folder_name_is_escaped_on_the_page(tmp_path):
     """A campaign folder named with HTML's special characters shows as text, not markup."""
     folder = _synthetic_campaign(tmp_path / "a<b>&c")

@@ -156,6 +156,11 @@ class PairObserver:
     runs_rules: np.ndarray  # (2P,) bool: the own ship runs the rules (behaviour colregs)
     first_role: np.ndarray  # (2P,) the role the own ship's network first gave (NaN: none yet)
     first_encounter: np.ndarray  # the encounter it gave with it (vocabulary constants)
+    active: np.ndarray | None = None  # (2P,) bool: the pairs still observed (all: None)
+
+    def __post_init__(self) -> None:
+        if self.active is None:
+            self.active = np.ones(self.own.shape[0], dtype=bool)
 
     @classmethod
     def start(cls, sim: Simulation) -> PairObserver:
@@ -190,8 +195,9 @@ class PairObserver:
 
     def observe(self, sim: Simulation) -> None:
         """One sample of the true state (and of the decisions just taken): one compiled loop
-        over the directed pairs."""
-        _observe(sim.batch.x, self.x0, self.own, self.tgt, self.closest_m, self.alpha_cpa,
+        over the active directed pairs."""
+        _observe(sim.batch.x, self.x0, self.own, self.tgt, self.active, self.closest_m,
+                 self.alpha_cpa,
                  self.beta_cpa, self.stbd_rad, self.port_rad, self.faster_mps,
                  self.slower_mps, self.stbd_cpa, self.port_cpa, self.faster_cpa,
                  self.slower_cpa, self.range_at_manoeuvre_m, self.manoeuvre_cpa_m, self.side,
@@ -203,7 +209,7 @@ class PairObserver:
         if d is None or not d.last_decision:
             return
         role = d.memory[_ROLE_ROW]  # (the pair memory after the decision just taken)
-        new = np.isnan(self.first_role) & (role != NO_ROLE)
+        new = np.isnan(self.first_role) & (role != NO_ROLE) & self.active
         self.first_role[new] = role[new]
         self.first_encounter[new] = d.memory[_ENCOUNTER_ROW, new]
         for k, dec in enumerate(d.last_decision):
@@ -211,11 +217,12 @@ class PairObserver:
                 continue
             idx = np.flatnonzero(self.net_of_pair == k)
             asked = dec.action("manoeuvre")
+            live = self.active[idx]
             for j, name in enumerate(MANOEUVRES):
-                self.asked[idx, j] |= asked == ENUMS[name]
+                self.asked[idx, j] |= (asked == ENUMS[name]) & live
             rows = np.repeat(idx, dec.path.shape[1])
             nodes = dec.path.ravel()
-            keep = nodes >= 0
+            keep = (nodes >= 0) & np.repeat(live, dec.path.shape[1])
             self.fired[rows[keep], nodes[keep]] = True
 
     def columns(self) -> dict[str, Any]:
@@ -301,12 +308,12 @@ def _larger(a: float, b: float) -> float:
 
 @kernel
 def _observe(x: np.ndarray, x0: np.ndarray, own: np.ndarray, tgt: np.ndarray,
-             closest: np.ndarray, alpha: np.ndarray, beta: np.ndarray, stbd: np.ndarray,
-             port: np.ndarray, faster: np.ndarray, slower: np.ndarray, stbd_cpa: np.ndarray,
-             port_cpa: np.ndarray, faster_cpa: np.ndarray, slower_cpa: np.ndarray,
-             range_at_manoeuvre: np.ndarray, manoeuvre_cpa: np.ndarray, side: np.ndarray,
-             ahead: np.ndarray, crossed_ahead: np.ndarray) -> None:
-    """:meth:`PairObserver.observe` of every directed pair, in place (attributes of
+             active: np.ndarray, closest: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+             stbd: np.ndarray, port: np.ndarray, faster: np.ndarray, slower: np.ndarray,
+             stbd_cpa: np.ndarray, port_cpa: np.ndarray, faster_cpa: np.ndarray,
+             slower_cpa: np.ndarray, range_at_manoeuvre: np.ndarray, manoeuvre_cpa: np.ndarray,
+             side: np.ndarray, ahead: np.ndarray, crossed_ahead: np.ndarray) -> None:
+    """:meth:`PairObserver.observe` of every active directed pair, in place (attributes of
     :class:`PairObserver`; ``x`` the true state now, ``x0`` at the start).
 
     The own ship crossed the other's bow line ahead of her when its side of the line changed
@@ -314,6 +321,8 @@ def _observe(x: np.ndarray, x0: np.ndarray, own: np.ndarray, tgt: np.ndarray,
     samples in the other ship's frame, lies ahead of her: a crossing made between two samples
     is seen even when the other ship has passed that point by the second."""
     for k in range(own.shape[0]):
+        if not active[k]:
+            continue
         o, t = own[k], tgt[k]
         dn, de = x[NORTH, t] - x[NORTH, o], x[EAST, t] - x[EAST, o]
         rng = math.hypot(dn, de)

@@ -7,7 +7,9 @@ streams, rules, policy, domain and step as the campaign (:func:`~.runner.prepare
 encounter) and reproduces its rows exactly. The folder is the one ``trafficsim run`` writes
 (:func:`trafficsim.run.record_run`, :func:`trafficsim.run.write_run`), so ``trafficsim
 render`` and ``trafficsim explain`` work on it; its ``summary.json`` adds ``campaign_dir``,
-``encounter`` and ``encounter_type``.
+``encounter`` and ``encounter_type``. It runs to the encounter's end in the campaign
+(``end_s``: ``duration_s``, or later up to ``max_duration_s`` until every pair passed its
+closest point), found by running the encounter once through the campaign's own loop.
 """
 
 from __future__ import annotations
@@ -85,7 +87,7 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
             encounter index outside the campaign; a record period that is not a positive
             multiple of the campaign's step, or longer than its ``duration_s``.
     """
-    from trafficsim.campaign.runner import prepare
+    from trafficsim.campaign.runner import prepare, run_chunk
     from trafficsim.folders import refuse_other_results
     from trafficsim.run import raise_if_diverged, record_run, run_summary, write_run
 
@@ -106,14 +108,17 @@ def replay_encounter(campaign_dir: str | Path, encounter: int, out_dir: str | Pa
         raise InputError(f"must not exceed the encounter's duration ({spec.duration_s:g} s, "
                          f"duration_s of {spec.path}), got {record_every_s:g} (only the start "
                          "would be recorded)", key="--record-every-s")
+    end_s = spec.duration_s
+    if spec.longest_s > spec.duration_s:  # where the campaign took its figures
+        end_s = float(run_chunk(spec, encounter, encounter + 1)["end_s"][0])
     encounters, sim = prepare(spec, encounter, encounter + 1)
     if sim.decider is not None:
         sim.decider.record = True  # decisions.parquet (recording changes nothing else)
-    n_steps = round(spec.duration_s / spec.dt_s)
+    n_steps = round(end_s / spec.dt_s)
     rec, wall = record_run(sim, n_steps, every, on_record)
     header = {"scenario": f"{spec.name} encounter {encounter}",
               "scenario_file": str(spec.path), "seed": spec.seed,
-              "duration_s": spec.duration_s, "dt_s": spec.dt_s,
+              "duration_s": end_s, "dt_s": spec.dt_s,
               "campaign_dir": str(Path(campaign_dir).resolve()), "encounter": encounter,
               "encounter_type": encounters[0].kind}
     summary = run_summary(header, sim, n_steps, wall, max(sim.step_index - 1, 1),

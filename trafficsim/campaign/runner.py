@@ -22,7 +22,8 @@ from trafficsim.campaign.compliance import RULES, PairObserver
 from trafficsim.campaign.generator import Encounter, classify, draw
 from trafficsim.campaign.spec import CampaignSpec
 from trafficsim.colregs.decider import Decider
-from trafficsim.engine import Simulation
+from trafficsim.engine import Simulation, earth_velocity
+from trafficsim.geometry import cpa
 from trafficsim.ships.base import EAST, NORTH, PSI, U
 from trafficsim.units import NM
 
@@ -32,8 +33,9 @@ COLUMNS: dict[str, str] = {
     "encounter": "int64", "encounter_type": "string", "pair_type": "string", "seed": "int64",
     **dict.fromkeys(("ship_i", "ship_j", "type_i", "type_j", "behaviour_i", "behaviour_j"),
                     "string"),
-    **dict.fromkeys(("dcpa0_nm", "tcpa0_min", "range0_nm", "min_range_m", "t_cpa_s"), "double"),
-    **dict.fromkeys(("collision", "domain_violation", "blind_spot"), "bool"),
+    **dict.fromkeys(("dcpa0_nm", "tcpa0_min", "range0_nm", "min_range_m", "t_cpa_s", "end_s"),
+                    "double"),
+    **dict.fromkeys(("cpa_passed", "collision", "domain_violation", "blind_spot"), "bool"),
     "blind_spot_role": "string", "diverged_at_s": "double", "diverged": "bool",
     **{f"{name}{side}": kind for side in ("_i", "_j") for name, kind in (
         ("manoeuvres", "string"), ("rules_fired", "string"), ("course_change_stbd_deg", "double"),
@@ -83,21 +85,66 @@ def run_chunk(spec: CampaignSpec, start: int, stop: int) -> dict[str, Any]:
     encounters, sim = prepare(spec, start, stop)
     observer = PairObserver.start(sim)
     steps = round(spec.duration_s / spec.dt_s)
+    longest = round(spec.longest_s / spec.dt_s)
     period = sim.decision_steps
+    end_s = np.full(len(encounters), np.nan)  # when each encounter's figures were taken
+    passed = np.zeros(sim.batch.pair_i.shape[0], dtype=bool)
     done = 0
-    while done < steps:  # one observation per decision period (vectorised over all pairs)
-        k = min(period, steps - done)
+    while done < longest:  # one observation per decision period (vectorised over all pairs)
+        k = min(period - done % period, (steps if done < steps else longest) - done)
         sim.run(k)
         done += k
         observer.observe(sim)
-    return _rows(spec, encounters, sim, observer, steps, time.perf_counter() - t0)
+        if done >= steps:
+            live = sim.metrics.active
+            passed[live] = cpa_passed(sim)[live]
+            if _end_passed(sim, observer, passed, end_s):
+                break
+    end_s[np.isnan(end_s)] = sim.t_s
+    return _rows(spec, encounters, sim, observer, passed, end_s, sim.batch.n_ships * done,
+                 time.perf_counter() - t0)
+
+
+def cpa_passed(sim: Simulation) -> np.ndarray:
+    """Per pair, whether its smallest range so far is its closest approach: the ships are
+    opening, or on their present courses and speeds over ground they would pass no closer than
+    they have been (the CPA of straight-line motion, measured on true states)."""
+    b, m = sim.batch, sim.metrics
+    pi, pj = b.pair_i, b.pair_j
+    v = earth_velocity(b.x, b.env)
+    # (errors ignored: a diverged encounter's frozen state may overflow; it ends anyway)
+    with np.errstate(all="ignore"):
+        dcpa, tcpa = cpa(b.x[NORTH, pj] - b.x[NORTH, pi], b.x[EAST, pj] - b.x[EAST, pi],
+                         v[0, pj] - v[0, pi], v[1, pj] - v[1, pi])
+    return (tcpa <= 0.0) | (dcpa >= m.min_range_m)
+
+
+def _end_passed(sim: Simulation, observer: PairObserver, passed: np.ndarray,
+                end_s: np.ndarray) -> bool:
+    """End the encounters whose pairs have all passed their CPA (or that diverged): their
+    figures stay as they are now (``end_s``) while the batch runs on. Whether every encounter
+    has ended."""
+    b = sim.batch
+    enc_of_pair = b.encounter[b.pair_i]
+    open_pair = np.zeros(end_s.shape[0], dtype=bool)
+    open_pair[enc_of_pair[~passed]] = True
+    ending = np.isnan(end_s) & (~open_pair | np.isfinite(sim.diverged_at_s))
+    end_s[ending] = sim.t_s
+    stop = ending[enc_of_pair]
+    sim.metrics.active[stop] = False
+    observer.active[np.concatenate([stop, stop])] = False
+    return not np.isnan(end_s).any()
 
 
 def _rows(spec: CampaignSpec, encounters: list, sim: Simulation, observer: PairObserver,
-          steps: int, seconds: float) -> dict[str, Any]:
+          passed: np.ndarray, end_s: np.ndarray, ship_steps: int,
+          seconds: float) -> dict[str, Any]:
     b, m = sim.batch, sim.metrics
     pi, pj = b.pair_i, b.pair_j
     enc_of_pair = b.encounter[pi]
+    # a divergence after an encounter's end is not its own (another encounter kept the
+    # batch running)
+    diverged_at = np.where(sim.diverged_at_s <= end_s, sim.diverged_at_s, np.nan)
     first = np.searchsorted(b.encounter, np.arange(len(encounters)))  # ship 0 of each
     slot_i, slot_j = pi - first[enc_of_pair], pj - first[enc_of_pair]
     x0 = observer.x0
@@ -114,6 +161,8 @@ def _rows(spec: CampaignSpec, encounters: list, sim: Simulation, observer: PairO
     if sim.decider is not None:
         index = {(int(a), int(c)): p for p, (a, c) in enumerate(zip(pi, pj, strict=True))}
         for spot in sim.decider.blind_spots:
+            if spot.from_s > end_s[b.encounter[spot.ship]]:
+                continue
             p = index[(min(spot.ship, spot.other), max(spot.ship, spot.other))]
             blind[p] = blind[p] or spot.role
     graded_kind, graded_by = observer.graded_kinds()
@@ -138,18 +187,20 @@ def _rows(spec: CampaignSpec, encounters: list, sim: Simulation, observer: PairO
         "range0_nm": np.hypot(x0[NORTH, pj] - x0[NORTH, pi], x0[EAST, pj] - x0[EAST, pi]) / NM,
         "min_range_m": m.min_range_m,
         "t_cpa_s": m.t_min_range_s,
+        "end_s": end_s[enc_of_pair],
+        "cpa_passed": passed,
         "collision": m.collision,
         "domain_violation": m.domain_violation,
         "blind_spot": np.array([b != "" for b in blind]),
         "blind_spot_role": blind,
-        "diverged_at_s": sim.diverged_at_s[enc_of_pair],
-        "diverged": np.isfinite(sim.diverged_at_s[enc_of_pair]),
+        "diverged_at_s": diverged_at[enc_of_pair],
+        "diverged": np.isfinite(diverged_at[enc_of_pair]),
         **observer.columns(),
         "graded_kind_i": graded_kind[:half], "graded_kind_j": graded_kind[half:],
         "graded_by_i": graded_by[:half], "graded_by_j": graded_by[half:],
         **scores,
     }
-    rows["_ship_steps"] = b.n_ships * steps
+    rows["_ship_steps"] = ship_steps
     rows["_seconds"] = seconds
     return rows
 

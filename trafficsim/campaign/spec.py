@@ -7,6 +7,8 @@ A campaign draws ``n_encounters`` random encounters and runs them all::
     n_encounters: 1000             # 1 .. 10,000,000
     seed: 1                        # int >= 0; with the encounter index it fixes each encounter
     duration_s: 1800               # per encounter, > 0 and >= tcpa_min's upper end
+    max_duration_s: 3600           # optional, default duration_s: an encounter runs on past
+                                   #   duration_s until every pair has passed its closest point
     dt_s: 1.0                      # optional, default 1.0
     chunk_encounters: 500          # optional, default 500: encounters per chunk (memory,
                                    #   and the unit of work, of resuming and of the executors)
@@ -122,6 +124,7 @@ class CampaignSpec(Strict):
     n_encounters: Annotated[Integer, Field(ge=1, le=10_000_000)]
     seed: Annotated[Integer, Field(ge=0)] = 0
     duration_s: Annotated[Number, Field(gt=0.0, le=MAX_DURATION_S)]
+    max_duration_s: Annotated[Number, Field(gt=0.0, le=MAX_DURATION_S)] | None = None
     dt_s: Annotated[Number, Field(gt=0.0, le=MAX_DT_S, validate_default=True)] = 1.0
     chunk_encounters: Annotated[Integer, Field(ge=1, le=1_000_000)] = 500
     policy: Literal["colregs", "no_avoidance"] = "colregs"
@@ -144,6 +147,11 @@ class CampaignSpec(Strict):
     sensors: Sensors | None = None
 
     _path: Path | None = PrivateAttr(default=None)
+
+    @property
+    def longest_s(self) -> float:
+        """The longest an encounter runs: ``max_duration_s``, else ``duration_s``."""
+        return self.duration_s if self.max_duration_s is None else self.max_duration_s
 
     @property
     def path(self) -> Path | None:
@@ -216,6 +224,17 @@ class CampaignSpec(Strict):
                              f"= {latest_s:g} s, so that every encounter reaches its CPA "
                              f"(lengthen it or lower tcpa_min), got {self.duration_s:g}",
                              loc=("duration_s",))
+        return self
+
+    @model_validator(mode="after")
+    def _max_duration_after_duration(self) -> CampaignSpec:
+        cap = self.max_duration_s
+        if cap is not None and cap < self.duration_s:
+            raise FieldError(f"must be at least duration_s ({self.duration_s:g} s), got "
+                             f"{cap:g}", loc=("max_duration_s",))
+        if cap is not None and not _whole(cap, self.dt_s):
+            raise FieldError(f"must be a whole multiple of dt_s ({self.dt_s:g} s; 1 s when not "
+                             f"given), got {cap:g}", loc=("max_duration_s",))
         return self
 
 

@@ -7,7 +7,9 @@ when any ship entered another's domain. The 95 % interval of a rate ``k / n`` is
 interval (Wilson 1927, J. Am. Stat. Assoc. 22:209-212). An encounter that diverged (its
 state stopped being finite and it stood frozen from then on) has no outcome: it is counted
 and listed apart, and every rate, quantile and score is over the encounters that ran to the
-end.
+end. ``cpa_not_passed`` counts the encounters that reached ``max_duration_s`` with a pair
+still closing to less than its smallest range so far: their smallest range (in the quantiles
+and the near-miss rate) bounds their closest approach from above.
 """
 
 from __future__ import annotations
@@ -72,10 +74,13 @@ def per_encounter(table: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     for side in ("behaviour_i", "behaviour_j"):
         np.logical_or.at(rogue, idx, np.asarray(table[side], dtype=object) != "colregs")
     collision = any_of("collision")
+    open_ended = np.zeros(ids.shape[0], dtype=bool)
+    if "cpa_passed" in table:  # (a table from before the column: every pair taken as passed)
+        np.logical_or.at(open_ended, idx, ~np.asarray(table["cpa_passed"], dtype=bool))
     return {"encounter": ids, "type": np.asarray(table["encounter_type"], dtype=object)[first],
             "collision": collision, "near_miss": (min_range < R_NM_M) & ~collision,
             "domain_violation": any_of("domain_violation"), "blind_spot": any_of("blind_spot"),
-            "min_range_m": min_range, "all_compliant": ~rogue}
+            "min_range_m": min_range, "all_compliant": ~rogue, "cpa_not_passed": open_ended}
 
 
 def _stats(enc: dict[str, np.ndarray], rows: dict[str, np.ndarray]) -> dict[str, Any]:
@@ -85,6 +90,7 @@ def _stats(enc: dict[str, np.ndarray], rows: dict[str, np.ndarray]) -> dict[str,
         k = int(np.sum(enc[name]))
         low, high = wilson(k, n)
         out[name] = {"count": k, "rate": k / n if n else math.nan, "ci95": [low, high]}
+    out["cpa_not_passed"] = int(np.sum(enc["cpa_not_passed"]))
     cpa_nm = enc["min_range_m"] / NM
     out["cpa_nm"] = ({f"p{q}": float(np.percentile(cpa_nm, q)) for q in (1, 5, 50)} if n
                      else {f"p{q}": math.nan for q in (1, 5, 50)})

@@ -62,12 +62,12 @@ class Report:
 
 
 #: the columns of ``encounters.parquet`` the report reads (written with the types of
-#: :data:`trafficsim.campaign.runner.COLUMNS`); ``diverged`` may be absent: tables from before
-#: it count every encounter as run to the end
+#: :data:`trafficsim.campaign.runner.COLUMNS`); ``diverged`` and ``cpa_passed`` may be absent:
+#: tables from before them count every encounter as run to the end and past its CPA
 READ = ("encounter", "encounter_type", "min_range_m", "t_cpa_s", "collision",
         "domain_violation", "blind_spot", "blind_spot_role", "behaviour_i", "behaviour_j",
         "compliance_i", "compliance_j", *(f"score_rule{r}" for r in RULES))
-OPTIONAL = ("diverged",)
+OPTIONAL = ("diverged", "cpa_passed")
 #: what a column of each written type must hold
 KINDS = {"int64": "integer", "double": "number", "bool": "bool", "string": "text"}
 EXPECTED = {"integer": "whole numbers", "number": "numbers", "bool": "true or false",
@@ -292,6 +292,11 @@ def _page(campaign_dir: Path, spec: Any, summary: dict[str, Any], figures: list[
                 f"{_num(cpa['p5'], '.2f')} / {_num(cpa['p50'], '.2f')} NM. Collisions with "
                 f"every ship compliant: {summary['collisions_all_compliant']} of "
                 f"{summary['encounters_all_compliant']} such encounters.</p>")
+    if summary.get("cpa_not_passed"):
+        body.append(f"<p class='warn'>{summary['cpa_not_passed']} encounters ended (at "
+                    "<code>max_duration_s</code>) with a pair still closing to less than its "
+                    "smallest range so far: for them that range bounds the closest approach "
+                    "from above.</p>")
     body.append("<table><tr><th>rule</th>" + "".join(
         f"<th>{e(k.replace('rule', 'Rule '))}</th>" for k in summary["compliance"])
         + "</tr><tr><td>mean compliance</td>" + "".join(
