@@ -760,3 +760,41 @@ def test_classify_takes_the_reciprocal_test_on_the_own_course():
     assert classify(0.0, math.radians(172.0), *geometry) == "head_on"
     assert classify(0.0, math.radians(167.3), *geometry,
                     own_course=math.radians(4.8)) == "crossing_stand_on"
+
+
+def test_no_other_ship_starts_nearer_than_min_start_range_nm(tmp_path):
+    """With ``min_start_range_nm: 1.5`` every other ship starts at least 1.5 NM from the own
+    ship and from every other ship; without it, slow overtakings start nearer, and the
+    encounters are those of a spec that gives 0 (the key only rejects draws)."""
+    kinds = "encounter_types: {overtaking: 1, overtaken: 1, multi: 1}\n"
+
+    def starts(spec):
+        ranges, own = [], []
+        for index in range(40):
+            ships = draw(spec, index).ships
+            for k, a in enumerate(ships):
+                for b in ships[k + 1:]:
+                    ranges.append(math.hypot(b.north_m - a.north_m, b.east_m - a.east_m))
+                    own.append(k == 0)
+        return np.array(ranges), np.array(own)
+
+    far, _ = starts(_spec(tmp_path, kinds + "min_start_range_nm: 1.5", name="far.yaml"))
+    assert far.min() >= 1.5 * NM
+    near, own = starts(_spec(tmp_path, kinds, name="near.yaml"))
+    assert (near[own] < 1.5 * NM).sum() >= 5 and near[own].min() < 0.6 * NM
+    zero, _ = starts(_spec(tmp_path, kinds + "min_start_range_nm: 0", name="zero.yaml"))
+    np.testing.assert_array_equal(near, zero)
+
+
+def test_a_start_range_no_draw_reaches_names_the_key(tmp_path, monkeypatch):
+    """Overtaking at 10-12 min TCPA cannot start 10 NM away with these speeds: the error
+    names ``min_start_range_nm`` beside the other limits."""
+    from trafficsim.campaign import generator as gen
+
+    monkeypatch.setattr(gen, "MAX_TRIES", 3)
+    monkeypatch.setattr(gen, "TRIES_PER_SHIP", 20)
+    spec = _spec(tmp_path, "encounter_types: {overtaking: 1}\ntcpa_min: [10, 12]\n"
+                 "min_start_range_nm: 10")
+    errors = gen.drawing_errors(spec)
+    assert [e.key for e in errors] == ["encounter_types.overtaking"]
+    assert "DCPA and TCPA ranges and min_start_range_nm 10" in errors[0].message

@@ -1250,21 +1250,23 @@ _SLOW_CLOSE = {"tcpa_min": 25.0, "range_nm": 1.62, "dcpa_nm": 1.0 - _EPS,
     ("stand_on_watch", {"tcpa_min": 5.0, "time_to_domain_min": 10.0 + _EPS},
      ["stand_on_watch", "stand_on_check", "stand_on_close"], {}, "stand_on_watch"),
     # ... a slow closing: domain entry far off, but within stand_on_act_nm (1.62) with the CPA
-    # closer than cpa_limit_nm, within the look-ahead, the role held not_acting_min (3) and the
-    # other not acting: a substantial alteration, keeping the speed; each limit beside it not
-    ("stand_on_watch", _SLOW_CLOSE,
-     ["stand_on_watch", "stand_on_check", "stand_on_close", "stand_on_turn"],
-     {"manoeuvre": "alter_course", "course_change_deg": 30.0, "pass_distance_nm": 1.0},
-     "keep_clear"),
+    # closer than cpa_limit_nm, within the look-ahead and the role held not_acting_min (3):
+    # a substantial alteration, keeping the speed, whatever the other ship did (Rule 17(b):
+    # it has not opened the CPA); each limit beside it not
+    *[("stand_on_watch", {**_SLOW_CLOSE, **row},
+       ["stand_on_watch", "stand_on_check", "stand_on_close", "stand_on_turn"],
+       {"manoeuvre": "alter_course", "course_change_deg": 30.0, "pass_distance_nm": 1.0},
+       "keep_clear")
+      for row in ({}, {"other_course_change_deg": 40.0}, {"other_speed_change_ratio": 0.5})],
     *[("stand_on_watch", {**_SLOW_CLOSE, **row},
        ["stand_on_watch", "stand_on_check", "stand_on_close"], {}, "stand_on_watch")
       for row in ({"range_nm": 1.62 + _EPS}, {"dcpa_nm": 1.0}, {"tcpa_min": 30.0 + _EPS},
-                  {"tcpa_min": -_EPS}, {"time_in_role_min": 3.0 - _EPS},
-                  {"other_course_change_deg": 10.0}, {"other_speed_change_ratio": 0.8})],
-    ("overtaken_watch", {**_SLOW_CLOSE, "bearing_deg": -150.0, "aspect_deg": 20.0},
-     ["overtaken_watch", "overtaken_check", "overtaken_close", "stand_on_turn"],
-     {"manoeuvre": "alter_course", "course_change_deg": 30.0, "pass_distance_nm": 1.0},
-     "keep_clear"),
+                  {"tcpa_min": -_EPS}, {"time_in_role_min": 3.0 - _EPS})],
+    *[("overtaken_watch", {**_SLOW_CLOSE, "bearing_deg": -150.0, "aspect_deg": 20.0, **row},
+       ["overtaken_watch", "overtaken_check", "overtaken_close", "stand_on_turn"],
+       {"manoeuvre": "alter_course", "course_change_deg": 30.0, "pass_distance_nm": 1.0},
+       "keep_clear")
+      for row in ({}, {"other_course_change_deg": 40.0})],
     # give_way_wait: the other ship within give_way_act_nm (2.7), the CPA within the
     # look-ahead: act whatever the time to CPA; not beyond either, nor when overtaking
     ("give_way_still", {**_GW, "tcpa_min": 25.0, "range_nm": 2.7},

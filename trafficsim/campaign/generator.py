@@ -5,7 +5,8 @@ other ships, each placed so that its DCPA and TCPA to the own ship at the start 
 spec's ranges: with relative velocity ``w = v_other - v_own``, TCPA ``T`` and DCPA ``D`` the
 other ship starts at ``p = -w T + D n`` from the own ship, ``n`` a unit vector across ``w``
 (either side). Its course relative to the own ship and its speed are drawn for the encounter
-type, and a draw is kept only when the start geometry is of that type by the sectors of
+type, and a draw is kept only when it starts at least ``min_start_range_nm`` from the own ship
+and its start geometry is of that type by the sectors of
 COLREGS Rules 13-15 (``../shared/reference/colregs.md``) as the bundled ``rules/colregs.yaml``
 reads them, so that the network sees the encounter the draw was meant to be: overtaking when
 coming up faster from more than 22.5 degrees abaft the other's beam (relative bearing
@@ -163,13 +164,14 @@ def _clear_of(placed: list[tuple[tuple[float, float], tuple[float, float]]],
               pos: tuple[float, float], vel: tuple[float, float], spec: CampaignSpec) -> bool:
     """Whether another ship starting at ``pos`` with velocity ``vel`` (m, m/s) leaves every
     other ship ``placed`` before it as much room as the spec gives the own ship: at least the
-    spec's largest DCPA apart at the start, and a pair closing to less than that no sooner than
-    the spec's least TCPA (a multi-ship encounter must not start in a collision no one can
-    avoid)."""
+    spec's largest DCPA (or its least start range, if larger) apart at the start, and a pair
+    closing to less than that DCPA no sooner than the spec's least TCPA (a multi-ship
+    encounter must not start in a collision no one can avoid)."""
     room, least_s = NM * spec.dcpa_nm[1], 60.0 * spec.tcpa_min[0]
+    start_room = max(room, NM * spec.min_start_range_nm)
     for (n, e), (vn, ve) in placed:
         pn, pe, dvn, dve = n - pos[0], e - pos[1], vn - vel[0], ve - vel[1]
-        if math.hypot(pn, pe) < room:
+        if math.hypot(pn, pe) < start_room:
             return False
         v2 = dvn * dvn + dve * dve
         t = -(pn * dvn + pe * dve) / v2 if v2 > 1e-12 else -1.0
@@ -210,6 +212,7 @@ def _ships(spec: CampaignSpec, pair_kinds: list[str], types: list[str],
             rel_e = -we * tcpa + dcpa * wn / w
             vel = (speed * math.cos(psi), speed * math.sin(psi))
             if (classify(own_psi, psi, rel_n, rel_e, own_speed, speed) == pair_kind
+                    and math.hypot(rel_n, rel_e) >= NM * spec.min_start_range_nm
                     and _clear_of(placed, (rel_n, rel_e), vel, spec)):
                 break
         else:
@@ -281,7 +284,9 @@ def _no_geometry(spec: CampaignSpec, kind: str, pair_kinds: list[str], what: str
                 "ship types of different service speeds")
     err = NoGeometryError(
         f"{what}no geometry for {', '.join(pair_kinds)} in {MAX_TRIES} draws with these ship "
-        f"types, speeds, DCPA and TCPA ranges{hint}",
+        f"types, speeds, DCPA and TCPA ranges"
+        + (f" and min_start_range_nm {spec.min_start_range_nm:g}" if spec.min_start_range_nm
+           else "") + hint,
         path=None if spec.path is None else str(spec.path), key=f"encounter_types.{kind}")
     locate(err)
     return err

@@ -27,6 +27,8 @@ A campaign draws ``n_encounters`` random encounters and runs them all::
     multi_ships: [3, 5]            # ships in a multi-ship encounter (inclusive)
     dcpa_nm: [0.0, 1.0]            # DCPA of every other ship to the own ship at the start
     tcpa_min: [10, 30]             # TCPA at the start
+    min_start_range_nm: 1.0        # optional, default 0: no other ship starts nearer the own
+                                   #   ship (nor, in a multi-ship encounter, another's)
     ship_types: {cargo: 2, container: 1, tanker: 1, bulk_carrier: 1, ferry: 1, fishing: 1}
     speed_fraction: [0.6, 1.0]     # speed as a fraction of the type's service speed
     current_kn: [0.0, 1.0]         # uniform current, random direction
@@ -138,6 +140,7 @@ class CampaignSpec(Strict):
                        Annotated[Integer, Field(ge=3, le=5)]] = (3, 5)
     dcpa_nm: _range(0.0, 10.0) = (0.0, 1.0)
     tcpa_min: _range(1.0, 120.0) = (10.0, 30.0)
+    min_start_range_nm: Annotated[Number, Field(ge=0.0, le=20.0)] = 0.0
     ship_types: dict[Text, NonNegative] = Field(default_factory=lambda: {"cargo": 1.0})
     speed_fraction: _range(0.2, 1.2) = (0.6, 1.0)
     current_kn: _range(0.0, 5.0) = (0.0, 0.0)
