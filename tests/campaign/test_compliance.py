@@ -220,12 +220,26 @@ def test_a_port_turn_counts_as_a_course_change_for_the_apparent_test():
 
 
 def test_crossing_ahead_penalties_and_clipping():
-    """S13 = S16 - 0.3 and S15 = S16 - 0.5 when the own ship crossed ahead; clipped at 0."""
+    """S15 = S16 - 0.5 when the own ship crossed the other's bow line ahead of her; clipped
+    at 0. Rule 13 does not look at the bow line: a crossing ahead away from the CPA costs
+    nothing there."""
     g = grade(_fields(m=2, crossed_ahead=[True, True], closest_m=[1500.0, 200.0]))
     # safety 0.75 for the first; 0.5 * 0 + 0.25 = 0.25 for the second
     assert g[16] == pytest.approx([0.75, 0.25], abs=1e-12)
-    assert g[13] == pytest.approx([0.45, 0.0], abs=1e-12)
     assert g[15] == pytest.approx([0.25, 0.0], abs=1e-12)
+    assert g[13] == pytest.approx(g[16], abs=1e-12)
+
+
+@pytest.mark.parametrize("alpha_deg, penalised", [
+    (0.0, True), (44.9, True), (-44.9, True), (45.0, False), (-45.0, False), (90.0, False),
+    (315.1, True), (180.0, False)])
+def test_rule_13_penalises_a_closest_point_ahead_of_the_overtaken_ship(alpha_deg, penalised):
+    """S13 = S16 - 0.3 when the own ship is within 45 deg of the other's bow at the CPA
+    (colregs.md section 2.4), whether or not it crossed her bow line; clipped at 0."""
+    g = grade(_fields(m=2, alpha_cpa=math.radians(alpha_deg), closest_m=[1500.0, 200.0],
+                      crossed_ahead=[False, True]))
+    assert g[13] == pytest.approx(np.clip(g[16] - 0.3 * penalised, 0.0, 1.0), abs=1e-12)
+    assert g[13][1] == pytest.approx(0.0 if penalised else g[16][1], abs=1e-12)
 
 
 def test_head_on_grades_by_hand():
@@ -601,7 +615,9 @@ def _woerner(seen, crossed=False):
     p_down = 0.5 * seen["slower"] / u0 if seen["slower"] > 0.2 else 0.0
     s17 = (safety - p_course) * p_up - p_down
     clip = lambda v: min(max(v, 0.0), 1.0)  # noqa: E731
-    return {13: clip(s16 - 0.3 * crossed), 14: clip(s14), 15: clip(s16 - 0.5 * crossed),
+    ahead_at_cpa = abs((seen["alpha"] + 180) % 360 - 180) < 45.0
+    return {13: clip(s16 - 0.3 * ahead_at_cpa), 14: clip(s14),
+            15: clip(s16 - 0.5 * crossed),
             16: clip(s16), 17: clip(s17), "safety": safety, "p_delay": p_delay}
 
 
@@ -741,18 +757,35 @@ def test_head_on_small_starboard_turn_pays_the_non_starboard_and_apparent_terms(
         max(0.0, (1 - 0.6 / 16 - 0.2 * exp["p_delay"] - p_sts) * 5 / 9), abs=1e-9)
 
 
-def test_overtaking_then_crossing_the_bow_loses_0_3_for_rule_13():
+def test_overtaking_then_crossing_the_bow_far_ahead_keeps_rule_13():
     """Own ship (8 m/s) comes up 300 m to port of a 4 m/s ship on the same course, sheers 35
     deg to port from 95 s to 300 s (a readily apparent early manoeuvre, 205 * 8 * sin 35 =
     940 m more to port), passes her about 1.24 km off at some 574 s, then at 1300 s, 2.9 km
     ahead, turns to 60 deg: relative to her it runs due east and crosses her bow line 2.9 km
-    ahead of her, the range opening all the while. S13 = S16 - 0.3."""
+    ahead of her, the range opening all the while. The closest point is the passage abeam:
+    crossed ahead, yet S13 = S16 (Rule 13 asks her to keep clear until past and clear)."""
     own = (0.0, 0.0, [(0.0, 0.0, 8.0), (95.0, 325.0, 8.0), (300.0, 0.0, 8.0),
                       (1300.0, 60.0, 8.0)])
     slow = (2000.0, 300.0, [(0.0, 0.0, 4.0)])
     g, _, seen = _check([own, slow], crossed=True, end_s=2400)
     assert seen["t_cpa"] < 1300.0
+    assert abs((seen["alpha"] + 180) % 360 - 180) > 45.0
     assert g[16][0] > 0.3
+    assert g[13][0] == pytest.approx(g[16][0], abs=1e-9)
+
+
+def test_overtaking_then_cutting_across_the_bow_close_ahead_loses_0_3_for_rule_13():
+    """As above, sheering at 10 s, but at 1050 s, some 1.9 km ahead, she turns 90 deg to
+    starboard straight across the other's bow: she passes 1.15 km ahead of her, nearer than
+    abeam (1.24 km), so the closest point is made ahead of the other ship, 27 deg off her bow.
+    S13 = S16 - 0.3."""
+    own = (0.0, 0.0, [(0.0, 0.0, 8.0), (10.0, 325.0, 8.0), (215.0, 0.0, 8.0),
+                      (1050.0, 90.0, 8.0)])
+    slow = (2000.0, 300.0, [(0.0, 0.0, 4.0)])
+    g, _, seen = _check([own, slow], crossed=True, end_s=1550)
+    assert seen["t_cpa"] > 1050.0
+    assert abs((seen["alpha"] + 180) % 360 - 180) < 45.0
+    assert g[16][0] > 0.4
     assert g[13][0] == pytest.approx(g[16][0] - 0.3, abs=1e-9)
 
 

@@ -26,9 +26,13 @@ applies to the own ship's part in the encounter:
   evaluator's stage-2 range of 5000 m, or the start range if closer; a manoeuvre before it
   costs nothing), ``P_na`` the non-apparent-manoeuvre
   penalty (course change under 30 deg and speed kept above half);
-* overtaking (Rule 13) ``S16 - 0.3``, crossing give-way (Rule 15) ``S16 - 0.5``, when the own
-  ship crossed ahead of the other (the colregs.md criterion "no passing ahead of a crossing
-  stand-on vessel", tested on the bow line itself rather than on alpha at the CPA);
+* overtaking (Rule 13) ``S16 - 0.3`` when the own ship passed ahead of the overtaken ship,
+  within 45 deg of her bow at the CPA (``|alpha| < 45 deg``, Woerner's test as colregs.md
+  section 2.4 states it): unlike Rule 15, Rule 13 has no clause against crossing ahead, and a
+  ship finally past and clear may cross the other's bow; the score marks a closest approach
+  made ahead of her; crossing give-way (Rule 15) ``S16 - 0.5`` when
+  the own ship crossed ahead of the other (Rule 15: "avoid crossing ahead of the other
+  vessel", tested on the bow line itself, at any range, rather than on alpha at the CPA);
 * head-on (Rule 14): ``(1 - 0.6 P_nsb - 0.2 P_delay - P_sts)(1 - P_na_course)`` with the
   non-starboard penalty ``clip(1 - stbd / 20 deg, 0, 1)^4`` (the form colregs.md suggests) and
   the starboard-to-starboard penalty ``1 - ((sin a + 1)/2)^2 ((sin b + 1)/2)^2`` (angles
@@ -95,6 +99,9 @@ MANOEUVRE_SPEED_MPS = 0.2
 #: r_detect of the delay penalty: the stage-2 range of NTNU's AutoVerification (AIS version;
 #: 7000 m in the other), colregs.md sections 1 and 2.4
 DETECT_RANGE_M = 5000.0
+#: Rule 13's penalty: the overtaking ship passed within this of the overtaken ship's bow at
+#: the CPA (colregs.md section 2.4, S13)
+AHEAD_AT_CPA_RAD = math.radians(45.0)
 #: the rule graded for the own ship's part in each kind of pair (a mutual give-way crossing
 #: as head-on, Rule 14(c): module docstring)
 RULE_OF_KIND = {"head_on": 14, "crossing_mutual": 14, "crossing_give_way": 15,
@@ -376,7 +383,7 @@ def grade(obs: PairObserver) -> dict[int, np.ndarray]:
     p_na_speed = np.where(kept > 0.5, kept - 0.5, 0.0)
     p_na = np.where((p_na_course < 0.3) | (p_na_speed < 0.3), 0.0, p_na_course * p_na_speed)
     s16 = safety * (1.0 - p_delay) * (1.0 - p_na)
-    s13 = s16 - 0.3 * obs.crossed_ahead
+    s13 = s16 - 0.3 * (alpha < AHEAD_AT_CPA_RAD)
     s15 = s16 - 0.5 * obs.crossed_ahead
     p_nsb = np.clip(1.0 - obs.stbd_cpa / math.radians(20.0), 0.0, 1.0) ** 4
     a_ccw, b_ccw = -obs.alpha_cpa, -obs.beta_cpa
