@@ -19,6 +19,8 @@ import pytest
 
 from trafficsim.colregs.decider import (
     BEHAVIOURS,
+    DRAW_AHEAD_MPS,
+    PASSED_FLOOR_FACTOR,
     RESUME_MARGIN,
     RULES_DIR,
     BlindSpot,
@@ -450,11 +452,11 @@ def _overtaken_ship_ahead() -> tuple[Decider, float]:
     return dec, v1
 
 
-def _path_closest_m(own: Ship, other: Ship, course_deg: float, horizon_s: float = 1800.0,
-                    n: int = 18_001) -> float:
-    """Least range to ``other`` (straight on) of ship 0 steering ``course_deg`` until she meets
-    her route line (north through the origin), then north along it; dense sampling, no code
-    shared with the decider; +inf when the range opens from the start."""
+def _path_ranges_m(own: Ship, other: Ship, course_deg: float, horizon_s: float = 1800.0,
+                   n: int = 18_001) -> np.ndarray:
+    """Range to ``other`` (straight on) of ship 0 steering ``course_deg`` until she meets her
+    route line (north through the origin), then north along it, densely sampled over
+    ``horizon_s``; no code shared with the decider."""
     t = np.linspace(0.0, horizon_s, n)
     c = math.radians(course_deg)
     v = own[3]
@@ -464,9 +466,20 @@ def _path_closest_m(own: Ship, other: Ship, course_deg: float, horizon_s: float 
     north = own[0] + v * math.cos(c) * t1 + v * (t - t1)
     east = own[1] + across * t1
     oc = math.radians(other[2])
-    rng = np.hypot(other[0] + other[3] * math.cos(oc) * t - north,
-                   other[1] + other[3] * math.sin(oc) * t - east)
+    return np.hypot(other[0] + other[3] * math.cos(oc) * t - north,
+                    other[1] + other[3] * math.sin(oc) * t - east)
+
+
+def _path_closest_m(own: Ship, other: Ship, course_deg: float) -> float:
+    """The least of :func:`_path_ranges_m`; +inf when the range opens from the start."""
+    rng = _path_ranges_m(own, other, course_deg)
     return math.inf if rng[1] > rng[0] else float(rng.min())
+
+
+def _path_least_m(own: Ship, other: Ship, course_deg: float) -> float:
+    """The least of :func:`_path_ranges_m`, even where the range opens at first (it may close
+    again along the route line)."""
+    return float(_path_ranges_m(own, other, course_deg).min())
 
 
 def test_overtaking_ship_holds_off_the_line_then_crosses_ahead_rule_13d():
@@ -476,11 +489,17 @@ def test_overtaking_ship_holds_off_the_line_then_crosses_ahead_rule_13d():
     13(d)). Her route course steers straight back onto the line (000 - atan(3600 / 600) =
     279.5 deg) and would meet it 2550 m astern of ship 1, then close on her along it: she is
     not released, but turns back towards it only as far as her path keeps ship 1 at 1 NM x 1.1
-    (a course 5 deg further does not). 4500 m ahead of ship 1 she is finally past and clear
-    (ship 1 abaft her beam, she 38.7 deg off ship 1's bow), and the route meets the line (in
-    3600 / (V sin 80.54) = 591 s, 600 m further north) 4500 + 600 - 4.32 x 591 = 2545 m ahead
-    of her and opens: released. The next step, on her route course, the risk test does not
-    take her back (no hunting)."""
+    (a course 5 deg further does not).
+
+    4500 m ahead of ship 1 she is finally past and clear (ship 1 abaft her beam, she 38.7 deg
+    off ship 1's bow) and, ahead of ship 1's beam with the range opening and drawing ahead of
+    her, has passed her at 5763 m; the range kept from here on is that, at most 1.5 x the
+    1 NM her manoeuvre kept: 2778 m. Her route would meet the line (in 3600 / (V sin 80.54) =
+    591 s, 600 m further north) 4500 + 600 - 4.32 x 591 = 2545 m ahead of ship 1, cutting back
+    across her bow nearer than that: she is not released, and turns back only as far as her
+    path keeps ship 1 at 2778 m (Rules 13(d), 8(d)). 4800 m ahead of ship 1 her route meets
+    the line 2845 m ahead of her: released. The next step, on her route course, the risk test
+    does not take her back (no hunting)."""
     dec, v1 = _overtaken_ship_ahead()
     los = math.degrees(-math.atan(3600.0 / 600.0))
     assert los == pytest.approx(-80.54, abs=0.01)
@@ -497,30 +516,67 @@ def test_overtaking_ship_holds_off_the_line_then_crosses_ahead_rule_13d():
     assert mem(dec, "encounter")[0] == ENC["overtaking"]
     assert mem(dec, "own_manoeuvre")[0] == RESUME_ROUTE
     assert dec.candidate[0] >= 0  # resuming, not released
+    assert np.isnan(dec.passed_range_m[0])  # astern of her beam: not passed
     course = float(wrap_deg(dec.course_order_rad[0]))
     assert 0.0 < (course - los) % 360.0 < 30.0 - los  # between her route course and 030
     assert _path_closest_m(own, one, course) >= need
     assert _path_closest_m(own, one, course - 5.0) < need
     assert dec.speed_factor[0] == 1.0
+
     own = (n1 + 4500.0, 3600.0, course, V)
+    passed = math.hypot(4500.0, 3600.0)
+    assert passed == pytest.approx(5763.0, abs=1.0)
+    floor = PASSED_FLOOR_FACTOR * NM
+    assert floor == pytest.approx(2778.0)
     t1 = 3600.0 / (V * math.sin(math.radians(-los)))  # 591 s to the line, 600 m north
     assert 4500.0 + 600.0 - v1 * t1 == pytest.approx(2545.0, abs=1.0)
-    assert _path_closest_m(own, one, los) == pytest.approx(2545.0, abs=1.0)
+    assert _path_least_m(own, one, los) == pytest.approx(2545.0, abs=1.0)
     decide(dec, 610.0, [own, one], route_deg=[los, 0.0])
     assert feature(dec, "bearing_abs_deg")[0] > 112.5
     assert feature(dec, "aspect_abs_deg")[0] == pytest.approx(
         math.degrees(math.atan2(3600.0, 4500.0)))
     assert mem(dec, "own_role")[0] == NO_ROLE  # past and clear
-    assert dec.candidate[0] == -1 and np.isnan(dec.course_order_rad[0])  # released
-    assert dec.speed_factor[0] == 1.0
+    assert dec.passed_range_m[0] == pytest.approx(floor)
+    assert dec.candidate[0] >= 0  # resuming, not released
+    turned = float(wrap_deg(dec.course_order_rad[0]))
+    assert 0.0 < (turned - los) % 360.0 <= (course - los) % 360.0  # not away from the route
+    assert _path_least_m(own, one, turned) >= floor - 1.0
+    assert _path_least_m(own, one, turned - 5.0) < floor
+
+    for ahead_m, released in ((4700.0, False), (4800.0, True)):
+        own = (n1 + ahead_m, 3600.0, turned, V)
+        assert (_path_least_m(own, one, los) >= floor) == released, ahead_m
+        decide(dec, 620.0, [own, one], route_deg=[los, 0.0])
+        assert (dec.candidate[0] == -1) == released, ahead_m
+    assert np.isnan(dec.course_order_rad[0]) and dec.speed_factor[0] == 1.0
+    assert np.isnan(dec.passed_range_m[0])  # forgotten with the return
     c = math.radians(los)
     ahead = [(own[0] + 10.0 * V * math.cos(c), own[1] + 10.0 * V * math.sin(c), los, V),
              (n1 + 10.0 * v1, 0.0, 0.0, v1)]
     los_next = math.degrees(-math.atan(ahead[0][1] / 600.0))
-    decide(dec, 620.0, ahead, route_deg=[los_next, 0.0])
+    decide(dec, 630.0, ahead, route_deg=[los_next, 0.0])
     assert feature(dec, "dcpa_nm")[0] > 1.0  # no risk of collision on her route course
     assert mem(dec, "own_role")[0] == NO_ROLE
     assert np.isnan(dec.course_order_rad[0])
+
+
+def test_ship_keeping_pace_sets_no_passed_floor():
+    """Ahead of ship 1's beam (4500 m ahead, 3600 m to starboard) with the range opening, but
+    on a course 10 deg off hers at her speed: drawing ahead of her along her own course by
+    4.32 (1 - cos 10 deg) = 0.07 m/s, below ``DRAW_AHEAD_MPS``, she has not passed ship 1
+    and keeps no floor; drawing ahead at 12 kn she has."""
+    dec, v1 = _overtaken_ship_ahead()
+    los = math.degrees(-math.atan(3600.0 / 600.0))
+    one = (6000.0, 0.0, 0.0, v1)
+    decide(dec, 600.0, [(5000.0, 3600.0, 30.0, V), one], route_deg=[los, 0.0])
+    assert dec.candidate[0] >= 0  # resuming
+    assert v1 * (1.0 - math.cos(math.radians(10.0))) < DRAW_AHEAD_MPS
+    one = (10_500.0, 0.0, 0.0, v1)
+    decide(dec, 610.0, [(15_000.0, 3600.0, 10.0, v1), one], route_deg=[los, 0.0])
+    assert dec.candidate[0] >= 0
+    assert np.isnan(dec.passed_range_m[0])
+    decide(dec, 620.0, [(15_000.0, 3600.0, 10.0, V), one], route_deg=[los, 0.0])
+    assert dec.passed_range_m[0] == pytest.approx(PASSED_FLOOR_FACTOR * NM)
 
 
 def test_lost_track_resumes_after_the_timeout():

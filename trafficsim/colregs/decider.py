@@ -73,6 +73,11 @@ DEFAULT_LOST_TRACK_MIN = 3.0  # used when the rules file has no ``lost_track_min
 #: resuming keeps every ship this fraction beyond the distance the manoeuvre kept, so that the
 #: risk test (a CPA closer than that distance) does not take a released ship back at once
 RESUME_MARGIN = 0.1
+#: a resuming ship keeps a ship she has passed no nearer than at the passage, at most this
+#: times the distance her manoeuvre kept, while she draws ahead of her by at least
+#: ``DRAW_AHEAD_MPS`` along her course (a ship keeping pace constrains nothing)
+PASSED_FLOOR_FACTOR = 1.5
+DRAW_AHEAD_MPS = 0.5
 #: for this long after a pair in which both ships keep out of the way (head-on and mutual
 #: crossings, Rule 14; restricted visibility, Rule 19) is released, a ship resuming her route
 #: checks her way back also against the other ship turning back as she does (by the same
@@ -144,6 +149,11 @@ class Decider:
         lost_track_s: ``(m,)`` how long a lost track keeps the pair's encounter (the observer's
             rules file's ``lost_track_min``).
         start_cursor: ``(m,)`` the start node of each pair's network.
+        passed_range_m: ``(m,)`` while the observer resumes her route, the range at which she
+            was first seen ahead of the target's beam with the range opening (she has passed
+            her; NaN: not yet): resuming then comes no nearer to the target than that, so
+            that the closest approach stays the passage and no cutting back across her bow
+            replaces it (Rules 13(d), 8(d)).
     """
 
     networks: list[network.Network]
@@ -176,6 +186,7 @@ class Decider:
     mutual_released_s: np.ndarray
     lost_track_s: np.ndarray
     start_cursor: np.ndarray
+    passed_range_m: np.ndarray
     blind_spots: list[BlindSpot] = field(default_factory=list)
     last_features: np.ndarray | None = None
     last_decision: list[network.Decision | None] = field(default_factory=list)
@@ -234,7 +245,8 @@ class Decider:
             line_east_m=np.full(n, np.nan), line_course_rad=np.full(n, np.nan),
             cross_track_m=np.full(n, np.nan),
             last_known_s=np.full(m, np.nan), mutual_released_s=np.full(m, np.nan),
-            lost_track_s=lost[ship_net[obs]], start_cursor=cursor.copy())
+            lost_track_s=lost[ship_net[obs]], start_cursor=cursor.copy(),
+            passed_range_m=np.full(m, np.nan))
 
     def decide(self, t_s: float, own_state: np.ndarray, own_vel: np.ndarray,
                length_m: np.ndarray, other: np.ndarray, route_course_rad: np.ndarray,
@@ -409,13 +421,26 @@ class Decider:
         c = np.ascontiguousarray
         found, home, row, course = (np.zeros(s, dtype=bool), np.zeros(s, dtype=bool),
                                     np.zeros(s, dtype=np.int64), np.zeros(s))
+        pn = other[0, pairs] - own_state[0, o[pairs]]
+        pe = other[1, pairs] - own_state[1, o[pairs]]
+        vn, ve = own_vel[0, o[pairs]], own_vel[1, o[pairs]]
+        # the own ship ahead of the other's beam, the range opening and she drawing ahead:
+        # passed; the range then (at most PASSED_FLOOR_FACTOR x the distance kept) is kept
+        # for the rest of the return, while she draws ahead
+        wn, we = other[2, pairs], other[3, pairs]
+        v2 = vn * vn + ve * ve
+        ahead = v2 - (wn * vn + we * ve) > DRAW_AHEAD_MPS * np.sqrt(v2)  # (v - w) . v / |v|
+        passing = (np.isnan(self.passed_range_m[pairs]) & ahead & (pn * wn + pe * we < 0.0)
+                   & (pn * (wn - vn) + pe * (we - ve) > 0.0))
+        self.passed_range_m[pairs[passing]] = np.minimum(
+            np.hypot(pn[passing], pe[passing]),
+            PASSED_FLOOR_FACTOR * self.kept_distance_m[o[pairs[passing]]])
+        passed = np.where(ahead, self.passed_range_m[pairs], np.nan)
         _resume_plan(c(ordered), c(route), c(chi), c(e), c(slow), c(route_speed_mps[r]),
                      c(np.hypot(own_vel[0, r], own_vel[1, r])), c(own_vel[0, r]),
-                     c(own_vel[1, r]), c(ps),
-                     c(other[0, pairs] - own_state[0, o[pairs]]),
-                     c(other[1, pairs] - own_state[1, o[pairs]]), c(other[2, pairs]),
+                     c(own_vel[1, r]), c(ps), c(pn), c(pe), c(other[2, pairs]),
                      c(other[3, pairs]), c(self.kept_distance_m[o[pairs]]),
-                     c(t_s - self.mutual_released_s[pairs] <= MIRROR_S),
+                     c(t_s - self.mutual_released_s[pairs] <= MIRROR_S), c(passed),
                      float(self.horizon_s), found, home, row, course)
         on_route = found & home
         factor = np.where(row < 2, 1.0, slow)
@@ -455,6 +480,7 @@ class Decider:
         self.course_order_rad[idle] = np.nan
         self.speed_factor[idle] = 1.0
         self.kept_distance_m[idle] = 0.0
+        self.passed_range_m[idle[o]] = np.nan
         if ships.size == 0:
             return
         start = ships[np.isnan(self.base_course_rad[ships])]
@@ -641,8 +667,8 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
                  slow: np.ndarray, route_speed: np.ndarray, present: np.ndarray,
                  own_vn: np.ndarray, own_ve: np.ndarray, pair_ship: np.ndarray,
                  pn: np.ndarray, pe: np.ndarray, wn: np.ndarray,
-                 we: np.ndarray, kept: np.ndarray, mirror: np.ndarray, horizon_s: float,
-                 found: np.ndarray, home: np.ndarray, chosen_row: np.ndarray,
+                 we: np.ndarray, kept: np.ndarray, mirror: np.ndarray, passed_m: np.ndarray,
+                 horizon_s: float, found: np.ndarray, home: np.ndarray, chosen_row: np.ndarray,
                  chosen_course: np.ndarray) -> None:
     """The candidates of :meth:`Decider._resume` and the choice among them, per resuming ship.
 
@@ -723,6 +749,11 @@ def _resume_plan(ordered: np.ndarray, route: np.ndarray, chi: np.ndarray, e: np.
                 _resume_margins(c1, s1, c2, s2, meet, speed, end, present[i], pn[p], pe[p],
                                 wn[p], we[p], max(kept[p], now), horizon_s, keeps, clears,
                                 alongside, present_short, present_close, co, so)
+            if passed_m[p] > 0.0:  # no nearer to a ship passed than at the passage
+                _resume_margins(c1, s1, c2, s2, meet, speed, end, present[i], pn[p], pe[p],
+                                wn[p], we[p], max(kept[p], passed_m[p] / (1.0 + RESUME_MARGIN)),
+                                horizon_s, keeps, clears, alongside, present_short,
+                                present_close, math.nan, math.nan, True)
         # a course further off the line comes after a reduced speed; there, where a safe
         # course nearer the route lies beyond courses not to be turned through at route speed,
         # a reduced speed first (the ship in the way draws clear sooner)
@@ -761,7 +792,8 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
                     speed: np.ndarray, end: np.ndarray, present: float, pn: float, pe: float,
                     wn: float, we: float, kept: float, horizon_s: float, keeps: np.ndarray,
                     clears: np.ndarray, alongside: np.ndarray, present_short: np.ndarray,
-                    present_close: np.ndarray, co: float, so: float) -> None:
+                    present_close: np.ndarray, co: float, so: float,
+                    path_only: bool = False) -> None:
     """The safety of one ship's :meth:`Decider._resume` candidates against one pair, in place.
 
     The other ship is at ``pn, pe`` relative, velocity ``wn, we``; candidate ``(row, step)``
@@ -780,12 +812,14 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
     ``end[row]``: the turns beyond are clipped at the target course and repeat the last.
     With ``co, so`` (cos, sin of the own ship's course over ground; NaN: not) the other ship's
     velocity is turned by each candidate's course change from it (the mirror hypothesis of
-    :meth:`Decider._resume`; no running alongside is marked then).
+    :meth:`Decider._resume`; no running alongside is marked then). With ``path_only`` only the
+    path counts (``keeps``; nothing is marked in ``clears`` or ``alongside``).
     """
     n_rows = c1.shape[0]
     mirror = not math.isnan(co)
     keep = kept * (1.0 + RESUME_MARGIN)
-    near = not mirror and hypot_below(pn, pe, arbitration.ALONGSIDE_RANGE_FACTOR * keep)
+    near = (not mirror and not path_only
+            and hypot_below(pn, pe, arbitration.ALONGSIDE_RANGE_FACTOR * keep))
     vn, ve = wn, we
     for row in range(n_rows):
         for step in range(end[row]):
@@ -804,7 +838,7 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
                     too_short, too_close = _too_close(
                         pn, pe, vn, ve, speed[row] if variant == 0 else present,
                         c1[row, step], s1[row, step], meet_m[row, step], c2, s2, horizon_s,
-                        kept, keep)
+                        kept, keep, path_only)
                     if variant == 1:
                         present_short[row, step], present_close[row, step] = (too_short,
                                                                               too_close)
@@ -821,15 +855,17 @@ def _resume_margins(c1: np.ndarray, s1: np.ndarray, c2: float, s2: float, meet_m
 
 @kernel
 def _too_close(pn: float, pe: float, wn: float, we: float, v: float, c1: float, s1: float,
-               meet_m: float, c2: float, s2: float, horizon_s: float, kept: float, keep: float
-               ) -> tuple[bool, bool]:
+               meet_m: float, c2: float, s2: float, horizon_s: float, kept: float, keep: float,
+               path_only: bool = False) -> tuple[bool, bool]:
     """Whether one candidate, course ``(c1, s1)`` (cos, sin) at speed ``v``, passes the other
-    ship (at ``pn, pe``, velocity ``wn, we``) nearer than ``keep`` - straight on, or along its
-    path: straight on for ``meet_m``, then along the route line ``(c2, s2)`` - and whether
-    straight on nearer than ``kept`` (:func:`_resume_margins`)."""
+    ship (at ``pn, pe``, velocity ``wn, we``) nearer than ``keep`` - straight on (unless
+    ``path_only``), or along its path: straight on for ``meet_m``, then along the route line
+    ``(c2, s2)`` - and whether straight on nearer than ``kept`` (:func:`_resume_margins`)."""
     dn1, de1 = wn - v * c1, we - v * s1
-    a, b = arbitration.closest_offset(pn, pe, dn1, de1, horizon_s)
-    close, short = hypot_below(a, b, kept), hypot_below(a, b, keep)
+    close = short = False
+    if not path_only:
+        a, b = arbitration.closest_offset(pn, pe, dn1, de1, horizon_s)
+        close, short = hypot_below(a, b, kept), hypot_below(a, b, keep)
     if not short:
         t1 = min(meet_m / max(v, 1e-9), horizon_s)
         a, b = arbitration.closest_offset(pn, pe, dn1, de1, t1)
