@@ -26,6 +26,7 @@ lint: $(STAMP)
 	$(PY) -m ruff check trafficsim tests
 
 bench: $(STAMP)
+	mkdir -p out
 	$(PY) -m pytest tests/benchmarks --benchmark-only --benchmark-timer=time.process_time \
 		--benchmark-json=out/benchmark.json
 
