@@ -581,6 +581,11 @@ def _by_hand(ships, end_s=2000, every_s=10):
     return seen
 
 
+def _off_bow_deg(seen) -> float:
+    """The own ship's angle off the other's bow at the CPA, 0-180 deg."""
+    return abs((seen["alpha"] + 180) % 360 - 180)
+
+
 def _woerner(seen, crossed=False):
     """colregs.md section 2.4 / the module docstring, term by term, angles in degrees."""
     r = seen["r_cpa"]
@@ -592,7 +597,7 @@ def _woerner(seen, crossed=False):
         s_r = 0.6 - 0.6 * (800 - r) / 600
     else:
         s_r = 0.0
-    a = min(abs((seen["alpha"] + 180) % 360 - 180), 90.0)
+    a = min(_off_bow_deg(seen), 90.0)
     b = min(max(seen["beta"], 90.0), 270.0)
     cos = lambda d: math.cos(math.radians(d))  # noqa: E731
     safety = 0.5 * s_r + 0.5 * (1 - cos(a)) * (1 - cos(b)) / 2
@@ -615,7 +620,7 @@ def _woerner(seen, crossed=False):
     p_down = 0.5 * seen["slower"] / u0 if seen["slower"] > 0.2 else 0.0
     s17 = (safety - p_course) * p_up - p_down
     clip = lambda v: min(max(v, 0.0), 1.0)  # noqa: E731
-    ahead_at_cpa = abs((seen["alpha"] + 180) % 360 - 180) < 45.0
+    ahead_at_cpa = _off_bow_deg(seen) < 45.0
     return {13: clip(s16 - 0.3 * ahead_at_cpa), 14: clip(s14),
             15: clip(s16 - 0.5 * crossed),
             16: clip(s16), 17: clip(s17), "safety": safety, "p_delay": p_delay}
@@ -769,7 +774,7 @@ def test_overtaking_then_crossing_the_bow_far_ahead_keeps_rule_13():
     slow = (2000.0, 300.0, [(0.0, 0.0, 4.0)])
     g, _, seen = _check([own, slow], crossed=True, end_s=2400)
     assert seen["t_cpa"] < 1300.0
-    assert abs((seen["alpha"] + 180) % 360 - 180) > 45.0
+    assert _off_bow_deg(seen) > 45.0
     assert g[16][0] > 0.3
     assert g[13][0] == pytest.approx(g[16][0], abs=1e-9)
 
@@ -784,7 +789,7 @@ def test_overtaking_then_cutting_across_the_bow_close_ahead_loses_0_3_for_rule_1
     slow = (2000.0, 300.0, [(0.0, 0.0, 4.0)])
     g, _, seen = _check([own, slow], crossed=True, end_s=1550)
     assert seen["t_cpa"] > 1050.0
-    assert abs((seen["alpha"] + 180) % 360 - 180) < 45.0
+    assert _off_bow_deg(seen) < 45.0
     assert g[16][0] > 0.4
     assert g[13][0] == pytest.approx(g[16][0] - 0.3, abs=1e-9)
 

@@ -438,8 +438,8 @@ class Decider:
         passed = np.where(ahead, self.passed_range_m[pairs], np.nan)
         _resume_plan(c(ordered), c(route), c(chi), c(e), c(slow), c(route_speed_mps[r]),
                      c(np.hypot(own_vel[0, r], own_vel[1, r])), c(own_vel[0, r]),
-                     c(own_vel[1, r]), c(ps), c(pn), c(pe), c(other[2, pairs]),
-                     c(other[3, pairs]), c(self.kept_distance_m[o[pairs]]),
+                     c(own_vel[1, r]), c(ps), c(pn), c(pe), c(wn), c(we),
+                     c(self.kept_distance_m[o[pairs]]),
                      c(t_s - self.mutual_released_s[pairs] <= MIRROR_S), c(passed),
                      float(self.horizon_s), found, home, row, course)
         on_route = found & home
