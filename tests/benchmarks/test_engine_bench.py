@@ -27,7 +27,7 @@ def _batch(type_: str, n_encounters: int, ships_per_encounter: int = 2):
     return build_batch(ships, envs)
 
 
-@pytest.mark.parametrize("type_", ["kvlcc2", "container"])
+@pytest.mark.parametrize("type_", ["kvlcc2", "catfish", "container"])
 def test_engine_10000_ships(benchmark, type_):
     sim = Simulation.start(_batch(type_, 5000), 1.0)
     benchmark.pedantic(sim.run, args=(STEPS,), rounds=3, warmup_rounds=1)
@@ -50,12 +50,16 @@ def test_engine_scaling_with_batch_size(benchmark, n_encounters):
         print(f"\n{2 * n_encounters} ships: {rate:,.0f} ship-steps/s")
 
 
-@pytest.mark.parametrize("filter_name, tracking", [("pv", False), ("ekf", False),
-                                                   ("pv", True)])
-def test_engine_with_instruments_and_filter_10000_ships(benchmark, filter_name, tracking):
+@pytest.mark.parametrize("type_, filter_name, tracking", [
+    ("container", "pv", False), ("container", "ekf", False), ("container", "pv", True),
+    ("kvlcc2", "pv", True), ("catfish", "pv", True)])
+def test_engine_with_instruments_and_filter_10000_ships(benchmark, type_, filter_name, tracking):
     """Engine plus DGPS, gyro, wave motion and a gated own-ship filter on every ship (and with
-    ``tracking``: radar, AIS and a tracker of the other ship)."""
-    batch = _batch("container", 5000)
+    ``tracking``: radar, AIS and a tracker of the other ship), on the Nomoto container ship and
+    on the two surge-sway-yaw models (``mmg`` KVLCC2, ``modular`` Catfish): the layer's cost
+    per ship-step is the difference of the inverse rates of this test and
+    :func:`test_engine_10000_ships` for the same ship."""
+    batch = _batch(type_, 5000)
     sensors = {"gnss": {"sigma_m": 2.0, "gross_prob": 0.001},
                "compass": {"kind": "gyro", "sigma_deg": 0.3},
                "waves": {"heading_sigma_deg": 0.3, "sway_sigma_m": 0.5}}
@@ -70,7 +74,7 @@ def test_engine_with_instruments_and_filter_10000_ships(benchmark, filter_name, 
         rate = sim.batch.n_ships * STEPS / benchmark.stats.stats.mean
         benchmark.extra_info["ship_steps_per_s"] = rate
         extra = " and tracking" if tracking else ""
-        print(f"\nwith instruments, {filter_name} filter{extra}: {rate:,.0f} ship-steps/s")
+        print(f"\n{type_} with instruments, {filter_name} filter{extra}: {rate:,.0f} ship-steps/s")
 
 
 def test_engine_with_decisions_10000_ships(benchmark):
