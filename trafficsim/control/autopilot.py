@@ -45,6 +45,10 @@ def rudder_command(psi_d: np.ndarray, psi: np.ndarray, r: np.ndarray, integral: 
     return out
 
 
+#: ships per block in which :func:`_rudder_command` looks for the ships outside the fast wrap
+_BLOCK = 64
+
+
 @kernel
 def _rudder_command(psi_d: np.ndarray, psi: np.ndarray, r: np.ndarray, integral: np.ndarray,
                     kp: np.ndarray, kd_s: np.ndarray, ki_per_s: np.ndarray,
@@ -52,23 +56,33 @@ def _rudder_command(psi_d: np.ndarray, psi: np.ndarray, r: np.ndarray, integral:
     """PID on the heading error wrapped to [-pi, pi), in place. The ships whose
     ``psi_d - psi + pi`` lies within (-2 pi, 2 pi) (all of them, as a rule) in a loop without
     branches, which the compiler vectorises (the wrap as :func:`mod_2pi_scalar` gives it
-    there); the others after, one by one, with the division."""
+    there); the others after it, one by one, with the division. They are picked out block by
+    block from the flags that loop leaves: a loop over all ships with the division inside would
+    be vectorised too, the division then worked out for every ship."""
+    n = psi.shape[0]
+    outside = np.empty(n, dtype=np.bool_)
     wide = False
-    for i in range(psi.shape[0]):
+    for i in range(n):
         a = psi_d[i] - psi[i] + math.pi
         inside = -TWO_PI < a < TWO_PI
+        outside[i] = not inside
         wide |= not inside
         err = (a + 0.0 if a >= 0.0 else a + TWO_PI) - math.pi
         integrate = inside and abs(err) < INTEGRAL_BAND_RAD
         integral[i] = integral[i] + err * dt if integrate else integral[i]
         out[i] = _pid(err, integral[i], r[i], kp[i], kd_s[i], ki_per_s[i], rudder_max[i])
-    for i in range(psi.shape[0] if wide else 0):
-        a = psi_d[i] - psi[i] + math.pi
-        if not -TWO_PI < a < TWO_PI:
-            err = mod_2pi_scalar(a) - math.pi
-            if abs(err) < INTEGRAL_BAND_RAD:
-                integral[i] += err * dt
-            out[i] = _pid(err, integral[i], r[i], kp[i], kd_s[i], ki_per_s[i], rudder_max[i])
+    for start in range(0, n if wide else 0, _BLOCK):
+        stop = min(start + _BLOCK, n)
+        any_outside = False
+        for i in range(start, stop):
+            any_outside |= outside[i]
+        for i in range(start, stop if any_outside else start):
+            if outside[i]:
+                err = mod_2pi_scalar(psi_d[i] - psi[i] + math.pi) - math.pi
+                if abs(err) < INTEGRAL_BAND_RAD:
+                    integral[i] += err * dt
+                out[i] = _pid(err, integral[i], r[i], kp[i], kd_s[i], ki_per_s[i],
+                              rudder_max[i])
 
 
 @inline_kernel
