@@ -32,7 +32,8 @@ from trafficsim.jit import inline_kernel, kernel
 
 #: every purpose that draws random numbers; append only (the index is part of the stream key)
 PURPOSES = ("gnss", "gnss_gross", "compass", "log", "actuators", "waves", "radar", "ais",
-            "initial", "ais_rx", "gnss2", "gnss2_gross", "gnss3", "gnss3_gross", "encounter")
+            "initial", "ais_rx", "gnss2", "gnss2_gross", "gnss3", "gnss3_gross", "encounter",
+            "phase")
 #: steps per block: small, since a refill is one compiled call whatever its size
 BLOCK_STEPS = 16
 

@@ -403,6 +403,56 @@ def test_speeds_routes_environment_and_sensors_within_the_spec(tmp_path):
             assert "radar" in s.sensors and "ais" in s.sensors and s.filter == "ekf"
 
 
+def test_radars_and_transponders_start_unsynchronised(tmp_path, monkeypatch):
+    """Each ship's first radar scan falls within one scan period and its first AIS report
+    within one reporting interval at its start speed, drawn from a stream of their own: the
+    times differ from ship to ship and spread over the whole period, they are the same at
+    every draw of the encounter, and the encounter's geometry is the one drawn without them."""
+    from trafficsim.campaign import generator
+    from trafficsim.sensors import ais
+
+    spec = _spec(tmp_path, extra="sensors: {gnss_sigma_m: [2, 3]}")
+    timed = [draw(spec, index) for index in range(60)]
+    scans, reports = [], []
+    for index, enc in enumerate(timed):
+        for s, t in zip(enc.ships, draw(spec, index).ships, strict=True):
+            interval = float(ais.reporting_interval_s(np.array([s.speed_mps]),
+                                                      np.array([False]))[0])
+            scan, report = s.sensors["radar"]["scan_phase_s"], s.sensors["ais"]["first_report_s"]
+            assert 0.0 <= scan < 2.5 and 0.0 <= report < interval
+            assert (scan, report) == (t.sensors["radar"]["scan_phase_s"],
+                                      t.sensors["ais"]["first_report_s"])
+            scans.append(scan / 2.5)
+            reports.append(report / interval)
+    for u in (scans, reports):
+        assert len(set(u)) == len(u)
+        assert np.histogram(u, bins=5, range=(0.0, 1.0))[0].min() > len(u) / 10
+    monkeypatch.setattr(generator, "_phase", lambda setups, rng: None)
+    for index, enc in enumerate(timed):
+        plain = draw(spec, index)
+        assert plain.env == enc.env
+        for a, b in zip(plain.ships, enc.ships, strict=True):
+            assert (a.north_m, a.east_m, a.heading_rad, a.speed_mps, a.behaviour) == (
+                b.north_m, b.east_m, b.heading_rad, b.speed_mps, b.behaviour)
+            assert a.sensors["gnss"] == b.sensors["gnss"]
+            assert "scan_phase_s" not in a.sensors["radar"]
+
+
+def test_a_scan_phase_or_first_report_in_a_ship_file_is_kept(tmp_path, monkeypatch):
+    """Times a ship file sets are not replaced by drawn ones."""
+    from trafficsim.campaign import generator
+
+    spec = _spec(tmp_path, extra="sensors: {gnss_sigma_m: [2, 3]}")
+    enc = draw(spec, 0)
+    for s in enc.ships:
+        s.sensors["radar"]["scan_phase_s"] = 1.25
+        s.sensors["ais"]["first_report_s"] = 7.0
+    generator._phase(enc.ships, np.random.default_rng(0))
+    for s in enc.ships:
+        assert s.sensors["radar"]["scan_phase_s"] == 1.25
+        assert s.sensors["ais"]["first_report_s"] == 7.0
+
+
 def test_without_sensors_ships_have_perfect_knowledge(tmp_path):
     spec = _spec(tmp_path)
     for s in draw(spec, 0).ships:

@@ -20,8 +20,12 @@ In a multi-ship encounter each further ship must also leave the others placed be
 much room (:func:`_clear_of`), so that no two ships start in a collision nobody can avoid.
 
 Every ship sails a straight route along its initial course, long enough for the whole run.
-All draws come from the encounter's own stream (purpose ``"encounter"``), so encounter ``k``
-is the same whatever the batch, chunk or worker it runs in; the policy and the rogue share
+With radar and AIS, each ship's radar first scans, and its transponder first reports, at a time
+drawn within one scan period and one reporting interval (:func:`_phase`), so that the ships'
+instruments are not in step, as at sea; these times come from a stream of their own (purpose
+``"phase"``) and leave every other draw as it is. All other draws come from the encounter's own
+stream (purpose ``"encounter"``), so encounter ``k`` is the same whatever the batch, chunk or
+worker it runs in; the policy and the rogue share
 only decide what is done with the draws, so a ``no_avoidance`` baseline meets the very
 encounters of its ``colregs`` campaign.
 """
@@ -41,6 +45,7 @@ from trafficsim.campaign.spec import ENCOUNTER_TYPES, CampaignSpec
 from trafficsim.errors import InputError, ScenarioError
 from trafficsim.navigation import merge_sensors
 from trafficsim.noise import generator
+from trafficsim.sensors import ais, radar
 from trafficsim.ships.library import load_ship
 from trafficsim.units import NM, from_kn
 
@@ -267,9 +272,26 @@ def draw(spec: CampaignSpec, index: int, ships_cache: dict[str, Any] | None = No
     else:
         raise _no_geometry(spec, kind, pair_kinds, "" if forced else f"encounter {index}: ")
     setups, dcpas, tcpas = drawn
+    _phase(setups, generator(spec.seed, index, 0, "phase"))
     env = EncounterEnv(from_kn(rng.uniform(*spec.current_kn)), rng.uniform(0.0, 2.0 * math.pi),
                        rng.uniform(*spec.wind_mps), rng.uniform(0.0, 2.0 * math.pi))
     return Encounter(index, kind, setups, env, pair_kinds, dcpas, tcpas)
+
+
+def _phase(setups: list[ShipSetup], rng: np.random.Generator) -> None:
+    """Each ship's first radar scan and first AIS report at a time of its own within one scan
+    period and one reporting interval (at its start speed, on a straight course): the ships'
+    radars turn and their transponders send unsynchronised, as at sea."""
+    for s in setups:
+        radar_u, ais_u = rng.random(), rng.random()
+        sensors = s.sensors
+        if "radar" in sensors and "scan_phase_s" not in sensors["radar"]:
+            period = float(sensors["radar"].get("scan_period_s", radar.DEFAULT_SCAN_PERIOD_S))
+            sensors["radar"]["scan_phase_s"] = radar_u * period
+        if "ais" in sensors and "first_report_s" not in sensors["ais"]:
+            interval = float(ais.reporting_interval_s(np.array([s.speed_mps]),
+                                                      np.array([False]))[0])
+            sensors["ais"]["first_report_s"] = ais_u * interval
 
 
 def _no_geometry(spec: CampaignSpec, kind: str, pair_kinds: list[str], what: str

@@ -82,6 +82,8 @@ RADAR_NORMAL_DIMS = 3
 RADAR_PURPOSE = "radar"
 
 NM = 1852.0
+#: antenna revolution period, s (a ship's radar turns at 24 rpm)
+DEFAULT_SCAN_PERIOD_S = 2.5
 #: A.823(19) annex sensor errors: pulse shape 20 m, range quantisation +-0.01 NM rectangular
 DEFAULT_SIGMA_RANGE_M = math.hypot(20.0, 0.01 * NM / math.sqrt(3.0))
 #: beam shape 0.05, backlash +-0.05 rect., quantisation +-0.1 rect., encoder 0.03 (deg)
@@ -196,8 +198,8 @@ def build(configs: Sequence[Mapping]) -> RadarParams:
         min_range_m=min_range_m,
         p_detect=p_detect,
         z_detect=probit(p_detect),
-        scan_period_s=column(configs, "scan_period_s", 2.5, what, minimum=0.0, strictly=True,
-                             maximum=MAX_SCAN_PERIOD_S),
+        scan_period_s=column(configs, "scan_period_s", DEFAULT_SCAN_PERIOD_S, what, minimum=0.0,
+                             strictly=True, maximum=MAX_SCAN_PERIOD_S),
         scan_phase_s=column(configs, "scan_phase_s", 0.0, what),
         antenna_x_m=column(configs, "antenna_x_m", 0.0, what, minimum=-MAX_LEVER_M,
                            maximum=MAX_LEVER_M),
