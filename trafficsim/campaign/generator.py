@@ -25,9 +25,8 @@ drawn within one scan period and one reporting interval (:func:`_phase`), so tha
 instruments are not in step, as at sea; these times come from a stream of their own (purpose
 ``"phase"``) and leave every other draw as it is. All other draws come from the encounter's own
 stream (purpose ``"encounter"``), so encounter ``k`` is the same whatever the batch, chunk or
-worker it runs in; the policy and the rogue share
-only decide what is done with the draws, so a ``no_avoidance`` baseline meets the very
-encounters of its ``colregs`` campaign.
+worker it runs in; the policy and the rogue share only decide what is done with the draws, so a
+``no_avoidance`` baseline meets the very encounters of its ``colregs`` campaign.
 """
 
 from __future__ import annotations
