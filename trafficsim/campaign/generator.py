@@ -281,15 +281,15 @@ def _phase(setups: list[ShipSetup], rng: np.random.Generator) -> None:
     """Each ship's first radar scan and first AIS report at a time of its own within one scan
     period and one reporting interval (at its start speed, on a straight course): the ships'
     radars turn and their transponders send unsynchronised, as at sea."""
-    for s in setups:
+    intervals = ais.reporting_interval_s(np.array([s.speed_mps for s in setups]),
+                                         np.zeros(len(setups), dtype=bool))
+    for s, interval in zip(setups, intervals.tolist(), strict=True):
         radar_u, ais_u = rng.random(), rng.random()
         sensors = s.sensors
         if "radar" in sensors and "scan_phase_s" not in sensors["radar"]:
             period = float(sensors["radar"].get("scan_period_s", radar.DEFAULT_SCAN_PERIOD_S))
             sensors["radar"]["scan_phase_s"] = radar_u * period
         if "ais" in sensors and "first_report_s" not in sensors["ais"]:
-            interval = float(ais.reporting_interval_s(np.array([s.speed_mps]),
-                                                      np.array([False]))[0])
             sensors["ais"]["first_report_s"] = ais_u * interval
 
 
